@@ -1,0 +1,1 @@
+"""ftc_hw/scene"""
