@@ -1,1 +1,18 @@
-"""ftc_hw/scene"""
+"""Scenes: TOML files that say what a setup is. Built-ins ship in ``ftc_hw/scene/builtin``."""
+from .errors import SceneError
+from .loader import builtin_names, load_scene, resolve
+from .schema import (
+    COMPENSATION_LEVELS,
+    CompensationLevel,
+    DeviceSpec,
+    RobotSpec,
+    Scene,
+    SensorSpec,
+    SignConvention,
+    TouchableLink,
+)
+
+__all__ = [
+    "COMPENSATION_LEVELS", "CompensationLevel", "DeviceSpec", "RobotSpec", "Scene", "SceneError",
+    "SensorSpec", "SignConvention", "TouchableLink", "builtin_names", "load_scene", "resolve",
+]

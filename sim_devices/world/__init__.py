@@ -1,1 +1,9 @@
-"""sim_devices/world"""
+"""The physics world: a scene simulated in MuJoCo, with device signals and ground truth."""
+from .scenarios import SCENARIOS, ScenarioInfo, build_scenario
+from .trajectory import Hold, PointToPoint, Sinusoid, Trajectory
+from .truth import TruthWriter, truth_record
+from .world import ContactTruth, Obstacle, Probe, ScenarioSetup, World, WorldState
+
+__all__ = ["SCENARIOS", "ContactTruth", "Hold", "Obstacle", "PointToPoint", "Probe", "ScenarioInfo",
+           "ScenarioSetup", "Sinusoid", "Trajectory", "TruthWriter", "World", "WorldState", "build_scenario",
+           "truth_record"]

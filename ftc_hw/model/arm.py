@@ -1,0 +1,258 @@
+"""The arm model on MuJoCo: kinematics, link surfaces, Jacobians, predicted sensor wrench and joint torques.
+
+Frames (docs/conventions.md): ``base`` is the model's world frame; ``sensor`` is the scene's sensor site;
+``<link>`` is a body's frame. Poses are 4x4 homogeneous matrices named ``base_T_<frame>``.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from ..scene import CompensationLevel, Scene, SceneError
+from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, load_spec
+
+GEOM_KINDS = {
+    mujoco.mjtGeom.mjGEOM_PLANE: "plane",
+    mujoco.mjtGeom.mjGEOM_SPHERE: "sphere",
+    mujoco.mjtGeom.mjGEOM_CAPSULE: "capsule",
+    mujoco.mjtGeom.mjGEOM_ELLIPSOID: "ellipsoid",
+    mujoco.mjtGeom.mjGEOM_CYLINDER: "cylinder",
+    mujoco.mjtGeom.mjGEOM_BOX: "box",
+}
+SURFACE_GROUP = 1  # MJCF geom group that holds the touchable surfaces
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A point contact: ``force`` (N, base frame) applied to the arm at ``point`` (m, base frame) of ``link``."""
+
+    link: str
+    point: np.ndarray
+    force: np.ndarray
+
+
+@dataclass(frozen=True)
+class Surface:
+    """One primitive of a link's surface, in MuJoCo's size convention.
+
+    sphere (r), capsule and cylinder (r, half-length along local z), ellipsoid (a, b, c),
+    box (half-sizes), plane (z = 0 of the geom frame, normal +z).
+    """
+
+    link: str
+    geom: str
+    kind: str
+    size: np.ndarray
+    link_T_geom: np.ndarray
+    pulls: bool
+
+
+@dataclass(frozen=True)
+class PosedSurface:
+    surface: Surface
+    base_T_geom: np.ndarray
+
+
+def pose(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = rotation
+    out[:3, 3] = translation
+    return out
+
+
+class ArmModel:
+    """A scene's robot as MuJoCo sees it, with the scene's gravity and sensor.
+
+    Not thread-safe: it owns one ``MjData`` scratch buffer. Make one per thread.
+    """
+
+    def __init__(self, scene: Scene, payload: Payload | None = None) -> None:
+        self.scene = scene
+        self.payload = payload
+        spec = load_spec(scene)
+        add_ft_sensors(spec, scene)
+        if payload is not None:
+            attach_payload(spec, scene, payload)
+        self.model = spec.compile()
+        m = self.model
+        # Predictions never include contacts, joint limits or friction loss: only rigid-body dynamics.
+        m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+        self.data = mujoco.MjData(m)
+        self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
+        self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
+        self.site_id = m.site(scene.sensor.site).id
+        self.sensor_body = int(m.site_bodyid[self.site_id])
+
+        self.joint_names = scene.robot.joints
+        self.n_joints = len(self.joint_names)
+        qadr, dadr = [], []
+        for j in self.joint_names:
+            try:
+                jnt = m.joint(j)
+            except KeyError:
+                raise SceneError(scene.path, "robot.joints",
+                                 f"no joint {j!r} in {scene.robot.model_path.name}") from None
+            if int(jnt.type[0]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+                raise SceneError(scene.path, "robot.joints", f"joint {j!r} is not a 1-DoF hinge or slide")
+            qadr.append(int(jnt.qposadr[0]))
+            dadr.append(int(jnt.dofadr[0]))
+        if m.nq != self.n_joints or m.nv != self.n_joints:
+            raise SceneError(scene.path, "robot.joints",
+                             f"the model has {m.nq} position coordinates but the scene lists {self.n_joints} joints")
+        self._qadr = np.array(qadr)
+        self._dadr = np.array(dadr)
+        self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
+        self.surfaces = self._collect_surfaces()
+        self.sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
+        self.total_mass = float(m.body_subtreemass[self.sensor_body])
+
+    # -- set-up ---------------------------------------------------------------------------------------
+    def _collect_surfaces(self) -> tuple[Surface, ...]:
+        m = self.model
+        out = []
+        for t in self.scene.touchable:
+            try:
+                body = m.body(t.link)
+            except KeyError:
+                raise SceneError(self.scene.path, "touchable.link",
+                                 f"no body {t.link!r} in {self.scene.robot.model_path.name}") from None
+            for g in range(m.ngeom):
+                if m.geom_bodyid[g] != body.id or m.geom_group[g] != SURFACE_GROUP:
+                    continue
+                kind = GEOM_KINDS.get(int(m.geom_type[g]))
+                if kind is None:
+                    raise SceneError(self.scene.path, "touchable.link",
+                                     f"geom {m.geom(g).name!r} of {t.link!r} is not a primitive "
+                                     "(sphere, capsule, cylinder, ellipsoid, box, plane)")
+                rot = np.empty(9)
+                mujoco.mju_quat2Mat(rot, m.geom_quat[g])
+                out.append(Surface(link=t.link, geom=m.geom(g).name or f"geom{g}", kind=kind,
+                                   size=m.geom_size[g].copy(), link_T_geom=pose(rot.reshape(3, 3), m.geom_pos[g]),
+                                   pulls=t.pulls))
+            if not any(s.link == t.link for s in out):
+                raise SceneError(self.scene.path, "touchable.link",
+                                 f"link {t.link!r} has no surface geoms (group {SURFACE_GROUP})")
+        return tuple(out)
+
+    # -- state ----------------------------------------------------------------------------------------
+    def _set(self, q: Sequence[float] | np.ndarray, qd=None, qdd=None) -> None:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.n_joints,):
+            raise ValueError(f"q must have {self.n_joints} entries (joints {', '.join(self.joint_names)}), "
+                             f"got shape {q.shape}")
+        if not np.all(np.isfinite(q)):
+            raise ValueError("q holds NaN or Inf")
+        d = self.data
+        d.qpos[self._qadr] = q
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        if qd is not None:
+            d.qvel[self._dadr] = qd
+        if qdd is not None:
+            d.qacc[self._dadr] = qdd
+        d.xfrc_applied[:] = 0.0
+
+    def kinematics(self, q) -> dict[str, np.ndarray]:
+        """``base_T_<link>`` for every body at joint angles q (rad)."""
+        self._set(q)
+        mujoco.mj_kinematics(self.model, self.data)
+        d = self.data
+        return {name: pose(d.xmat[i + 1].reshape(3, 3), d.xpos[i + 1]) for i, name in enumerate(self.link_names)}
+
+    def base_T_site(self, q, site: str) -> np.ndarray:
+        self._set(q)
+        mujoco.mj_kinematics(self.model, self.data)
+        sid = self.model.site(site).id
+        return pose(self.data.site_xmat[sid].reshape(3, 3), self.data.site_xpos[sid])
+
+    def base_T_sensor(self, q) -> np.ndarray:
+        return self.base_T_site(q, self.scene.sensor.site)
+
+    def posed_surfaces(self, q) -> list[PosedSurface]:
+        """Every touchable primitive with its pose ``base_T_geom`` at q."""
+        links = self.kinematics(q)
+        return [PosedSurface(s, links[s.link] @ s.link_T_geom) for s in self.surfaces]
+
+    def jacobian(self, q, link: str, point) -> np.ndarray:
+        """Positional Jacobian (3 x n, m/rad) of the point of ``link`` at ``point`` (base frame) at q."""
+        self._set(q)
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+        jac = np.zeros((3, self.model.nv))
+        mujoco.mj_jac(self.model, self.data, jac, None, np.asarray(point, dtype=float), self.model.body(link).id)
+        return jac[:, self._dadr]
+
+    # -- predictions ----------------------------------------------------------------------------------
+    def predicted_wrench(self, q, qd=None, qdd=None, level: CompensationLevel = "dynamics",
+                         contacts: Iterable[Contact] = ()) -> np.ndarray:
+        """The wrench the sensor reports (sensor frame, the scene's sign convention) for this state.
+
+        ``level`` says which arm loads are included: ``bias`` none (contacts only), ``gravity`` the
+        static weight of the arm, ``dynamics`` weight plus inertial, Coriolis and centrifugal terms
+        from (q, qd, qdd). The sensor's bias is not included.
+        """
+        self._inverse(q, qd, qdd, level, contacts)
+        d = self.data
+        out = np.empty(6)
+        out[:3] = d.sensordata[self._force_adr:self._force_adr + 3]
+        out[3:] = d.sensordata[self._torque_adr:self._torque_adr + 3]
+        return self.sign * out
+
+    def joint_torques(self, q, qd=None, qdd=None, level: CompensationLevel = "dynamics",
+                      contacts: Iterable[Contact] = ()) -> np.ndarray:
+        """Joint torques (N m) the motors must apply for this motion with these contacts (M qdd + c - J^T p)."""
+        contacts = list(contacts)
+        self._inverse(q, qd, qdd, level, ())
+        tau = self.data.qfrc_inverse[self._dadr].copy()
+        for c in contacts:
+            tau -= self.jacobian(q, c.link, c.point).T @ np.asarray(c.force, dtype=float)
+        return tau
+
+    def _inverse(self, q, qd, qdd, level: CompensationLevel, contacts: Iterable[Contact]) -> None:
+        if level not in ("bias", "gravity", "dynamics"):
+            raise ValueError(f"level must be bias, gravity or dynamics, got {level!r}")
+        m, d = self.model, self.data
+        if level == "dynamics":
+            self._set(q, qd, qdd)
+        else:
+            self._set(q)
+        gravity_off = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
+        if level == "bias":
+            m.opt.disableflags |= gravity_off
+        else:
+            m.opt.disableflags &= ~gravity_off
+        contacts = list(contacts)
+        if contacts:
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            for c in contacts:
+                apply_point_force(m, d, c.link, c.point, c.force)
+        mujoco.mj_inverse(m, d)
+
+    # -- frames ---------------------------------------------------------------------------------------
+    def wrench_sensor_to_base(self, q, wrench_sensor) -> np.ndarray:
+        """Re-express a sensor-frame wrench (about the sensor origin) in the base frame about the base origin.
+
+        The sign convention is kept: this only changes frame and reference point.
+        """
+        b_T_s = self.base_T_sensor(q)
+        r, t = b_T_s[:3, :3], b_T_s[:3, 3]
+        w = np.asarray(wrench_sensor, dtype=float)
+        f = r @ w[:3]
+        return np.concatenate([f, r @ w[3:] + np.cross(t, f)])
+
+
+def apply_point_force(model: mujoco.MjModel, data: mujoco.MjData, link: str, point, force) -> None:
+    """Add a force (N, world frame) at a world point to ``data.xfrc_applied`` of ``link``.
+
+    ``xfrc_applied`` takes the torque about the body's centre of mass, hence the moment arm from xipos.
+    Needs ``mj_kinematics`` to have run for the current qpos.
+    """
+    bid = model.body(link).id
+    f = np.asarray(force, dtype=float)
+    data.xfrc_applied[bid, :3] += f
+    data.xfrc_applied[bid, 3:] += np.cross(np.asarray(point, dtype=float) - data.xipos[bid], f)
+

@@ -1,0 +1,239 @@
+"""Reading scene TOML files into `Scene` objects, with errors that name the file and the key."""
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from .errors import SceneError
+from .schema import (
+    COMPENSATION_LEVELS,
+    SIGN_CONVENTIONS,
+    DeviceSpec,
+    RobotSpec,
+    Scene,
+    SensorSpec,
+    TouchableLink,
+    _frozen,
+)
+
+SCHEMA_VERSION = 1
+_BUILTIN_DIR = Path(__file__).resolve().parent / "builtin"
+
+
+def builtin_dir() -> Path:
+    return _BUILTIN_DIR
+
+
+def builtin_names() -> list[str]:
+    return sorted(p.stem for p in builtin_dir().glob("*.toml"))
+
+
+def resolve(name_or_path: str | Path) -> Path:
+    """A built-in scene name (``ur5e``) or a path to a TOML file."""
+    text = str(name_or_path)
+    if text in builtin_names():
+        return builtin_dir() / f"{text}.toml"
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists() or "/" in text:
+        return path
+    raise SceneError(text, "", f"no built-in scene of that name (built-ins: {', '.join(builtin_names())}) "
+                     "and no such file")
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Load a built-in scene by name or a user scene from a path."""
+    path = resolve(name_or_path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise SceneError(path, "", f"cannot read the scene file ({exc.strerror or exc})") from exc
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise SceneError(path, "", f"not UTF-8 text ({exc})") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "", f"invalid TOML: {exc}") from exc
+    return _Parser(path).scene(data)
+
+
+class _Parser:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, key: str, problem: str) -> SceneError:
+        return SceneError(self.path, key, problem)
+
+    # -- primitive readers -------------------------------------------------------------------------
+    def table(self, data: dict, key: str, prefix: str = "") -> dict:
+        full = f"{prefix}{key}"
+        if key not in data:
+            raise self.fail(full, "missing table")
+        value = data[key]
+        if not isinstance(value, dict):
+            raise self.fail(full, f"expected a table, got {type(value).__name__}")
+        return value
+
+    def get(self, data: dict, key: str, prefix: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
+        full = f"{prefix}{key}"
+        if key not in data:
+            if default is ...:
+                raise self.fail(full, f"missing key (expected {_kind_name(kind)})")
+            return default
+        value = data[key]
+        if isinstance(value, bool) and kind is not bool and bool not in _as_tuple(kind):
+            raise self.fail(full, f"expected {_kind_name(kind)}, got a boolean")
+        if not isinstance(value, kind):
+            raise self.fail(full, f"expected {_kind_name(kind)}, got {type(value).__name__} {value!r}")
+        return value
+
+    def number(self, data: dict, key: str, prefix: str, *, positive: bool = False, default: Any = ...) -> float:
+        value = float(self.get(data, key, prefix, (int, float), default))
+        if not math.isfinite(value):
+            raise self.fail(prefix + key, f"expected a finite number, got {value}")
+        if positive and value <= 0:
+            raise self.fail(prefix + key, f"expected a positive number, got {value}")
+        return value
+
+    def vector(self, data: dict, key: str, prefix: str, n: int, *, nonneg: bool = False,
+               positive: bool = False, default: Any = ...) -> Any:
+        full = f"{prefix}{key}"
+        if key not in data and default is not ...:
+            return _frozen(default)
+        value = self.get(data, key, prefix, list)
+        if len(value) != n:
+            raise self.fail(full, f"expected a list of {n} numbers, got {len(value)}")
+        for i, v in enumerate(value):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise self.fail(f"{full}[{i}]", f"expected a number, got {type(v).__name__} {v!r}")
+            if not math.isfinite(v):
+                raise self.fail(f"{full}[{i}]", f"expected a finite number, got {v}")
+            if nonneg and v < 0:
+                raise self.fail(f"{full}[{i}]", f"expected a number >= 0, got {v}")
+            if positive and v <= 0:
+                raise self.fail(f"{full}[{i}]", f"expected a number > 0, got {v}")
+        return _frozen(value)
+
+    def choice(self, data: dict, key: str, prefix: str, options: tuple[str, ...]) -> str:
+        value = self.get(data, key, prefix, str)
+        if value not in options:
+            raise self.fail(prefix + key, f"expected one of {', '.join(options)}, got {value!r}")
+        return value
+
+    def unknown_keys(self, data: dict, allowed: set[str], prefix: str) -> None:
+        extra = sorted(set(data) - allowed)
+        if extra:
+            raise self.fail(prefix + extra[0], f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+    # -- sections --------------------------------------------------------------------------------------
+    def scene(self, data: dict) -> Scene:
+        self.unknown_keys(data, {"schema", "name", "description", "robot", "gravity", "sensor",
+                                 "touchable", "compensation", "devices"}, "")
+        schema = self.get(data, "schema", "", int)
+        if schema != SCHEMA_VERSION:
+            raise self.fail("schema", f"expected schema version {SCHEMA_VERSION}, got {schema}")
+        name = self.get(data, "name", "", str)
+        if not name.strip():
+            raise self.fail("name", "expected a non-empty string")
+        robot = self.robot(self.table(data, "robot"))
+        gravity = self.vector(self.table(data, "gravity"), "vector", "gravity.", 3)
+        self.unknown_keys(data["gravity"], {"vector"}, "gravity.")
+        sensor = self.sensor(self.table(data, "sensor"))
+        touchable = self.touchable(data.get("touchable"))
+        comp = self.table(data, "compensation")
+        self.unknown_keys(comp, {"level"}, "compensation.")
+        level = self.choice(comp, "level", "compensation.", COMPENSATION_LEVELS)
+        devices = self.devices(data.get("devices", []))
+        return Scene(name=name, description=self.get(data, "description", "", str, ""), path=self.path,
+                     robot=robot, gravity=gravity, sensor=sensor, touchable=touchable,
+                     compensation=level, devices=devices)
+
+    def robot(self, t: dict) -> RobotSpec:
+        p = "robot."
+        self.unknown_keys(t, {"model", "joints", "home", "flange", "torque_constant", "friction_viscous",
+                              "friction_coulomb", "kp", "kd", "current_noise_std"}, p)
+        model = self.get(t, "model", p, str)
+        model_path = (self.path.parent / model).resolve()
+        if model_path.suffix.lower() not in (".xml", ".urdf"):
+            raise self.fail(p + "model", f"expected an MJCF (.xml) or URDF (.urdf) file, got {model!r}")
+        if not model_path.is_file():
+            raise self.fail(p + "model", f"model file not found: {model_path}")
+        joints = self.get(t, "joints", p, list)
+        if not joints or not all(isinstance(j, str) and j for j in joints):
+            raise self.fail(p + "joints", "expected a non-empty list of joint names")
+        if len(set(joints)) != len(joints):
+            raise self.fail(p + "joints", "joint names must be unique")
+        n = len(joints)
+        return RobotSpec(
+            model_path=model_path,
+            joints=tuple(joints),
+            home=self.vector(t, "home", p, n, default=[0.0] * n),
+            flange=self.get(t, "flange", p, str, None),
+            torque_constant=self.vector(t, "torque_constant", p, n, positive=True, default=[1.0] * n),
+            friction_viscous=self.vector(t, "friction_viscous", p, n, nonneg=True, default=[0.0] * n),
+            friction_coulomb=self.vector(t, "friction_coulomb", p, n, nonneg=True, default=[0.0] * n),
+            kp=self.vector(t, "kp", p, n, positive=True, default=[100.0] * n),
+            kd=self.vector(t, "kd", p, n, nonneg=True, default=[10.0] * n),
+            current_noise_std=self.vector(t, "current_noise_std", p, n, nonneg=True, default=[0.0] * n),
+        )
+
+    def sensor(self, t: dict) -> SensorSpec:
+        p = "sensor."
+        self.unknown_keys(t, {"site", "reports", "range", "noise_std", "quantization", "rate_hz", "bias",
+                              "drift_per_s"}, p)
+        return SensorSpec(
+            site=self.get(t, "site", p, str),
+            reports=self.choice(t, "reports", p, SIGN_CONVENTIONS),  # type: ignore[arg-type]
+            range=self.vector(t, "range", p, 6, positive=True),
+            noise_std=self.vector(t, "noise_std", p, 6, nonneg=True),
+            quantization=self.vector(t, "quantization", p, 6, nonneg=True, default=[0.0] * 6),
+            rate_hz=self.number(t, "rate_hz", p, positive=True),
+            bias=self.vector(t, "bias", p, 6, default=[0.0] * 6),
+            drift_per_s=self.vector(t, "drift_per_s", p, 6, default=[0.0] * 6),
+        )
+
+    def touchable(self, items: Any) -> tuple[TouchableLink, ...]:
+        if items is None:
+            raise self.fail("touchable", "missing: expected at least one [[touchable]] table")
+        if not isinstance(items, list) or not all(isinstance(i, dict) for i in items) or not items:
+            raise self.fail("touchable", "expected an array of tables ([[touchable]])")
+        out = []
+        for i, item in enumerate(items):
+            p = f"touchable[{i}]."
+            self.unknown_keys(item, {"link", "pulls"}, p)
+            out.append(TouchableLink(link=self.get(item, "link", p, str),
+                                     pulls=self.get(item, "pulls", p, bool, False)))
+        names = [t.link for t in out]
+        if len(set(names)) != len(names):
+            raise self.fail("touchable", "a link is listed twice")
+        return tuple(out)
+
+    def devices(self, items: Any) -> tuple[DeviceSpec, ...]:
+        if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
+            raise self.fail("devices", "expected an array of tables ([[devices]])")
+        out = []
+        for i, item in enumerate(items):
+            p = f"devices[{i}]."
+            self.unknown_keys(item, {"name", "kind", "transport", "address", "params"}, p)
+            params = self.get(item, "params", p, dict, {})
+            out.append(DeviceSpec(name=self.get(item, "name", p, str), kind=self.get(item, "kind", p, str),
+                                  transport=self.get(item, "transport", p, str),
+                                  address=self.get(item, "address", p, str, None), params=dict(params)))
+        names = [d.name for d in out]
+        if len(set(names)) != len(names):
+            raise self.fail("devices", "device names must be unique")
+        return tuple(out)
+
+
+def _as_tuple(kind: type | tuple[type, ...]) -> tuple[type, ...]:
+    return kind if isinstance(kind, tuple) else (kind,)
+
+
+def _kind_name(kind: type | tuple[type, ...]) -> str:
+    names = {int: "an integer", float: "a number", str: "a string", bool: "true or false", list: "a list",
+             dict: "a table"}
+    kinds = _as_tuple(kind)
+    if set(kinds) == {int, float}:
+        return "a number"
+    return " or ".join(names.get(k, k.__name__) for k in kinds)

@@ -1,0 +1,88 @@
+"""The scene: what a setup is (robot model, F/T sensor, gravity, touchable links, compensation, devices).
+
+All quantities are SI (m, kg, s, N, N m, rad). See docs/conventions.md for frames and signs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+SignConvention = Literal["base_on_arm", "arm_on_base"]
+CompensationLevel = Literal["bias", "gravity", "dynamics"]
+COMPENSATION_LEVELS: tuple[CompensationLevel, ...] = ("bias", "gravity", "dynamics")
+SIGN_CONVENTIONS: tuple[SignConvention, ...] = ("base_on_arm", "arm_on_base")
+
+
+def _frozen(values: Any) -> np.ndarray:
+    arr = np.array(values, dtype=float)
+    arr.flags.writeable = False
+    return arr
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    model_path: Path
+    joints: tuple[str, ...]
+    home: np.ndarray
+    flange: str | None
+    torque_constant: np.ndarray  # N m / A, at the joint
+    friction_viscous: np.ndarray  # N m s / rad
+    friction_coulomb: np.ndarray  # N m
+    kp: np.ndarray  # simulated world's joint PD controller, N m / rad
+    kd: np.ndarray  # N m s / rad
+    current_noise_std: np.ndarray  # A, the simulated current sensor's noise
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    site: str
+    reports: SignConvention
+    range: np.ndarray  # symmetric saturation limits, [N]*3 + [N m]*3
+    noise_std: np.ndarray  # per-axis Gaussian noise standard deviation
+    quantization: np.ndarray  # LSB per axis, 0 = none
+    rate_hz: float
+    bias: np.ndarray  # the simulated sensor's bias (the world's truth; calibration estimates it)
+    drift_per_s: np.ndarray
+
+    @property
+    def noise_cov(self) -> np.ndarray:
+        """Sensor noise covariance (6x6, diagonal), including the quantization noise LSB^2/12."""
+        return np.diag(self.noise_std**2 + self.quantization**2 / 12.0)
+
+
+@dataclass(frozen=True)
+class TouchableLink:
+    link: str
+    pulls: bool = False
+
+
+@dataclass(frozen=True)
+class DeviceSpec:
+    name: str
+    kind: str
+    transport: str
+    address: str | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    description: str
+    path: Path
+    robot: RobotSpec
+    gravity: np.ndarray  # m/s^2, base frame
+    sensor: SensorSpec
+    touchable: tuple[TouchableLink, ...]
+    compensation: CompensationLevel
+    devices: tuple[DeviceSpec, ...]
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.robot.joints)
+
+    def touchable_link(self, name: str) -> TouchableLink | None:
+        return next((t for t in self.touchable if t.link == name), None)

@@ -1,0 +1,257 @@
+"""The physics world: a MuJoCo simulation of a scene that produces device signals and ground truth.
+
+One physics step is ``model.opt.timestep`` (0.5 ms in the built-ins). Each step is split in
+``mj_step1`` / ``mj_step2`` so that the recorded state (q, qd, qdd), the joint torques, the sensor
+wrench and the contacts all belong to the same instant: the state before the integration.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from ftc_hw.model import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, load_spec
+from ftc_hw.scene import Scene
+
+from .sensor_model import FTSensorModel, SensorReading
+from .trajectory import Hold, Trajectory
+
+
+@dataclass(frozen=True)
+class Probe:
+    """A scripted probe pressing a point of a link: a trapezoid force profile, fixed direction."""
+
+    link: str
+    point_link: np.ndarray  # m, in the link's body frame (the probe tip moves with the link)
+    direction: np.ndarray  # unit vector, base frame, of the force applied to the arm
+    magnitude: float  # N at the plateau
+    t_start: float
+    ramp_s: float = 0.05
+    hold_s: float = 0.2
+
+    @property
+    def t_end(self) -> float:
+        return self.t_start + 2 * self.ramp_s + self.hold_s
+
+    def magnitude_at(self, t: float) -> float:
+        u = t - self.t_start
+        if u <= 0 or t >= self.t_end:
+            return 0.0
+        if u < self.ramp_s:
+            return self.magnitude * u / self.ramp_s
+        if u <= self.ramp_s + self.hold_s:
+            return self.magnitude
+        return self.magnitude * (self.t_end - t) / self.ramp_s
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A sphere the moving arm can hit, mounted on a spring along ``axis`` (a compliant object)."""
+
+    position: np.ndarray  # m, base frame
+    radius: float = 0.03
+    axis: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    stiffness: float = 2000.0  # N/m
+    damping: float = 60.0  # N s/m
+    mass: float = 0.3
+
+
+@dataclass(frozen=True)
+class ScenarioSetup:
+    trajectory: Trajectory
+    probes: tuple[Probe, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
+    payload: Payload | None = None
+
+
+@dataclass(frozen=True)
+class ContactTruth:
+    link: str
+    point: np.ndarray  # m, base frame
+    force: np.ndarray  # N, base frame, applied to the arm
+    source: str  # "probe" or "obstacle"
+
+
+@dataclass(frozen=True)
+class WorldState:
+    t: float  # s since the start
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray  # motor torques at the joints, N m
+    current: np.ndarray  # motor currents, A
+    wrench: np.ndarray  # noise-free sensor wrench without bias (sensor frame, scene sign convention)
+    contacts: tuple[ContactTruth, ...]
+
+
+class World:
+    """A scene simulated in MuJoCo under joint control, with scripted contacts and a sensor model."""
+
+    def __init__(self, scene: Scene, setup: ScenarioSetup, seed: int = 0, noise: bool = True) -> None:
+        self.scene = scene
+        self.setup = setup
+        self.rng = np.random.default_rng(seed)
+        self.noise = noise
+        spec = load_spec(scene)
+        add_ft_sensors(spec, scene)
+        if setup.payload is not None:
+            attach_payload(spec, scene, setup.payload)
+        self._obstacle_bodies = [self._add_obstacle(spec, i, o) for i, o in enumerate(setup.obstacles)]
+        self.model = m = spec.compile()
+        self.data = mujoco.MjData(m)
+        r = scene.robot
+        self._qadr = np.array([m.joint(j).qposadr[0] for j in r.joints])
+        self._dadr = np.array([m.joint(j).dofadr[0] for j in r.joints])
+        m.dof_damping[self._dadr] = r.friction_viscous
+        m.dof_frictionloss[self._dadr] = r.friction_coulomb
+        self._fadr = m.sensor(FORCE_SENSOR).adr[0]
+        self._tadr = m.sensor(TORQUE_SENSOR).adr[0]
+        self._sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
+        sensor_body = m.site_bodyid[m.site(scene.sensor.site).id]
+        self._arm_bodies = {b for b in range(m.nbody) if _descends(m, b, sensor_body)}
+        self.sensor = FTSensorModel(scene.sensor, self.rng, noise=noise)
+        self.dt = float(m.opt.timestep)
+        ratio = 1.0 / (scene.sensor.rate_hz * self.dt)
+        if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+            raise ValueError(f"sensor rate {scene.sensor.rate_hz} Hz is not a divisor of the physics rate "
+                             f"{1 / self.dt:g} Hz")
+        self.steps_per_sample = int(round(ratio))
+        self._reference: Trajectory = setup.trajectory
+        self._t_ref0 = 0.0
+        q0, _, _ = self._reference.reference(0.0)
+        self.data.qpos[self._qadr] = q0
+        mujoco.mj_forward(m, self.data)
+        self.steps = 0
+        self.state: WorldState = self._step()
+
+    # -- construction -------------------------------------------------------------------------------
+    @staticmethod
+    def _add_obstacle(spec: mujoco.MjSpec, i: int, o: Obstacle) -> str:
+        name = f"ftc_obstacle{i}"
+        body = spec.worldbody.add_body(name=name, pos=list(o.position), gravcomp=1.0)
+        body.add_joint(name=f"{name}_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=list(o.axis),
+                       stiffness=o.stiffness, damping=o.damping)
+        body.add_geom(name=f"{name}_geom", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[o.radius, 0, 0],
+                      mass=o.mass, contype=2, conaffinity=1, group=2, condim=3, friction=[0.3, 0.005, 0.0001],
+                      solref=[0.02, 1.0])
+        return name
+
+    # -- control ------------------------------------------------------------------------------------
+    def halt(self) -> None:
+        """Stop the arm where it is (the reflex a stop command triggers): hold the current position."""
+        self.set_reference(Hold(self.data.qpos[self._qadr].copy()))
+
+    def set_reference(self, trajectory: Trajectory) -> None:
+        """Follow another trajectory from now on; its time starts at the current world time."""
+        self._reference = trajectory
+        self._t_ref0 = self.data.time
+
+    def set_goal(self, q_goal) -> None:
+        self.set_reference(Hold(np.asarray(q_goal, dtype=float).copy()))
+
+    @property
+    def t(self) -> float:
+        return float(self.data.time)
+
+    # -- stepping -------------------------------------------------------------------------------------
+    def _step(self) -> WorldState:
+        m, d, r = self.model, self.data, self.scene.robot
+        mujoco.mj_step1(m, d)
+        t = float(d.time)
+        q = d.qpos[self._qadr].copy()
+        qd = d.qvel[self._dadr].copy()
+        q_ref, qd_ref, qdd_ref = self._reference.reference(t - self._t_ref0)
+        acc = np.zeros(m.nv)
+        acc[self._dadr] = qdd_ref
+        inertial = np.zeros(m.nv)
+        mujoco.mj_mulM(m, d, inertial, acc)
+        tau = r.kp * (q_ref - q) + r.kd * (qd_ref - qd) + d.qfrc_bias[self._dadr] + inertial[self._dadr]
+        d.qfrc_applied[:] = 0.0
+        d.qfrc_applied[self._dadr] = tau
+        d.xfrc_applied[:] = 0.0
+        probes = []
+        for p in self.setup.probes:
+            mag = p.magnitude_at(t)
+            if mag <= 0.0:
+                continue
+            bid = m.body(p.link).id
+            point = d.xmat[bid].reshape(3, 3) @ p.point_link + d.xpos[bid]
+            force = mag * p.direction
+            d.xfrc_applied[bid, :3] += force
+            d.xfrc_applied[bid, 3:] += np.cross(point - d.xipos[bid], force)
+            probes.append(ContactTruth(p.link, point, force, "probe"))
+        mujoco.mj_step2(m, d)
+        self.steps += 1
+        wrench = np.empty(6)
+        wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
+        wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
+        current = tau / r.torque_constant
+        return WorldState(t=t, q=q, qd=qd, qdd=d.qacc[self._dadr].copy(), tau=tau, current=current,
+                          wrench=self._sign * wrench, contacts=tuple(probes) + self._obstacle_contacts())
+
+    def _obstacle_contacts(self) -> tuple[ContactTruth, ...]:
+        m, d = self.model, self.data
+        out = []
+        f6 = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            arm1, arm2 = b1 in self._arm_bodies, b2 in self._arm_bodies
+            if arm1 == arm2:
+                continue
+            mujoco.mj_contactForce(m, d, i, f6)
+            force = c.frame.reshape(3, 3).T @ f6[:3]  # world frame; acts on geom2 (normal from geom1 to geom2)
+            on_arm, arm_geom = (force, c.geom2) if arm2 else (-force, c.geom1)
+            link = m.body(m.geom_bodyid[arm_geom]).name
+            out.append(ContactTruth(link, self._on_arm_surface(arm_geom, c.pos, on_arm), on_arm, "obstacle"))
+        return tuple(out)
+
+    def _on_arm_surface(self, geom: int, pos: np.ndarray, force: np.ndarray) -> np.ndarray:
+        """Where the contact force's line of action enters the arm geom.
+
+        MuJoCo's contact point is midway through the (soft-contact) penetration, a fraction of a mm
+        inside the arm; the same line gives the same wrench, and this point is on the surface.
+        """
+        norm = float(np.linalg.norm(force))
+        if norm == 0.0:
+            return pos.copy()
+        u = force / norm
+        m, d = self.model, self.data
+        start = pos - 0.05 * u
+        dist = mujoco.mju_rayGeom(d.geom_xpos[geom], d.geom_xmat[geom], m.geom_size[geom], start, u,
+                                  int(m.geom_type[geom]))
+        return start + dist * u if 0.0 <= dist <= 0.06 else pos.copy()
+
+    def step(self) -> WorldState:
+        self.state = self._step()
+        return self.state
+
+    def read_sensor(self, state: WorldState | None = None) -> SensorReading:
+        s = state or self.state
+        return self.sensor.read(s.wrench, s.t)
+
+    def read_current(self, state: WorldState | None = None) -> np.ndarray:
+        s = state or self.state
+        std = self.scene.robot.current_noise_std
+        if self.noise and np.any(std > 0):
+            return s.current + self.rng.normal(size=s.current.shape) * std
+        return s.current.copy()
+
+    def run(self, duration: float) -> Iterator[tuple[WorldState, SensorReading]]:
+        """Advance ``duration`` s, yielding (state, sensor reading) at the sensor's rate."""
+        n_samples = int(round(duration * self.scene.sensor.rate_hz))
+        for _ in range(n_samples):
+            for _ in range(self.steps_per_sample):
+                state = self.step()
+            yield state, self.read_sensor(state)
+
+
+def _descends(m: mujoco.MjModel, body: int, ancestor: int) -> bool:
+    while True:
+        if body == ancestor:
+            return True
+        if body == 0:
+            return False
+        body = int(m.body_parentid[body])

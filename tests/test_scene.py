@@ -1,0 +1,114 @@
+"""Scene files: built-ins load; every malformed file gets an error naming the file, the key and the problem."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from ftc_hw.model import ArmModel
+from ftc_hw.scene import SceneError, builtin_names, load_scene
+from ftc_hw.scene.loader import builtin_dir
+
+LENG = (builtin_dir() / "leng2016.toml").read_text()
+
+
+def test_builtins_present_and_load():
+    assert {"leng2016", "ur5e", "dxl-arm"} <= set(builtin_names())
+    for name in builtin_names():
+        scene = load_scene(name)
+        assert scene.name == name
+        assert scene.robot.model_path.is_file()
+        model = ArmModel(scene)
+        assert model.n_joints == scene.n_joints
+        assert model.surfaces, name
+
+
+def test_user_scene_is_a_path(tmp_path):
+    p = _write(tmp_path, LENG.replace('name = "leng2016"', 'name = "mine"'))
+    assert load_scene(p).name == "mine"
+    assert load_scene(str(p)).name == "mine"
+
+
+def _write(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
+    # Copy the model beside the scene so relative paths resolve.
+    (tmp_path / "leng2016.xml").write_text((builtin_dir() / "leng2016.xml").read_text())
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def _expect(tmp_path, text, key, pattern):
+    p = _write(tmp_path, text)
+    with pytest.raises(SceneError) as info:
+        ArmModel(load_scene(p))
+    err = info.value
+    assert err.path == str(p)
+    assert err.key == key, str(err)
+    assert re.search(pattern, err.problem), err.problem
+    assert str(p) in str(err) and key in str(err)
+
+
+def test_unknown_builtin_and_missing_file(tmp_path):
+    with pytest.raises(SceneError, match="no built-in scene"):
+        load_scene("no-such-scene")
+    with pytest.raises(SceneError, match="cannot read"):
+        load_scene(tmp_path / "absent.toml")
+
+
+def test_invalid_toml(tmp_path):
+    _expect(tmp_path, LENG + "\n[robot\n", "", "invalid TOML")
+
+
+def test_not_utf8(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_bytes(b"name = \"\xff\xfe\"\n")
+    with pytest.raises(SceneError, match="UTF-8"):
+        load_scene(p)
+
+
+@pytest.mark.parametrize(("old", "new", "key", "pattern"), [
+    ("schema = 1", "schema = 7", "schema", "schema version 1"),
+    ("schema = 1", "", "schema", "missing key"),
+    ('name = "leng2016"', "name = 3", "name", "expected a string, got int"),
+    ("[gravity]\nvector = [0.0, -9.801, 0.0]", "[gravity]\nvector = [0.0, -9.801]", "gravity.vector",
+     "3 numbers, got 2"),
+    ("[gravity]\nvector = [0.0, -9.801, 0.0]", "[gravity]\nvector = [0.0, nan, 0.0]", "gravity.vector[1]", "finite"),
+    ("[gravity]\nvector = [0.0, -9.801, 0.0]", "[gravity]\nvector = [0.0, \"x\", 0.0]", "gravity.vector[1]",
+     "expected a number"),
+    ('reports = "base_on_arm"', 'reports = "sideways"', "sensor.reports", "one of base_on_arm, arm_on_base"),
+    ("rate_hz = 1000.0", "rate_hz = -5", "sensor.rate_hz", "positive"),
+    ("rate_hz = 1000.0", "rate_hz = true", "sensor.rate_hz", "boolean"),
+    ("noise_std = [0.05,", "noise_std = [-0.05,", "sensor.noise_std[0]", ">= 0"),
+    ('level = "gravity"', 'level = "magic"', "compensation.level", "bias, gravity, dynamics"),
+    ('site = "ft_sensor"', 'site = "ft_sensor"\ncolour = "red"', "sensor.colour", "unknown key"),
+    ('model = "leng2016.xml"', 'model = "missing.xml"', "robot.model", "not found"),
+    ('model = "leng2016.xml"', 'model = "leng2016.stl"', "robot.model", "MJCF"),
+    ('joints = ["joint1", "joint2", "joint3"]', 'joints = ["joint1", "joint1", "joint3"]', "robot.joints", "unique"),
+    ('joints = ["joint1", "joint2", "joint3"]', 'joints = ["joint1", "elbow", "joint3"]', "robot.joints",
+     "no joint 'elbow'"),
+    ('joints = ["joint1", "joint2", "joint3"]', 'joints = ["joint1", "joint2"]', "robot.home", "2 numbers, got 3"),
+    ('site = "ft_sensor"', 'site = "nowhere"', "sensor.site", "no site 'nowhere'"),
+    ('link = "link2"', 'link = "link9"', "touchable.link", "no body 'link9'"),
+    ('link = "link2"', 'link = "world"', "touchable.link", "no surface geoms"),
+    ('link = "link2"', 'link = "link1"', "touchable", "listed twice"),
+    ('[[devices]]\nname = "ft"', '[[devices]]\nname = 5', "devices[0].name", "expected a string"),
+    ('[compensation]\nlevel = "gravity"', "", "compensation", "missing table"),
+    ("[compensation]", "[compensation_]", "compensation_", "unknown key"),
+])
+def test_malformed(tmp_path, old, new, key, pattern):
+    assert old in LENG, old
+    _expect(tmp_path, LENG.replace(old, new, 1), key, pattern)
+
+
+def test_broken_model_file(tmp_path):
+    p = _write(tmp_path, LENG)
+    (tmp_path / "leng2016.xml").write_text("<mujoco><worldbody><body></mujoco>")
+    with pytest.raises(SceneError) as info:
+        ArmModel(load_scene(p))
+    assert info.value.key == "robot.model" and "cannot load" in info.value.problem
+
+
+def test_missing_touchable(tmp_path):
+    text = re.sub(r"\[\[touchable\]\]\nlink = \"\w+\"\npulls = false[^\n]*\n", "", LENG)
+    _expect(tmp_path, text, "touchable", "at least one")

@@ -1,0 +1,113 @@
+"""The physics world: with noise off its sensor reading equals the model's prediction for the true contacts."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.scene import builtin_names, load_scene
+from sim_devices.world import SCENARIOS, World, build_scenario, truth_record
+from sim_devices.world.sensor_model import FTSensorModel
+
+
+def _world(scene_name, scenario, duration, seed=3, noise=False):
+    scene = load_scene(scene_name)
+    model = ArmModel(scene)
+    setup = build_scenario(scenario, scene, model, seed, duration)
+    return scene, setup, World(scene, setup, seed=seed, noise=noise)
+
+
+@pytest.mark.parametrize("scene_name", ["leng2016", "ur5e", "dxl-arm"])
+@pytest.mark.parametrize("scenario", ["static-pokes", "sweep-with-collision", "payload-poses"])
+def test_noise_free_reading_equals_model_prediction(scene_name, scenario):
+    duration = {"static-pokes": 1.3, "sweep-with-collision": 2.0, "payload-poses": 2.0}[scenario]
+    scene, setup, world = _world(scene_name, scenario, duration)
+    model = ArmModel(scene, setup.payload)
+    in_contact = 0
+    worst = 0.0
+    for state, reading in world.run(duration):
+        contacts = [Contact(c.link, c.point, c.force) for c in state.contacts]
+        in_contact += bool(contacts)
+        predicted = model.predicted_wrench(state.q, state.qd, state.qdd, "dynamics", contacts)
+        worst = max(worst, float(np.abs(state.wrench - predicted).max()))
+        # the device reading adds exactly the scene's bias (and drift) when noise is off
+        expected = np.clip(predicted + scene.sensor.bias + scene.sensor.drift_per_s * state.t,
+                           -scene.sensor.range, scene.sensor.range)
+        if not np.any(scene.sensor.quantization > 0):
+            np.testing.assert_allclose(reading.wrench, expected, atol=1e-8)
+    scale = max(1.0, float(np.abs(state.wrench).max()))
+    assert worst <= 1e-9 * scale, worst
+    if scenario != "payload-poses":
+        assert in_contact > 0, "the scenario produced no contact"
+
+
+def test_probe_truth_is_on_the_link_surface_and_pushes_in():
+    scene, setup, world = _world("leng2016", "static-pokes", 1.0)
+    assert setup.probes
+    model = ArmModel(scene)
+    for state, _ in world.run(1.0):
+        for c in state.contacts:
+            links = model.kinematics(state.q)
+            local = np.linalg.inv(links[c.link]) @ np.append(c.point, 1.0)
+            probe = next(p for p in setup.probes if p.link == c.link and np.allclose(p.point_link, local[:3]))
+            assert probe.magnitude_at(state.t) == pytest.approx(np.linalg.norm(c.force))
+
+
+def test_same_seed_same_run_different_seed_different_run():
+    a = [r.wrench for _, r in _world("leng2016", "static-pokes", 0.5, seed=7, noise=True)[2].run(0.5)]
+    b = [r.wrench for _, r in _world("leng2016", "static-pokes", 0.5, seed=7, noise=True)[2].run(0.5)]
+    c = [r.wrench for _, r in _world("leng2016", "static-pokes", 0.5, seed=8, noise=True)[2].run(0.5)]
+    assert np.array_equal(np.array(a), np.array(b))
+    assert not np.array_equal(np.array(a), np.array(c))
+
+
+def test_sensor_model_noise_quantization_saturation():
+    scene = load_scene("dxl-arm")
+    spec = scene.sensor
+    rng = np.random.default_rng(0)
+    model = FTSensorModel(spec, rng, noise=True)
+    clean = np.zeros(6)
+    readings = np.array([model.read(clean, 0.0).wrench for _ in range(4000)])
+    lsb = np.where(spec.quantization > 0, spec.quantization, 1.0)
+    if np.any(spec.quantization > 0):
+        steps = readings / lsb
+        assert np.allclose(steps[:, spec.quantization > 0], np.round(steps[:, spec.quantization > 0]), atol=1e-9)
+    np.testing.assert_allclose(readings.mean(axis=0), spec.bias, atol=4 * np.sqrt(np.diag(spec.noise_cov) / 4000)
+                               + spec.quantization)
+    np.testing.assert_allclose(readings.std(axis=0), np.sqrt(np.diag(spec.noise_cov)), rtol=0.1)
+    big = model.read(spec.range * 2, 0.0)
+    assert big.saturated.all()
+    np.testing.assert_allclose(big.wrench, spec.range)
+
+
+def test_truth_record_fields():
+    _, _, world = _world("leng2016", "static-pokes", 0.5)
+    records = [json.loads(json.dumps(truth_record(s))) for s, _ in world.run(0.5)]
+    touched = [r for r in records if r["contact"]]
+    free = [r for r in records if not r["contact"]]
+    assert touched and free
+    for r in touched:
+        assert isinstance(r["t"], float) and r["link"] in ("link1", "link2", "link3")
+        assert len(r["point"]) == 3 and len(r["force"]) == 3
+    assert all(r["link"] is None for r in free)
+
+
+def test_halt_stops_the_arm():
+    scene, _, world = _world("leng2016", "sweep", 1.0)
+    for _ in world.run(0.5):
+        pass
+    world.halt()
+    for _ in world.run(0.5):
+        pass
+    assert np.abs(world.state.qd).max() < 1e-3
+
+
+def test_every_scenario_builds_for_every_scene():
+    for scene_name in builtin_names():
+        scene = load_scene(scene_name)
+        model = ArmModel(scene)
+        for name in SCENARIOS:
+            setup = build_scenario(name, scene, model, 0, 5.0)
+            World(scene, setup, seed=0)
