@@ -1,1 +1,54 @@
-"""ftc_hw/bus"""
+"""Timestamped bus: typed frames, publish/subscribe with history, statistics, watchdog, clock alignment.
+
+Topics: ``wrench/<source>``, ``joints/<source>``, ``events/contact``, ``events/device`` (see
+:mod:`ftc_hw.bus.bus`). Times are host ``time.monotonic_ns()`` unless named ``t_device_ns``.
+"""
+
+from .bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, StaleDataError, joints_topic, wrench_topic
+from .clock import ClockAligner, ClockNotReadyError
+from .frames import (
+    CONTACT_KINDS,
+    DEVICE_EVENT_KINDS,
+    ContactEvent,
+    ContactKind,
+    DeviceEvent,
+    DeviceEventKind,
+    Frame,
+    FrameError,
+    JointFlag,
+    JointFrame,
+    WrenchFlag,
+    WrenchFrame,
+)
+from .stats import StatsSnapshot, StreamStats
+from .subscription import Empty, Subscription, SubscriptionClosed
+from .watchdog import Watchdog
+
+__all__ = [
+    "CONTACT_KINDS",
+    "DEVICE_EVENT_KINDS",
+    "EVENTS_CONTACT",
+    "EVENTS_DEVICE",
+    "Bus",
+    "ClockAligner",
+    "ClockNotReadyError",
+    "ContactEvent",
+    "ContactKind",
+    "DeviceEvent",
+    "DeviceEventKind",
+    "Empty",
+    "Frame",
+    "FrameError",
+    "JointFlag",
+    "JointFrame",
+    "StaleDataError",
+    "StatsSnapshot",
+    "StreamStats",
+    "Subscription",
+    "SubscriptionClosed",
+    "Watchdog",
+    "WrenchFlag",
+    "WrenchFrame",
+    "joints_topic",
+    "wrench_topic",
+]

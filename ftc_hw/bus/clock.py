@@ -1,0 +1,183 @@
+"""Device-to-host clock alignment, robust to transport delay spikes.
+
+Each sample pairs a device timestamp with the host receive time: ``t_host = h(t_device) + delay``
+where ``h`` maps device time to host time (offset plus a small rate error, the skew) and
+``delay >= 0``. Delays are positive and spiky but often close to a floor, so the lower envelope of
+``t_host - t_device`` over a sliding window tracks ``h(t_device) - t_device + floor``:
+
+* without skew estimation, the offset is the sliding-window minimum of ``t_host - t_device``;
+* with skew estimation (default), the slope comes from the lower convex hull of per-bucket minima
+  (the edge spanning the window's mean time: the linear programme of Moon, Skelly & Towsley 1999,
+  applied to bucket minima so that a bucket hit only by spikes is ignored), and the intercept puts the
+  line under every sample of the window.
+
+:meth:`ClockAligner.to_host` therefore returns the host time at which a minimum-delay packet stamped
+``t_device_ns`` would have arrived: true host time of the device event plus the delay floor, which
+timestamps alone cannot observe (subtract it if known).
+
+A device clock going backwards, or a sample arriving more than ``jump_ns`` *earlier* than the current
+estimate allows (impossible with positive delays), resets the estimate (``resets`` counts them).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+__all__ = ["ClockAligner", "ClockNotReadyError"]
+
+
+class ClockNotReadyError(RuntimeError):
+    """``to_host``/``offset_ns`` before any sample was seen."""
+
+
+class ClockAligner:
+    """Estimates host time of device timestamps for one source. Not thread-safe on its own.
+
+    ``window_s``: device-time span of the sliding window (capped at ``max_samples`` samples).
+    ``min_samples``: samples needed before ``ready``. ``estimate_skew``: fit the rate error too.
+    ``refit_every``: samples between two skew fits. ``max_skew``: bound on ``|skew|`` (crystal
+    oscillators are within ~1e-4). ``min_skew_span_s``: shortest window span for a skew fit.
+    """
+
+    def __init__(
+        self,
+        window_s: float = 2.0,
+        *,
+        max_samples: int = 4096,
+        min_samples: int = 16,
+        estimate_skew: bool = True,
+        refit_every: int = 32,
+        buckets: int = 16,
+        max_skew: float = 1e-3,
+        min_skew_span_s: float = 0.2,
+        jump_ns: int = 500_000_000,
+    ) -> None:
+        if window_s <= 0 or max_samples < 2 or min_samples < 1 or buckets < 2 or refit_every < 1:
+            raise ValueError("invalid ClockAligner parameters")
+        self.window_ns = int(window_s * 1e9)
+        self.max_samples = max_samples
+        self.min_samples = min_samples
+        self.estimate_skew = estimate_skew
+        self.refit_every = refit_every
+        self.buckets = buckets
+        self.max_skew = max_skew
+        self.min_skew_span_ns = int(min_skew_span_s * 1e9)
+        self.jump_ns = jump_ns
+        self.resets = 0
+        self._reset()
+
+    def _reset(self) -> None:
+        self._t0: int | None = None  # reference device time
+        self._d0 = 0  # reference offset (t_host - t_device of the first sample)
+        self._xs: deque[int] = deque()  # device time - t0
+        self._ys: deque[int] = deque()  # (t_host - t_device) - d0
+        self._mins: deque[tuple[int, int]] = deque()  # monotone deque of (x, y): sliding minimum
+        self._last_x = 0
+        self._a = 0.0  # offset line y = a + b x, relative to (t0, d0)
+        self._b = 0.0
+        self._since_fit = 0
+        self._fitted = False
+
+    # -- feeding --------------------------------------------------------------------------------
+    def update(self, t_device_ns: int, t_host_ns: int) -> None:
+        """Add one (device time, host receive time) pair, both in ns."""
+        if self._t0 is not None:
+            x = t_device_ns - self._t0
+            y = (t_host_ns - t_device_ns) - self._d0
+            if x < self._last_x or y - (self._a + self._b * x) < -self.jump_ns:
+                self.resets += 1
+                self._reset()
+        if self._t0 is None:
+            self._t0, self._d0 = t_device_ns, t_host_ns - t_device_ns
+        x = t_device_ns - self._t0
+        y = (t_host_ns - t_device_ns) - self._d0
+        self._last_x = x
+        xs, ys, mins = self._xs, self._ys, self._mins
+        xs.append(x)
+        ys.append(y)
+        while mins and mins[-1][1] >= y:
+            mins.pop()
+        mins.append((x, y))
+        lo = x - self.window_ns
+        while xs[0] < lo or len(xs) > self.max_samples:
+            xs.popleft()
+            ys.popleft()
+        while mins[0][0] < xs[0]:
+            mins.popleft()
+        if not self.estimate_skew:
+            self._a = float(mins[0][1])
+            return
+        self._since_fit += 1
+        if not self._fitted or self._since_fit >= self.refit_every:
+            self._fit()
+        elif not self._b:
+            self._a = float(mins[0][1])
+        else:
+            self._a = min(self._a, y - self._b * x)  # keep the line under the new sample
+
+    def _fit(self) -> None:
+        self._since_fit = 0
+        self._fitted = True
+        x = np.fromiter(self._xs, dtype=np.int64, count=len(self._xs))
+        y = np.fromiter(self._ys, dtype=np.int64, count=len(self._ys))
+        span = int(x[-1] - x[0])
+        b = 0.0
+        if span >= self.min_skew_span_ns and x.shape[0] >= 2 * self.buckets:
+            b = self._hull_slope(x, y, span)
+        self._b = b
+        self._a = float(np.min(y - b * x)) if b else float(self._mins[0][1])
+
+    def _hull_slope(self, x: np.ndarray, y: np.ndarray, span: int) -> float:
+        bucket = (x - x[0]) * self.buckets // (span + 1)
+        order = np.lexsort((y, bucket))  # by bucket, then by y: the first of each bucket is its minimum
+        _, first = np.unique(bucket[order], return_index=True)
+        px = x[order][first].astype(np.float64)
+        py = y[order][first].astype(np.float64)
+        hull: list[tuple[float, float]] = []  # lower convex hull, monotone chain (px is increasing)
+        for p in zip(px.tolist(), py.tolist(), strict=True):
+            while len(hull) >= 2:
+                (x1, y1), (x2, y2) = hull[-2], hull[-1]
+                if (x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1) <= 0:
+                    hull.pop()
+                else:
+                    break
+            hull.append(p)
+        if len(hull) < 2:
+            return 0.0
+        # The edge spanning the mean time minimises the mean distance of the samples above the line.
+        x_mean = float(x.mean())
+        i = next((k for k in range(1, len(hull)) if hull[k][0] >= x_mean), len(hull) - 1)
+        (x1, y1), (x2, y2) = hull[i - 1], hull[i]
+        b = (y2 - y1) / (x2 - x1)
+        return max(-self.max_skew, min(self.max_skew, b))
+
+    # -- estimates --------------------------------------------------------------------------------
+    @property
+    def ready(self) -> bool:
+        """Enough samples in the window for the estimate to be trusted."""
+        return len(self._xs) >= self.min_samples
+
+    @property
+    def samples(self) -> int:
+        """Samples in the window."""
+        return len(self._xs)
+
+    @property
+    def skew(self) -> float:
+        """Estimated rate error d(t_host - t_device)/d(t_device), dimensionless (x 1e6 for ppm)."""
+        return self._b
+
+    @property
+    def offset_ns(self) -> int:
+        """``t_host - t_device`` for a minimum-delay packet at the newest device time."""
+        if self._t0 is None:
+            raise ClockNotReadyError("no sample yet")
+        return self._d0 + round(self._a + self._b * self._last_x)
+
+    def to_host(self, t_device_ns: int) -> int:
+        """Host monotonic time (ns) of device time ``t_device_ns`` (plus the delay floor)."""
+        if self._t0 is None:
+            raise ClockNotReadyError("no sample yet")
+        return t_device_ns + self._d0 + round(self._a + self._b * (t_device_ns - self._t0))

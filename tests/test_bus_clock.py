@@ -1,0 +1,110 @@
+"""Clock alignment against simulated device clocks with positive, spiky transport delays."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ftc_hw.bus import ClockAligner, ClockNotReadyError
+
+H0 = 987_654_321_000  # host time of device time DEV0
+DEV0 = 5_000_000_000
+US = 1_000
+
+
+@given(
+    st.lists(st.tuples(st.integers(1, 4_000_000), st.integers(0, 10**8)), min_size=1, max_size=200),
+    st.integers(-(10**12), 10**12),
+)
+def test_without_skew_offset_is_window_minimum_of_delay(steps, offset):
+    """Exact: the offset is the true offset plus the smallest delay of the samples in the window."""
+    al = ClockAligner(window_s=0.01, estimate_skew=False, min_samples=1)
+    t_dev, seen = DEV0, []
+    for period, delay in steps:
+        t_dev += period
+        al.update(t_dev, t_dev + offset + delay)
+        seen.append((t_dev, delay))
+        in_window = [d for t, d in seen if t >= t_dev - 10_000_000]
+        assert al.offset_ns == offset + min(in_window)
+        assert al.to_host(t_dev) == t_dev + offset + min(in_window)
+    assert al.resets == 0 and al.skew == 0.0
+
+
+def simulate(seed, skew, floor_ns, mean_ns, p_spike, n=4000, period_ns=1_000_000):
+    """Yield (t_device, t_host, true host time of the device event) for a 1 kHz device."""
+    rng = np.random.default_rng(seed)
+    delays = floor_ns + rng.exponential(mean_ns, n)
+    spikes = rng.random(n) < p_spike
+    delays[spikes] += rng.uniform(1e6, 50e6, spikes.sum())  # 1-50 ms transport hiccups
+    for i in range(n):
+        t_dev = DEV0 + i * period_ns
+        true = H0 + round(i * period_ns * (1 + skew))
+        yield t_dev, true + int(delays[i]), true
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    skew=st.floats(-100e-6, 100e-6),
+    floor_ns=st.integers(0, 1_000_000),
+    mean_ns=st.floats(10e3, 300e3),
+    p_spike=st.floats(0, 0.3),
+)
+def test_aligned_time_error_is_the_delay_floor(seed, skew, floor_ns, mean_ns, p_spike):
+    """After warm-up, to_host(t_device) = true host time + delay floor, within 20 us, despite spikes."""
+    al = ClockAligner()
+    errors = []
+    for i, (t_dev, t_host, true) in enumerate(simulate(seed, skew, floor_ns, mean_ns, p_spike)):
+        al.update(t_dev, t_host)
+        if i >= 2500:  # the 2 s window is full
+            errors.append(al.to_host(t_dev) - true - floor_ns)
+    errors = np.array(errors)
+    assert np.abs(errors).max() <= 20 * US, (errors.min(), errors.max())
+    assert al.skew == pytest.approx(skew, abs=5e-6)
+    assert al.resets == 0 and al.ready
+
+
+def test_skew_estimation_beats_min_filter_alone():
+    plain, fitted = ClockAligner(estimate_skew=False), ClockAligner()
+    err_plain, err_fit = [], []
+    for t_dev, t_host, true in simulate(7, 80e-6, 50_000, 100e3, 0.1):
+        plain.update(t_dev, t_host)
+        fitted.update(t_dev, t_host)
+        err_plain.append(plain.to_host(t_dev) - true - 50_000)
+        err_fit.append(fitted.to_host(t_dev) - true - 50_000)
+    # min filter alone lags by ~skew * window (160 us); the fit does not
+    assert abs(np.mean(err_plain[-1000:])) > 100 * US
+    assert abs(np.mean(err_fit[-1000:])) < 10 * US
+
+
+def test_not_ready_and_errors_before_samples():
+    al = ClockAligner(min_samples=3)
+    with pytest.raises(ClockNotReadyError):
+        al.to_host(0)
+    with pytest.raises(ClockNotReadyError):
+        _ = al.offset_ns
+    for i in range(3):
+        assert not al.ready
+        al.update(i * 1000, 10**9 + i * 1000 + 7)
+    assert al.ready and al.samples == 3
+    assert al.offset_ns == 10**9 + 7
+
+
+def test_device_clock_going_backwards_resets():
+    al = ClockAligner(min_samples=2, estimate_skew=False)
+    for i in range(10):
+        al.update(10**9 + i * 1000, 5 * 10**9 + i * 1000)
+    assert al.offset_ns == 4 * 10**9
+    al.update(0, 6 * 10**9)  # device rebooted: its clock restarts at 0
+    assert al.resets == 1 and al.samples == 1 and not al.ready
+    assert al.offset_ns == 6 * 10**9
+
+
+def test_impossibly_early_sample_resets_but_late_spike_does_not():
+    al = ClockAligner(estimate_skew=False, jump_ns=100_000_000)
+    for i in range(10):
+        al.update(i * 1000, 10**9 + i * 1000)
+    al.update(10_000, 10**9 + 10_000 + 10**9)  # 1 s late: just a delay spike
+    assert al.resets == 0 and al.offset_ns == 10**9
+    al.update(11_000, 11_000 + 10**8)  # 0.9 s earlier than possible: the device clock jumped
+    assert al.resets == 1 and al.offset_ns == 10**8

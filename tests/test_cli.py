@@ -1,0 +1,98 @@
+"""The ftc command as a user runs it."""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from ftc_hw import __version__
+from ftc_hw.cli import app
+
+runner = CliRunner()
+
+
+def _ftc() -> list[str]:
+    exe = shutil.which("ftc", path=str(Path(sys.executable).parent))
+    return [exe] if exe else [sys.executable, "-m", "ftc_hw"]
+
+
+def test_version_through_the_console_script():
+    out = subprocess.run([*_ftc(), "--version"], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == f"ftc-hw {__version__}"
+
+
+def test_scenes_lists_the_builtins_one_line_each():
+    result = runner.invoke(app, ["scenes"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.strip().splitlines()
+    names = [line.split()[0] for line in lines]
+    assert {"leng2016", "ur5e", "dxl-arm"} <= set(names)
+    assert len(lines) == len(names)
+
+
+def test_sim_list():
+    result = runner.invoke(app, ["sim", "--list"])
+    assert result.exit_code == 0
+    for name in ("static-pokes", "sweep-with-collision", "payload-poses"):
+        assert name in result.output
+
+
+def test_sim_writes_truth_one_line_per_sample(tmp_path):
+    truth = tmp_path / "t.jsonl"
+    proc = subprocess.run([*_ftc(), "sim", "leng2016", "--scenario", "static-pokes", "--duration", "2",
+                           "--truth", str(truth), "--fast"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    first = json.loads(proc.stdout.splitlines()[0])
+    assert first["scene"] == "leng2016" and isinstance(first["devices"], list)
+    lines = truth.read_text().splitlines()
+    assert len(lines) == 2000  # 2 s at the leng2016 sensor's 1 kHz
+    records = [json.loads(line) for line in lines]
+    assert all({"t", "contact", "link", "point", "force"} <= r.keys() for r in records)
+    touched = [r for r in records if r["contact"]]
+    assert touched, "static-pokes poked nothing in 2 s"
+    for r in touched:
+        assert r["link"] in ("link1", "link2", "link3")
+        assert len(r["point"]) == 3 and len(r["force"]) == 3
+    ts = [r["t"] for r in records]
+    assert ts == sorted(ts) and ts[1] - ts[0] == pytest.approx(1e-3)
+
+
+def test_sim_same_seed_same_truth(tmp_path):
+    outs = []
+    for i in range(2):
+        path = tmp_path / f"t{i}.jsonl"
+        r = runner.invoke(app, ["sim", "leng2016", "--scenario", "static-pokes", "--duration", "0.5", "--seed",
+                                "4", "--truth", str(path), "--fast"])
+        assert r.exit_code == 0, r.output
+        outs.append(path.read_text())
+    assert outs[0] == outs[1]
+
+
+def test_sim_errors_are_clear(tmp_path):
+    r = runner.invoke(app, ["sim", "nowhere"])
+    assert r.exit_code == 2 and "no built-in scene" in r.output
+    r = runner.invoke(app, ["sim", "leng2016", "--scenario", "dance"])
+    assert r.exit_code == 2 and "unknown scenario" in r.output
+    bad = tmp_path / "bad.toml"
+    bad.write_text("schema = 1\nname = 'x'\n")
+    r = runner.invoke(app, ["sim", str(bad)])
+    assert r.exit_code == 2 and "bad.toml: robot: missing table" in r.output
+
+
+def test_bench_bus_writes_json(tmp_path):
+    out = tmp_path / "bus.json"
+    r = runner.invoke(app, ["bench", "bus", "--json", str(out), "--frames", "20000"])
+    assert r.exit_code == 0, r.output
+    figures = json.loads(out.read_text())
+    assert figures["publish_deliver_fps"]["1_sub_callback"] > 0
+
+
+def test_demo_ends_by_itself_with_a_summary():
+    r = runner.invoke(app, ["demo", "--duration", "2", "--scenario", "static-pokes"])
+    assert r.exit_code == 0, r.output
+    assert "summary" in r.output and "contact episodes in the ground truth" in r.output
