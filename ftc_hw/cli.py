@@ -59,6 +59,22 @@ def sim(
     run_sim(scene, scenario, duration, seed, truth, realtime, noise)
 
 
+@app.command()
+def solve(
+    scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
+    method: Annotated[str, typer.Option(help="ours or leng2016 (the reference paper's method).")] = "ours",
+    input_path: Annotated[str, typer.Option("--input", help="JSON Lines file, or - for stdin.")] = "-",
+    output_path: Annotated[str, typer.Option("--output", help="JSON Lines file, or - for stdout.")] = "-",
+    bias: Annotated[Optional[str], typer.Option(help="Sensor bias to subtract, JSON list of 6 (N, N m).")] = None,  # noqa: UP045
+) -> None:
+    """Localize contacts: one JSON line in ({"q", "wrench", ...}), one estimate or error line out."""
+    from .commands.solve import run_solve
+
+    if method not in ("ours", "leng2016"):
+        raise typer.BadParameter("ours or leng2016", param_hint="--method")
+    run_solve(scene, method, input_path, output_path, bias)
+
+
 @bench_app.command("bus")
 def bench_bus(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045

@@ -85,8 +85,8 @@ def sample_surface_points(model: ArmModel, q, n: int, rng: np.random.Generator,
                           hidden=None) -> list[SurfacePoint]:
     """n points uniform by area on the touchable surfaces at joint angles q.
 
-    ``hidden(point_base) -> bool`` rejects points that are not on the arm's outer surface (inside
-    another primitive); by default every point of every primitive is kept.
+    ``hidden(point, normal, posed_surface) -> bool`` (base frame) rejects points that are not on the
+    arm's outer surface (inside another primitive); by default every point of every primitive is kept.
     """
     posed: list[PosedSurface] = model.posed_surfaces(q)
     areas = np.array([_area(p.surface.kind, p.surface.size) for p in posed])
@@ -99,7 +99,8 @@ def sample_surface_points(model: ArmModel, q, n: int, rng: np.random.Generator,
         p_loc, n_loc = sample_local(ps.surface.kind, ps.surface.size, rng)
         rot, t = ps.base_T_geom[:3, :3], ps.base_T_geom[:3, 3]
         point = rot @ p_loc + t
-        if hidden is not None and hidden(point, ps):
+        normal = rot @ n_loc
+        if hidden is not None and hidden(point, normal, ps):
             continue
-        out.append(SurfacePoint(ps.surface.link, ps.surface.geom, point, rot @ n_loc))
+        out.append(SurfacePoint(ps.surface.link, ps.surface.geom, point, normal))
     return out

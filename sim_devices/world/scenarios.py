@@ -44,19 +44,20 @@ def random_pokes(model: ArmModel, q, rng: np.random.Generator, count: int, t0: f
     return tuple(probes)
 
 
-def visible_filter(model: ArmModel, q):
-    """A ``hidden(point, posed_surface)`` predicate: true when the point lies strictly inside another
-    surface geom of the arm (touchable or not), so it is not on the arm's outer surface."""
-    from ftc_hw.solver.geometry import inside
+def visible_filter(model: ArmModel, q, eps: float = 1e-8):
+    """A ``hidden(point, normal, posed_surface)`` predicate: true when the point is not on the arm's
+    outer surface, by the solver's own rule (the point just outside it lies inside another geom)."""
+    from ftc_hw.solver.kernels import KINDS, inside_local
 
     others = _all_arm_geoms(model, q)
 
-    def hidden(point: np.ndarray, ps) -> bool:
+    def hidden(point: np.ndarray, normal: np.ndarray, ps) -> bool:
+        y = point + eps * normal
         for name, kind, size, b_T_g in others:
             if name == ps.surface.geom:
                 continue
-            local = b_T_g[:3, :3].T @ (point - b_T_g[:3, 3])
-            if bool(inside(kind, size, local, 1e-9)):
+            local = b_T_g[:3, :3].T @ (y - b_T_g[:3, 3])
+            if inside_local(KINDS[kind], size, local, 0.0):
                 return True
         return False
 

@@ -1,0 +1,4 @@
+"""Compensation: raw sensor wrench -> external contact wrench."""
+from .pipeline import Compensator
+
+__all__ = ["Compensator"]

@@ -1,0 +1,319 @@
+"""Contact localization: from the external contact wrench and q, where the arm was touched, how hard,
+and how sure we are.
+
+Method ("ours"): the wrench's line of action crossed with every touchable primitive (analytic,
+stable roots), hidden and inadmissible crossings dropped (inside another primitive; pulls where
+the scene forbids them), then for each candidate the weighted least-squares fit on its surface:
+minimise the Mahalanobis distance of the 6-D wrench over the contact point (on the surface) and the
+force, by manifold Gauss-Newton. Covariances come from the Jacobian at the solution; candidates are
+ranked by log-likelihood, including the per-joint external torques when given (link isolation).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from ..model import ArmModel
+from ..model.arm import GEOM_KINDS, SURFACE_GROUP
+from ..scene import Scene
+from . import kernels as K
+
+FLAG_NAMES = {
+    K.F_INVALID: "invalid_input",
+    K.F_LOW_FORCE: "low_force",
+    K.F_NO_CANDIDATE: "no_candidate",
+    K.F_AMBIGUOUS: "ambiguous",
+    K.F_GRAZING: "grazing",
+    K.F_OFF_SURFACE: "off_surface",
+    K.F_SATURATED: "saturated",
+    K.F_PULL: "pull",
+    K.F_OFF_LINE: "off_line",
+    K.F_NOT_CONVERGED: "not_converged",
+}
+CHI2_1DOF_999 = 10.827566170662733  # chi-square quantile, 1 degree of freedom, p = 0.999
+
+
+_FLAG_CACHE: dict[int, tuple[str, ...]] = {}
+
+
+def flag_names(bits: int) -> tuple[str, ...]:
+    names = _FLAG_CACHE.get(bits)
+    if names is None:
+        names = _FLAG_CACHE[bits] = tuple(name for bit, name in FLAG_NAMES.items() if bits & bit)
+    return names
+
+
+@dataclass(frozen=True, slots=True)
+class Candidate:
+    link: str
+    point: np.ndarray  # m, base frame
+    force: np.ndarray  # N applied to the arm, base frame
+    score: float  # log-likelihood (higher is better)
+    chi2: float
+
+
+@dataclass(frozen=True, slots=True)
+class ContactEstimate:
+    """The solver's answer for one frame (SI, base frame).
+
+    ``contact`` is False when no admissible point exists (``no_candidate``, ``invalid_input``) or the
+    force is below the noise floor (``low_force``; the best fit is still filled in).
+    ``residual`` is the moment about the force line (N m): zero for a perfect point contact.
+    ``cov`` is the 6x6 covariance of (point, force); the point block has rank 2 (on the surface).
+    ``conditioning`` is the condition number of the fit's information matrix.
+    """
+
+    contact: bool
+    link: str | None
+    point: np.ndarray
+    force: np.ndarray
+    normal: np.ndarray
+    residual: float
+    chi2: float
+    cov: np.ndarray
+    conditioning: float
+    flags: tuple[str, ...]
+    candidate_links: tuple[str, ...]  # best first
+    candidate_data: np.ndarray  # (n, 8): point (3), force (3), score, chi2
+
+    @property
+    def candidates(self) -> tuple[Candidate, ...]:
+        """Every admissible candidate, best first (built on demand: the live path rarely needs it)."""
+        d = self.candidate_data
+        return tuple(Candidate(link, d[k, 0:3], d[k, 3:6], float(d[k, 6]), float(d[k, 7]))
+                     for k, link in enumerate(self.candidate_links))
+
+    @property
+    def point_std(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.cov)[:3], 0.0))
+
+    @property
+    def force_std(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.cov)[3:], 0.0))
+
+
+@dataclass(frozen=True)
+class BatchEstimate:
+    """Arrays over N frames; ``flags`` are bit masks (see ``flag_names``); ``link`` indexes ``links``."""
+
+    contact: np.ndarray  # (N,) bool
+    link: np.ndarray  # (N,) int, -1 when none
+    point: np.ndarray  # (N, 3)
+    force: np.ndarray  # (N, 3)
+    normal: np.ndarray  # (N, 3)
+    residual: np.ndarray
+    chi2: np.ndarray
+    cov: np.ndarray  # (N, 6, 6)
+    conditioning: np.ndarray
+    flags: np.ndarray  # (N,) int
+    n_candidates: np.ndarray
+    links: tuple[str, ...]
+
+
+class ContactSolver:
+    """Solver for one scene. Not thread-safe (it owns the model's MjData): one per thread."""
+
+    def __init__(self, scene: Scene | ArmModel, *, low_force_sigma: float = 5.0, grazing_deg: float = 5.0,
+                 ambiguity_dlogl: float = 2.0, hide_tol: float = 1e-8, max_iter: int = 20,
+                 tau_std: np.ndarray | None = None) -> None:
+        self.model = scene if isinstance(scene, ArmModel) else ArmModel(scene)
+        self.scene = self.model.scene
+        m = self.model.model
+        touch = {t.link: t for t in self.scene.touchable}
+        geoms = [g for g in range(m.ngeom)
+                 if m.geom_group[g] == SURFACE_GROUP and int(m.geom_type[g]) in GEOM_KINDS]
+        self._geom_ids = np.array(geoms, dtype=np.int64)
+        self.kinds = np.array([K.KINDS[GEOM_KINDS[int(m.geom_type[g])]] for g in geoms], dtype=np.int64)
+        self.sizes = np.array([m.geom_size[g] for g in geoms], dtype=float)
+        self.prim_link = np.array([m.geom_bodyid[g] for g in geoms], dtype=np.int64)
+        self.prim_touch = np.array([m.body(int(m.geom_bodyid[g])).name in touch for g in geoms])
+        self.prim_pulls = np.array([bool(touch.get(m.body(int(m.geom_bodyid[g])).name) and
+                                         touch[m.body(int(m.geom_bodyid[g])).name].pulls) for g in geoms])
+        self.links = tuple(m.body(b).name for b in range(m.nbody))
+        # joint j moves body b when j's body is b or an ancestor of b
+        self.link_joint = np.zeros((m.nbody, m.njnt), dtype=np.bool_)
+        for b in range(m.nbody):
+            a = b
+            while a > 0:
+                for j in range(m.body_jntadr[a], m.body_jntadr[a] + m.body_jntnum[a]):
+                    self.link_joint[b, j] = True
+                a = int(m.body_parentid[a])
+        self._jnt_ids = np.array([m.joint(j).id for j in self.model.joint_names])
+        sensor_body = self.model.sensor_body
+        self.sensor_moves = bool(self.link_joint[sensor_body].any())
+        self.sigma_sensor = self.scene.sensor.noise_cov
+        self.ext_sign = -1.0 if self.scene.sensor.reports == "base_on_arm" else 1.0
+        q0 = np.array(self.scene.robot.home)
+        self._A0, self._W0 = self._frame_transform(q0)
+        force_var = np.trace(np.linalg.inv(self._W0)[:3, :3]) / 3.0
+        self.low_force = float(low_force_sigma * np.sqrt(force_var))
+        self.grazing_cos = float(np.sin(np.radians(grazing_deg)))
+        self.off_chi2 = CHI2_1DOF_999
+        self.ambiguity_dlogl = float(ambiguity_dlogl)
+        self.hide_tol = float(hide_tol)
+        self.max_iter = int(max_iter)
+        if tau_std is None:
+            tau_std = np.maximum(self.scene.robot.torque_constant * self.scene.robot.current_noise_std, 0.05)
+        self.tau_var = np.zeros(m.njnt)
+        self.tau_var[self._jnt_ids] = np.asarray(tau_std, dtype=float) ** 2
+        self.tau_var[self.tau_var == 0] = 1.0
+        self.prim_i = np.ascontiguousarray(np.stack([self.kinds, self.prim_link, self.prim_touch.astype(np.int64),
+                                                     self.prim_pulls.astype(np.int64)], axis=1))
+        self.cfg = np.array([self.low_force, self.grazing_cos, self.off_chi2, self.ambiguity_dlogl, self.hide_tol,
+                             self.max_iter], dtype=float)
+        self._tree = _TreeArrays(m, self._geom_ids)
+        self.max_candidates = 2 * len(geoms)
+        self._out = np.zeros(K.O_SIZE)
+        self._cand_prim = np.zeros(self.max_candidates, dtype=np.int64)
+        self._cand_f = np.zeros((self.max_candidates, K.C_SIZE))
+        self._tau = np.zeros(m.njnt)
+
+    # -- frames ---------------------------------------------------------------------------------------
+    def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """A maps a sensor-frame wrench about the sensor origin to the base frame about the base
+        origin; W is the inverse covariance of the external wrench in the base frame."""
+        b_T_s = self.model.base_T_sensor(q)
+        r, t = b_T_s[:3, :3], b_T_s[:3, 3]
+        a = np.zeros((6, 6))
+        a[:3, :3] = r
+        a[3:, 3:] = r
+        a[3:, :3] = _skew(t) @ r
+        sigma = a @ self.sigma_sensor @ a.T
+        return a, np.linalg.inv(sigma)
+
+    def external_wrench_base(self, wrench_sensor, q=None) -> np.ndarray:
+        """(p, c x p) in the base frame about the base origin from a compensated sensor reading."""
+        a = self._frame_transform(q)[0] if (self.sensor_moves and q is not None) else self._A0
+        return self.ext_sign * (a @ np.asarray(wrench_sensor, dtype=float))
+
+    # -- single frame ---------------------------------------------------------------------------------
+    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False) -> ContactEstimate:
+        """Estimate the contact from the compensated wrench (sensor frame, the scene's sign
+        convention: the external contact wrench only) at joint angles q (rad).
+
+        ``tau_ext``: optional per-joint external torques (N m, the scene's joint order) from the
+        joint currents; they score each candidate by J_c^T p and isolate the link.
+        """
+        w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
+        q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
+        if not (math.isfinite(w.sum()) and math.isfinite(q.sum())):  # NaN or Inf anywhere
+            return self._invalid(saturated)
+        m, d = self.model.model, self.model.data
+        d.qpos[self.model._qadr] = q
+        mujoco.mj_kinematics(m, d)
+        if self.sensor_moves:
+            a, wmat = self._frame_transform(q)
+        else:
+            a, wmat = self._A0, self._W0
+        use_tau = tau_ext is not None
+        if use_tau:
+            tau_arr = np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
+            if not math.isfinite(tau_arr.sum()):
+                return self._invalid(saturated)
+            self._tau[self._jnt_ids] = tau_arr
+        n = K.solve_frame_posed(self.ext_sign * (a @ w), wmat, self.prim_i, self.sizes, self._geom_ids, d.geom_xpos,
+                                d.geom_xmat, d.xaxis, d.xanchor, self.link_joint, self._tau, self.tau_var, use_tau,
+                                self.cfg, self._out, self._cand_prim, self._cand_f)
+        return self._estimate(n, saturated)
+
+    def _invalid(self, saturated: bool) -> ContactEstimate:
+        z = np.zeros(3)
+        bits = K.F_INVALID | (K.F_SATURATED if saturated else 0)
+        return ContactEstimate(False, None, z, z, z, 0.0, 0.0, np.zeros((6, 6)), math.inf, flag_names(bits), (),
+                               np.zeros((0, K.C_SIZE)))
+
+    def _estimate(self, n: int, saturated: bool) -> ContactEstimate:
+        out = self._out
+        sc = out[K.O_SCALARS:K.O_SCALARS + 8].tolist()
+        bits = int(sc[K.S_FLAGS]) | (K.F_SATURATED if saturated else 0)
+        if n == 0:
+            z = np.zeros(3)
+            return ContactEstimate(False, None, z, z, z, sc[K.S_RESIDUAL], 0.0, np.zeros((6, 6)), math.inf,
+                                   flag_names(bits), (), np.zeros((0, K.C_SIZE)))
+        links, prims = self.links, self.prim_link
+        cand_links = tuple([links[prims[g]] for g in self._cand_prim[:n].tolist()])
+        out = out.copy()
+        # below the noise floor the fit is reported but not called a contact
+        return ContactEstimate(not bits & K.F_LOW_FORCE, cand_links[0], out[0:3], out[3:6], out[6:9],
+                               sc[K.S_RESIDUAL], sc[K.S_CHI2], out[K.O_COV:K.O_COV + 36].reshape(6, 6), sc[K.S_COND],
+                               flag_names(bits), cand_links, self._cand_f[:n].copy())
+
+    # -- batch ----------------------------------------------------------------------------------------
+    def solve_batch(self, wrenches_sensor, qs, tau_ext=None, saturated=None) -> BatchEstimate:
+        """``solve`` over N frames at once: wrenches (N, 6), qs (N, n); the same answers."""
+        w = np.ascontiguousarray(wrenches_sensor, dtype=np.float64).reshape(-1, 6)
+        n = w.shape[0]
+        qs = np.ascontiguousarray(qs, dtype=np.float64).reshape(n, self.model.n_joints)
+        m = self.model.model
+        qfull = np.zeros((n, m.nq))
+        qfull[:, self.model._qadr] = qs
+        if self.sensor_moves:
+            pairs = [self._frame_transform(q) for q in qs]
+            ext = np.einsum("nij,nj->ni", np.array([p[0] for p in pairs]), w) * self.ext_sign
+            ws = np.array([p[1] for p in pairs])
+        else:
+            ext = (w @ self._A0.T) * self.ext_sign
+            ws = self._W0[None]
+        ext = np.ascontiguousarray(ext)
+        use_tau = np.zeros(n, dtype=np.bool_)
+        tau = np.zeros((n, m.njnt))
+        if tau_ext is not None:
+            t = np.asarray(tau_ext, dtype=float).reshape(n, self.model.n_joints)
+            tau[:, self._jnt_ids] = t
+            use_tau[:] = np.all(np.isfinite(t), axis=1)
+            tau[~use_tau] = 0.0
+        bad = ~(np.all(np.isfinite(ext), axis=1) & np.all(np.isfinite(qfull), axis=1))
+        qfull[bad] = 0.0
+        nc = self.max_candidates
+        out = np.zeros((n, K.O_SIZE))
+        cand_f = np.zeros((n, nc, K.C_SIZE))
+        cand_prim = np.zeros((n, nc), dtype=np.int64)
+        n_cand = np.zeros(n, dtype=np.int64)
+        tr = self._tree
+        K.solve_batch(ext, qfull, ws, self.prim_i, self.sizes, self.link_joint, tau, self.tau_var, use_tau, self.cfg,
+                      tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, out, cand_prim, cand_f, n_cand)
+        sc = out[:, K.O_SCALARS:K.O_SCALARS + 8]
+        flags = sc[:, K.S_FLAGS].astype(np.int64)
+        flags[bad] = K.F_INVALID
+        if saturated is not None:
+            flags[np.asarray(saturated, dtype=bool)] |= K.F_SATURATED
+        contact = (n_cand > 0) & ~bad & ((flags & K.F_LOW_FORCE) == 0)
+        link = np.where(contact, self.prim_link[cand_prim[:, 0]], -1)
+        return BatchEstimate(contact=contact, link=link, point=out[:, 0:3], force=out[:, 3:6], normal=out[:, 6:9],
+                             residual=sc[:, K.S_RESIDUAL], chi2=sc[:, K.S_CHI2],
+                             cov=out[:, K.O_COV:K.O_COV + 36].reshape(n, 6, 6), conditioning=sc[:, K.S_COND],
+                             flags=flags, n_candidates=n_cand, links=self.links)
+
+
+class _TreeArrays:
+    """The compiled model's tree in the packed arrays the batch kinematics kernel reads."""
+
+    def __init__(self, m: mujoco.MjModel, geom_ids: np.ndarray) -> None:
+        hinge, slide = int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)
+        self.tree_i = np.zeros((m.nbody, 4), dtype=np.int64)
+        self.tree_f = np.zeros((m.nbody, 13))
+        for b in range(m.nbody):
+            if m.body_jntnum[b] > 1:
+                raise ValueError(f"body {m.body(b).name!r} has {m.body_jntnum[b]} joints; the batch solver "
+                                 "supports one hinge or slide joint per body")
+            j = int(m.body_jntadr[b]) if m.body_jntnum[b] == 1 else -1
+            self.tree_i[b, 0] = m.body_parentid[b]
+            self.tree_i[b, 1] = j
+            self.tree_f[b, 0:3] = m.body_pos[b]
+            self.tree_f[b, 3:7] = m.body_quat[b]
+            if j >= 0:
+                if int(m.jnt_type[j]) not in (hinge, slide):
+                    raise ValueError(f"joint {m.joint(j).name!r} is not a hinge or slide joint")
+                self.tree_i[b, 2] = m.jnt_type[j]
+                self.tree_i[b, 3] = m.jnt_qposadr[j]
+                self.tree_f[b, 7:10] = m.jnt_axis[j]
+                self.tree_f[b, 10:13] = m.jnt_pos[j]
+        self.geom_i = m.geom_bodyid[geom_ids].astype(np.int64).reshape(-1, 1)
+        self.geom_f = np.ascontiguousarray(np.concatenate([m.geom_pos[geom_ids], m.geom_quat[geom_ids]], axis=1))
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

@@ -1,0 +1,80 @@
+"""Shared helpers for solver tests: sampled contacts and small custom scenes."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.model.sampling import SurfacePoint, sample_surface_points
+from ftc_hw.scene import load_scene
+from sim_devices.world.scenarios import _cone, visible_filter
+
+
+def contacts(model: ArmModel, q, n: int, seed: int, max_angle_deg: float = 80.0, f_range=(5.0, 200.0)):
+    """(surface point, force applied to the arm) pairs: uniform on the touchable surfaces, pushing in."""
+    rng = np.random.default_rng(seed)
+    pts = sample_surface_points(model, q, n, rng, hidden=visible_filter(model, q))
+    out = []
+    for sp in pts:
+        d = _cone(-sp.normal, math.radians(max_angle_deg), rng)
+        out.append((sp, d * rng.uniform(*f_range)))
+    return out
+
+
+def reading(model: ArmModel, q, sp: SurfacePoint, force) -> np.ndarray:
+    """The compensated sensor reading (sensor frame, scene convention) of one contact."""
+    return model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, force)])
+
+
+SCENE = """schema = 1
+name = "{name}"
+[robot]
+model = "{name}.xml"
+joints = ["j1", "j2"]
+home = [0.3, -0.4]
+[gravity]
+vector = [0.0, 0.0, -9.81]
+[sensor]
+site = "ft"
+reports = "{reports}"
+range = [1000.0, 1000.0, 1000.0, 100.0, 100.0, 100.0]
+noise_std = [0.1, 0.1, 0.1, 0.005, 0.005, 0.005]
+rate_hz = 1000.0
+[[touchable]]
+link = "l1"
+[[touchable]]
+link = "l2"
+[compensation]
+level = "gravity"
+"""
+
+MJCF = """<mujoco>
+  <worldbody>
+    <body name="base" pos="{offset}">
+      <site name="ft"/>
+      <inertial pos="0 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+      <body name="l1" pos="0 0 0.1">
+        <joint name="j1" axis="0 0 1"/>
+        <inertial pos="0 0 0.1" mass="1" diaginertia="0.01 0.01 0.01"/>
+        <geom type="{kind1}" size="{size1}" pos="0 0 0.2" group="1"/>
+        <body name="l2" pos="0 0 0.5">
+          <joint name="j2" axis="0 1 0"/>
+          <inertial pos="0.1 0 0" mass="1" diaginertia="0.01 0.01 0.01"/>
+          <geom type="{kind2}" size="{size2}" pos="{pos2}" euler="0 1.5707963267948966 0" group="1"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def custom_scene(tmp: Path, name: str, kind1: str, size1: str, kind2: str, size2: str, pos2: str = "0.3 0 0",
+                 offset: str = "0 0 0", reports: str = "base_on_arm"):
+    (tmp / f"{name}.xml").write_text(MJCF.format(kind1=kind1, size1=size1, kind2=kind2, size2=size2, pos2=pos2,
+                                                 offset=offset))
+    path = tmp / f"{name}.toml"
+    path.write_text(SCENE.format(name=name, reports=reports))
+    return load_scene(path)
