@@ -1,6 +1,15 @@
 """The arm model (on MuJoCo)."""
 from .arm import ArmModel, Contact, PosedSurface, Surface, apply_point_force, pose
-from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, load_spec
+from .build import (
+    FORCE_SENSOR,
+    TORQUE_SENSOR,
+    Payload,
+    add_ft_sensors,
+    attach_payload,
+    load_spec,
+)
 
-__all__ = ["FORCE_SENSOR", "TORQUE_SENSOR", "ArmModel", "Contact", "Payload", "PosedSurface", "Surface", "add_ft_sensors", "apply_point_force",
-           "attach_payload", "load_spec", "pose"]
+__all__ = [
+    "FORCE_SENSOR", "TORQUE_SENSOR", "ArmModel", "Contact", "Payload", "PosedSurface", "Surface",
+    "add_ft_sensors", "apply_point_force", "attach_payload", "load_spec", "pose",
+]
