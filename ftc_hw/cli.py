@@ -99,5 +99,19 @@ def demo(
     raise typer.Exit(run_demo(scene, scenario, duration, seed))
 
 
+@bench_app.command("solver")
+def bench_solver(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    plot: Annotated[Optional[Path], typer.Option(help="Draw error against latency to this PNG.")] = None,  # noqa: UP045
+    cases: Annotated[int, typer.Option(min=100, help="Sampled contacts per scene.")] = 2000,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
+) -> None:
+    """Solver accuracy (noise-free and with the scene's noise) against latency, ours vs leng2016."""
+    from .solver.bench import run
+
+    run(json_path=json_path, plot_path=plot, n=cases, seed=seed, scenes=scene)
+
+
 def run() -> None:  # pragma: no cover - console entry point
     app()

@@ -71,32 +71,31 @@ def _tangent_basis(n, t1, t2):
 
 
 # -- line / primitive crossings (local frame) -----------------------------------------------------------
+# Scalar helpers return tuples: numba keeps them on the stack (no heap allocation per call).
 @njit(**JIT)
-def _ball(cx, cy, cz, r, o, d, s_out, k):
-    """Crossings of the line o + s d (|d| = 1) with a sphere; solved about the closest approach
-    s0 = (c - o).d so the root offset never suffers cancellation. Returns the count added."""
-    s0 = (cx - o[0]) * d[0] + (cy - o[1]) * d[1] + (cz - o[2]) * d[2]
-    mx = o[0] + s0 * d[0] - cx
-    my = o[1] + s0 * d[1] - cy
-    mz = o[2] + s0 * d[2] - cz
-    m2 = mx * mx + my * my + mz * mz
-    disc = (r - math.sqrt(m2)) * (r + math.sqrt(m2))
+def _ball(cz, r, o, d):
+    """Crossings of the line o + s d (|d| = 1) with the sphere of radius r at (0, 0, cz), solved about
+    the closest approach s0 so the root offset never suffers cancellation: (hit, s_lo, s_hi)."""
+    s0 = -(o[0] * d[0] + o[1] * d[1] + (o[2] - cz) * d[2])
+    mx = o[0] + s0 * d[0]
+    my = o[1] + s0 * d[1]
+    mz = o[2] - cz + s0 * d[2]
+    m = math.sqrt(mx * mx + my * my + mz * mz)
+    disc = (r - m) * (r + m)
     if disc < 0.0:
         if disc < -1e-14 * r * r:
-            return 0
+            return False, 0.0, 0.0
         disc = 0.0
     h = math.sqrt(disc)
-    s_out[k] = s0 - h
-    s_out[k + 1] = s0 + h
-    return 2
+    return True, s0 - h, s0 + h
 
 
 @njit(**JIT)
-def _side(r, o, d, s_out, k):
+def _side(r, o, d):
     """Crossings with the infinite cylinder x^2 + y^2 = r^2 (about the xy closest approach)."""
     a = d[0] * d[0] + d[1] * d[1]
     if a < 1e-300:
-        return 0
+        return False, 0.0, 0.0
     s0 = -(o[0] * d[0] + o[1] * d[1]) / a
     mx = o[0] + s0 * d[0]
     my = o[1] + s0 * d[1]
@@ -104,107 +103,94 @@ def _side(r, o, d, s_out, k):
     disc = (r - m) * (r + m)
     if disc < 0.0:
         if disc < -1e-14 * r * r:
-            return 0
+            return False, 0.0, 0.0
         disc = 0.0
     h = math.sqrt(disc / a)
-    s_out[k] = s0 - h
-    s_out[k + 1] = s0 + h
-    return 2
+    return True, s0 - h, s0 + h
+
+
+@njit(**JIT)
+def normal_local(kind, size, x0, x1, x2):
+    """Outward unit normal at the surface point (x0, x1, x2) of a primitive (local frame)."""
+    r = size[0]
+    if kind == SPHERE:
+        n0, n1, n2 = x0, x1, x2
+    elif kind == CAPSULE:
+        z = min(max(x2, -size[1]), size[1])
+        n0, n1, n2 = x0, x1, x2 - z
+    elif kind == CYLINDER:
+        rho = math.sqrt(x0 * x0 + x1 * x1)
+        # the nearest face decides: the side when |rho - r| < | |z| - h |
+        if abs(rho - r) <= abs(abs(x2) - size[1]) and rho > 0.0:
+            n0, n1, n2 = x0, x1, 0.0
+        else:
+            n0, n1, n2 = 0.0, 0.0, 1.0 if x2 >= 0 else -1.0
+    elif kind == ELLIPSOID:
+        n0, n1, n2 = x0 / (size[0] * size[0]), x1 / (size[1] * size[1]), x2 / (size[2] * size[2])
+    elif kind == BOX:
+        g0, g1, g2 = abs(abs(x0) - size[0]), abs(abs(x1) - size[1]), abs(abs(x2) - size[2])
+        if g0 <= g1 and g0 <= g2:
+            n0, n1, n2 = 1.0 if x0 >= 0 else -1.0, 0.0, 0.0
+        elif g1 <= g2:
+            n0, n1, n2 = 0.0, 1.0 if x1 >= 0 else -1.0, 0.0
+        else:
+            n0, n1, n2 = 0.0, 0.0, 1.0 if x2 >= 0 else -1.0
+    else:
+        n0, n1, n2 = 0.0, 0.0, 1.0
+    k = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if k == 0.0:
+        return 0.0, 0.0, 1.0
+    return n0 / k, n1 / k, n2 / k
 
 
 @njit(**JIT)
 def surface_normal_local(kind, size, x, n):
-    """Outward unit normal at a surface point x (local frame)."""
-    r = size[0]
-    if kind == SPHERE:
-        n[0], n[1], n[2] = x[0], x[1], x[2]
-    elif kind == CAPSULE:
-        z = min(max(x[2], -size[1]), size[1])
-        n[0], n[1], n[2] = x[0], x[1], x[2] - z
-    elif kind == CYLINDER:
-        rho = math.sqrt(x[0] * x[0] + x[1] * x[1])
-        # nearest face decides: side when |rho - r| < | |z| - h |
-        if abs(rho - r) <= abs(abs(x[2]) - size[1]) and rho > 0.0:
-            n[0], n[1], n[2] = x[0], x[1], 0.0
-        else:
-            n[0], n[1], n[2] = 0.0, 0.0, 1.0 if x[2] >= 0 else -1.0
-    elif kind == ELLIPSOID:
-        n[0] = x[0] / (size[0] * size[0])
-        n[1] = x[1] / (size[1] * size[1])
-        n[2] = x[2] / (size[2] * size[2])
-    elif kind == BOX:
-        best, axis = 1e300, 0
-        for i in range(3):
-            g = abs(abs(x[i]) - size[i])
-            if g < best:
-                best, axis = g, i
-        n[0], n[1], n[2] = 0.0, 0.0, 0.0
-        n[axis] = 1.0 if x[axis] >= 0 else -1.0
-    else:
-        n[0], n[1], n[2] = 0.0, 0.0, 1.0
-    k = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
-    if k == 0.0:
-        n[0], n[1], n[2] = 0.0, 0.0, 1.0
-    else:
-        n[0] /= k
-        n[1] /= k
-        n[2] /= k
+    n[0], n[1], n[2] = normal_local(kind, size, x[0], x[1], x[2])
 
 
 @njit(**JIT)
 def crossings_local(kind, size, o, d, s_out):
     """Entry and exit of the line o + s d (d unit) through a closed primitive: returns the count
     (0, 1 for a plane, 2 otherwise; a tangent line gives a double root) and the s values, sorted."""
-    buf = np.empty(MAX_CROSS)
-    n = 0
     r = size[0]
     h = size[1]
+    lo, hi = math.inf, -math.inf
     if kind == SPHERE:
-        n = _ball(0.0, 0.0, 0.0, r, o, d, buf, 0)
+        ok, a, b = _ball(0.0, r, o, d)
+        if ok:
+            lo, hi = a, b
     elif kind == ELLIPSOID:
         # the unit sphere in coordinates scaled by the semi-axes; s keeps its metric meaning
-        os_ = np.empty(3)
-        ds = np.empty(3)
-        for i in range(3):
-            os_[i] = o[i] / size[i]
-            ds[i] = d[i] / size[i]
-        a = _dot3(ds, ds)
-        s0 = -_dot3(os_, ds) / a
-        m2 = 0.0
-        for i in range(3):
-            mi = os_[i] + s0 * ds[i]
-            m2 += mi * mi
-        m = math.sqrt(m2)
+        o0, o1, o2 = o[0] / size[0], o[1] / size[1], o[2] / size[2]
+        d0, d1, d2 = d[0] / size[0], d[1] / size[1], d[2] / size[2]
+        a = d0 * d0 + d1 * d1 + d2 * d2
+        s0 = -(o0 * d0 + o1 * d1 + o2 * d2) / a
+        m0, m1, m2 = o0 + s0 * d0, o1 + s0 * d1, o2 + s0 * d2
+        m = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
         disc = (1.0 - m) * (1.0 + m)
         if disc >= -1e-14:
             hh = math.sqrt(max(disc, 0.0) / a)
-            buf[0] = s0 - hh
-            buf[1] = s0 + hh
-            n = 2
+            lo, hi = s0 - hh, s0 + hh
     elif kind == CAPSULE or kind == CYLINDER:  # noqa: SIM109 (numba)
-        k = _side(r, o, d, buf, 0)
-        for i in range(k):
-            z = o[2] + buf[i] * d[2]
-            if abs(z) <= h * (1.0 + 1e-15) + 1e-15:
-                buf[n] = buf[i]
-                n += 1
+        ok, a, b = _side(r, o, d)
+        if ok:
+            for t in (a, b):
+                if abs(o[2] + t * d[2]) <= h * (1.0 + 1e-15) + 1e-15:
+                    lo, hi = min(lo, t), max(hi, t)
         if kind == CAPSULE:
             for sign in (-1.0, 1.0):
-                tmp = np.empty(2)
-                k = _ball(0.0, 0.0, sign * h, r, o, d, tmp, 0)
-                for i in range(k):
-                    z = o[2] + tmp[i] * d[2]
-                    if sign * z >= h * (1.0 - 1e-15) - 1e-15:
-                        buf[n] = tmp[i]
-                        n += 1
+                ok, a, b = _ball(sign * h, r, o, d)
+                if ok:
+                    for t in (a, b):
+                        if sign * (o[2] + t * d[2]) >= h * (1.0 - 1e-15) - 1e-15:
+                            lo, hi = min(lo, t), max(hi, t)
         elif abs(d[2]) > 1e-300:
             for sign in (-1.0, 1.0):
-                s = (sign * h - o[2]) / d[2]
-                x = o[0] + s * d[0]
-                y = o[1] + s * d[1]
+                t = (sign * h - o[2]) / d[2]
+                x = o[0] + t * d[0]
+                y = o[1] + t * d[1]
                 if x * x + y * y <= r * r * (1.0 + 1e-14):
-                    buf[n] = s
-                    n += 1
+                    lo, hi = min(lo, t), max(hi, t)
     elif kind == BOX:
         lo, hi = -1e300, 1e300
         for i in range(3):
@@ -220,105 +206,103 @@ def crossings_local(kind, size, o, d, s_out):
             hi = min(hi, t2)
         if lo > hi + 1e-15 * (abs(lo) + abs(hi)):
             return 0
-        buf[0] = lo
-        buf[1] = max(lo, hi)
-        n = 2
+        hi = max(lo, hi)
     elif kind == PLANE:
         if abs(d[2]) < 1e-300:
             return 0
         s_out[0] = -o[2] / d[2]
         return 1
-    if n == 0:
+    if lo > hi:
         return 0
-    lo, hi = buf[0], buf[0]
-    for i in range(1, n):
-        lo = min(lo, buf[i])
-        hi = max(hi, buf[i])
     s_out[0] = lo
     s_out[1] = hi
     return 2
 
 
 @njit(**JIT)
-def inside_local(kind, size, x, tol):
-    """x strictly inside the solid by more than tol (m)."""
+def inside_s(kind, size, x0, x1, x2, tol):
+    """(x0, x1, x2) strictly inside the solid by more than tol (m), local frame."""
     r = size[0]
     if kind == SPHERE:
-        return math.sqrt(_dot3(x, x)) < r - tol
+        return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) < r - tol
     if kind == CAPSULE:
-        z = min(max(x[2], -size[1]), size[1])
-        return math.sqrt(x[0] * x[0] + x[1] * x[1] + (x[2] - z) ** 2) < r - tol
+        z = min(max(x2, -size[1]), size[1])
+        return math.sqrt(x0 * x0 + x1 * x1 + (x2 - z) ** 2) < r - tol
     if kind == CYLINDER:
-        return math.sqrt(x[0] * x[0] + x[1] * x[1]) < r - tol and abs(x[2]) < size[1] - tol
+        return math.sqrt(x0 * x0 + x1 * x1) < r - tol and abs(x2) < size[1] - tol
     if kind == ELLIPSOID:
-        q = math.sqrt((x[0] / size[0]) ** 2 + (x[1] / size[1]) ** 2 + (x[2] / size[2]) ** 2)
+        q = math.sqrt((x0 / size[0]) ** 2 + (x1 / size[1]) ** 2 + (x2 / size[2]) ** 2)
         return q < 1.0 - tol / max(size[0], max(size[1], size[2]))
     if kind == BOX:
-        return abs(x[0]) < size[0] - tol and abs(x[1]) < size[1] - tol and abs(x[2]) < size[2] - tol
-    return x[2] < -tol
+        return abs(x0) < size[0] - tol and abs(x1) < size[1] - tol and abs(x2) < size[2] - tol
+    return x2 < -tol
+
+
+@njit(**JIT)
+def inside_local(kind, size, x, tol):
+    return inside_s(kind, size, x[0], x[1], x[2], tol)
+
+
+@njit(**JIT)
+def project_s(kind, size, x0, x1, x2):
+    """A point of the primitive's surface near (x0, x1, x2) (the closest one except for ellipsoids,
+    where it is the radial retraction): the Gauss-Newton retraction and the miss initialisation."""
+    r = size[0]
+    if kind == SPHERE or kind == CAPSULE:  # noqa: SIM109 (numba)
+        cz = min(max(x2, -size[1]), size[1]) if kind == CAPSULE else 0.0
+        vx, vy, vz = x0, x1, x2 - cz
+        k = math.sqrt(vx * vx + vy * vy + vz * vz)
+        if k == 0.0:
+            vx, vy, vz, k = 1.0, 0.0, 0.0, 1.0
+        return r * vx / k, r * vy / k, cz + r * vz / k
+    if kind == CYLINDER:
+        h = size[1]
+        rho = math.sqrt(x0 * x0 + x1 * x1)
+        ux, uy = (x0 / rho, x1 / rho) if rho > 0.0 else (1.0, 0.0)
+        sz = min(max(x2, -h), h)
+        d_side = (rho - r) ** 2 + (x2 - sz) ** 2
+        cz = h if x2 >= 0 else -h
+        cr = min(rho, r)
+        d_cap = (rho - cr) ** 2 + (x2 - cz) ** 2
+        if d_side <= d_cap:
+            return r * ux, r * uy, sz
+        return cr * ux, cr * uy, cz
+    if kind == ELLIPSOID:
+        q = math.sqrt((x0 / size[0]) ** 2 + (x1 / size[1]) ** 2 + (x2 / size[2]) ** 2)
+        if q == 0.0:
+            return size[0], 0.0, 0.0
+        return x0 / q, x1 / q, x2 / q
+    if kind == BOX:
+        c0 = min(max(x0, -size[0]), size[0])
+        c1 = min(max(x1, -size[1]), size[1])
+        c2 = min(max(x2, -size[2]), size[2])
+        if abs(x0) > size[0] or abs(x1) > size[1] or abs(x2) > size[2]:
+            return c0, c1, c2
+        g0, g1, g2 = size[0] - abs(x0), size[1] - abs(x1), size[2] - abs(x2)  # inside: nearest face
+        if g0 <= g1 and g0 <= g2:
+            return (size[0] if x0 >= 0 else -size[0]), c1, c2
+        if g1 <= g2:
+            return c0, (size[1] if x1 >= 0 else -size[1]), c2
+        return c0, c1, (size[2] if x2 >= 0 else -size[2])
+    return x0, x1, 0.0
 
 
 @njit(**JIT)
 def project_local(kind, size, x, out):
-    """A point of the primitive's surface near x (the closest one except for ellipsoids, where it
-    is the radial retraction): the Gauss-Newton retraction and the miss initialisation."""
-    r = size[0]
-    if kind == SPHERE or kind == CAPSULE:  # noqa: SIM109 (numba)
-        cz = 0.0
-        if kind == CAPSULE:
-            cz = min(max(x[2], -size[1]), size[1])
-        vx, vy, vz = x[0], x[1], x[2] - cz
-        k = math.sqrt(vx * vx + vy * vy + vz * vz)
-        if k == 0.0:
-            vx, vy, vz, k = 1.0, 0.0, 0.0, 1.0
-        out[0] = r * vx / k
-        out[1] = r * vy / k
-        out[2] = cz + r * vz / k
-    elif kind == CYLINDER:
-        h = size[1]
-        rho = math.sqrt(x[0] * x[0] + x[1] * x[1])
-        ux, uy = (x[0] / rho, x[1] / rho) if rho > 0.0 else (1.0, 0.0)
-        # side candidate
-        sz = min(max(x[2], -h), h)
-        ds = (rho - r) ** 2 + (x[2] - sz) ** 2
-        # cap candidate
-        cz = h if x[2] >= 0 else -h
-        cr = min(rho, r)
-        dc = (rho - cr) ** 2 + (x[2] - cz) ** 2
-        if ds <= dc:
-            out[0], out[1], out[2] = r * ux, r * uy, sz
-        else:
-            out[0], out[1], out[2] = cr * ux, cr * uy, cz
-    elif kind == ELLIPSOID:
-        q = math.sqrt((x[0] / size[0]) ** 2 + (x[1] / size[1]) ** 2 + (x[2] / size[2]) ** 2)
-        if q == 0.0:
-            out[0], out[1], out[2] = size[0], 0.0, 0.0
-        else:
-            out[0], out[1], out[2] = x[0] / q, x[1] / q, x[2] / q
-    elif kind == BOX:
-        outside = False
-        for i in range(3):
-            out[i] = min(max(x[i], -size[i]), size[i])
-            if abs(x[i]) > size[i]:
-                outside = True
-        if not outside:  # inside: push to the nearest face
-            best, axis = 1e300, 0
-            for i in range(3):
-                g = size[i] - abs(x[i])
-                if g < best:
-                    best, axis = g, i
-            out[axis] = size[axis] if x[axis] >= 0 else -size[axis]
-    else:
-        out[0], out[1], out[2] = x[0], x[1], 0.0
+    out[0], out[1], out[2] = project_s(kind, size, x[0], x[1], x[2])
+
+
+@njit(**JIT)
+def _local_s(pos, mat, x0, x1, x2):
+    """mat^T (x - pos) with mat row-major 3x3 as MuJoCo stores geom_xmat."""
+    dx, dy, dz = x0 - pos[0], x1 - pos[1], x2 - pos[2]
+    return (mat[0] * dx + mat[3] * dy + mat[6] * dz, mat[1] * dx + mat[4] * dy + mat[7] * dz,
+            mat[2] * dx + mat[5] * dy + mat[8] * dz)
 
 
 @njit(**JIT)
 def _to_local(pos, mat, x, out):
-    """out = mat^T (x - pos); mat row-major 3x3 as MuJoCo stores geom_xmat."""
-    dx, dy, dz = x[0] - pos[0], x[1] - pos[1], x[2] - pos[2]
-    out[0] = mat[0] * dx + mat[3] * dy + mat[6] * dz
-    out[1] = mat[1] * dx + mat[4] * dy + mat[7] * dz
-    out[2] = mat[2] * dx + mat[5] * dy + mat[8] * dz
+    out[0], out[1], out[2] = _local_s(pos, mat, x[0], x[1], x[2])
 
 
 @njit(**JIT)
@@ -329,9 +313,14 @@ def _dir_local(mat, v, out):
 
 
 @njit(**JIT)
+def _base_s(pos, mat, x0, x1, x2):
+    return (pos[0] + mat[0] * x0 + mat[1] * x1 + mat[2] * x2, pos[1] + mat[3] * x0 + mat[4] * x1 + mat[5] * x2,
+            pos[2] + mat[6] * x0 + mat[7] * x1 + mat[8] * x2)
+
+
+@njit(**JIT)
 def _to_base(pos, mat, x, out):
-    for i in range(3):
-        out[i] = pos[i] + mat[3 * i] * x[0] + mat[3 * i + 1] * x[1] + mat[3 * i + 2] * x[2]
+    out[0], out[1], out[2] = _base_s(pos, mat, x[0], x[1], x[2])
 
 
 @njit(**JIT)
@@ -345,15 +334,12 @@ def _hidden(x, n, skip, kinds, sizes, gpos, gmat, eps):
     """Not on the arm's outer surface: the point just outside x (x + eps n, n the outward normal of
     primitive ``skip`` at x) lies inside another primitive. This also hides faces glued to another
     primitive (a joint's coincident caps), which a plain inside test at x cannot tell."""
-    loc = np.empty(3)
-    y = np.empty(3)
-    for i in range(3):
-        y[i] = x[i] + eps * n[i]
+    y0, y1, y2 = x[0] + eps * n[0], x[1] + eps * n[1], x[2] + eps * n[2]
     for g in range(kinds.shape[0]):
         if g == skip:
             continue
-        _to_local(gpos[g], gmat[g], y, loc)
-        if inside_local(kinds[g], sizes[g], loc, 0.0):
+        l0, l1, l2 = _local_s(gpos[g], gmat[g], y0, y1, y2)
+        if inside_s(kinds[g], sizes[g], l0, l1, l2, 0.0):
             return True
     return False
 
@@ -394,61 +380,15 @@ def _chol_solve(L, b, x):
         x[i] = acc / L[i, i]
 
 
-@njit(**JIT)
-def sym_eigvals(A):
-    """Eigenvalues of a small symmetric matrix (cyclic Jacobi), ascending."""
-    n = A.shape[0]
-    a = A.copy()
-    for _ in range(60):
-        off = 0.0
-        for i in range(n):
-            for j in range(i + 1, n):
-                off += a[i, j] * a[i, j]
-        if off <= 1e-30 * (1.0 + _frob2(a)):
-            break
-        for p_ in range(n):
-            for q_ in range(p_ + 1, n):
-                if a[p_, q_] == 0.0:
-                    continue
-                theta = (a[q_, q_] - a[p_, p_]) / (2.0 * a[p_, q_])
-                t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                cs = 1.0 / math.sqrt(t * t + 1.0)
-                sn = t * cs
-                for k in range(n):
-                    akp, akq = a[k, p_], a[k, q_]
-                    a[k, p_] = cs * akp - sn * akq
-                    a[k, q_] = sn * akp + cs * akq
-                for k in range(n):
-                    apk, aqk = a[p_, k], a[q_, k]
-                    a[p_, k] = cs * apk - sn * aqk
-                    a[q_, k] = sn * apk + cs * aqk
-    ev = np.empty(n)
-    for i in range(n):
-        ev[i] = a[i, i]
-    ev.sort()
-    return ev
-
-
-@njit(**JIT)
-def _frob2(a):
-    s = 0.0
-    for i in range(a.shape[0]):
-        for j in range(a.shape[1]):
-            s += a[i, j] * a[i, j]
-    return s
-
-
 # -- Gauss-Newton on one primitive's surface --------------------------------------------------------------
 @njit(**JIT)
 def _project_base(kind, size, pos, mat, x, out_point, out_normal):
-    loc = np.empty(3)
-    sp = np.empty(3)
-    nl = np.empty(3)
-    _to_local(pos, mat, x, loc)
-    project_local(kind, size, loc, sp)
-    surface_normal_local(kind, size, sp, nl)
-    _to_base(pos, mat, sp, out_point)
-    _dir_base(mat, nl, out_normal)
+    l0, l1, l2 = _local_s(pos, mat, x[0], x[1], x[2])
+    p0, p1, p2 = project_s(kind, size, l0, l1, l2)
+    n0, n1, n2 = normal_local(kind, size, p0, p1, p2)
+    out_point[0], out_point[1], out_point[2] = _base_s(pos, mat, p0, p1, p2)
+    for i in range(3):
+        out_normal[i] = mat[3 * i] * n0 + mat[3 * i + 1] * n1 + mat[3 * i + 2] * n2
 
 
 @njit(**JIT)
@@ -495,8 +435,7 @@ def _chi2(r, W):
 
 
 @njit(**JIT)
-def _normal_matrix(J, W, r, H, g):
-    WJ = np.zeros((6, 5))
+def _normal_matrix(J, W, r, H, g, WJ):
     for i in range(6):
         for a in range(5):
             acc = 0.0
@@ -515,23 +454,30 @@ def _normal_matrix(J, W, r, H, g):
         g[a] = acc
 
 
+REFINE_WS = 160  # workspace (float64 entries) refine needs
+
+
 @njit(**JIT)
-def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov):
+def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov, ws):
     """Weighted least squares on one primitive's surface: minimise (w - h)^T W (w - h) with
     h = (p, c x p), c on the surface. Manifold Gauss-Newton from (c0, p0): tangent-plane steps,
-    retraction by projection onto the surface. Returns (chi2, iterations, converged); fills c, p,
-    the normal n at c, and cov (5x5: tangent coordinates t1, t2 at c, then p) = (J^T W J)^-1."""
-    t1 = np.empty(3)
-    t2 = np.empty(3)
-    J = np.empty((6, 5))
-    H = np.empty((5, 5))
-    g = np.empty(5)
-    r = np.empty(6)
-    trial_c = np.empty(3)
-    trial_n = np.empty(3)
-    trial_p = np.empty(3)
-    Lc = np.empty((5, 5))
-    step = np.empty(5)
+    retraction by projection onto the surface. Returns (chi2, iterations, converged, condition
+    estimate of J^T W J); fills c, p, the normal n at c, and cov (5x5: tangent coordinates t1, t2 at c,
+    then p) = (J^T W J)^-1."""
+    t1 = ws[0:3]
+    t2 = ws[3:6]
+    J = ws[6:36].reshape((6, 5))
+    H = ws[36:61].reshape((5, 5))
+    g = ws[61:66]
+    r = ws[66:72]
+    trial_c = ws[72:75]
+    trial_n = ws[75:78]
+    trial_p = ws[78:81]
+    Lc = ws[81:106].reshape((5, 5))
+    step = ws[106:111]
+    WJ = ws[111:141].reshape((6, 5))
+    e = ws[141:146]
+    col = ws[146:151]
     _project_base(kind, size, pos, mat, c0, c, n)
     for i in range(3):
         p[i] = p0[i]
@@ -543,7 +489,7 @@ def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov):
         it += 1
         _tangent_basis(n, t1, t2)
         _jacobian(c, p, t1, t2, J)
-        _normal_matrix(J, W, r, H, g)
+        _normal_matrix(J, W, r, H, g, WJ)
         if not _cholesky(H, Lc):  # singular: the force is too small to locate anything
             break
         _chol_solve(Lc, g, step)
@@ -578,10 +524,14 @@ def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov):
             break
     _tangent_basis(n, t1, t2)
     _jacobian(c, p, t1, t2, J)
-    _normal_matrix(J, W, r, H, g)
+    _normal_matrix(J, W, r, H, g, WJ)
+    cond = math.inf
     if _cholesky(H, Lc):
-        e = np.zeros(5)
-        col = np.empty(5)
+        lo, hi = math.inf, 0.0
+        for b in range(5):
+            lo = min(lo, Lc[b, b])
+            hi = max(hi, Lc[b, b])
+        cond = (hi / lo) ** 2  # from the Cholesky pivots: a cheap lower bound of the condition number
         for b in range(5):
             e[:] = 0.0
             e[b] = 1.0
@@ -592,7 +542,7 @@ def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov):
         for a in range(5):
             for b in range(5):
                 cov[a, b] = np.inf if a == b else 0.0
-    return chi2, it, converged
+    return chi2, it, converged, cond
 
 
 # -- the whole frame ----------------------------------------------------------------------------------------
@@ -651,22 +601,24 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         return 0
     if fn < low_force:
         flags |= F_LOW_FORCE
-    u = np.empty(3)
+    # one workspace for the whole frame (numba allocates on the heap: keep it to a few calls)
+    ws = np.empty(64 + REFINE_WS + max_cand * 37)
+    u = ws[0:3]
     for i in range(3):
         u[i] = f[i] / fn
-    r0 = np.empty(3)
+    r0 = ws[3:6]
     _cross(f, m, r0)
     for i in range(3):
         r0[i] /= fn * fn
     out_scalars[4] = _dot3(m, u)
 
-    o_loc = np.empty(3)
-    d_loc = np.empty(3)
-    s = np.empty(2)
-    x_loc = np.empty(3)
-    n_loc = np.empty(3)
-    x = np.empty(3)
-    nb = np.empty(3)
+    o_loc = ws[6:9]
+    d_loc = ws[9:12]
+    s = ws[12:14]
+    x_loc = ws[14:17]
+    n_loc = ws[17:20]
+    x = ws[20:23]
+    nb = ws[23:26]
     # raw candidates: (primitive, s) of admissible crossings
     raw_prim = np.empty(max_cand, dtype=np.int64)
     raw_point = np.empty((max_cand, 3))
@@ -728,22 +680,31 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         if best < 1e300:
             n_raw = 1
 
-    c = np.empty(3)
-    p = np.empty(3)
-    nrm = np.empty(3)
-    cov = np.empty((5, 5))
-    t1 = np.empty(3)
-    t2 = np.empty(3)
-    tmp = np.empty(3)
+    c = ws[26:29]
+    p = ws[29:32]
+    nrm = ws[32:35]
+    t1 = ws[35:38]
+    t2 = ws[38:41]
+    tmp = ws[41:44]
+    T = ws[44:50].reshape((3, 2))
+    rws = ws[64:64 + REFINE_WS]
+    base = 64 + REFINE_WS
+    cand_cov = ws[base:base + max_cand * 25].reshape((max_cand, 5, 5))
+    base += max_cand * 25
+    cand_normal = ws[base:base + max_cand * 3].reshape((max_cand, 3))
+    base += max_cand * 3
+    cand_iter = ws[base:base + max_cand]
+    base += max_cand
+    cand_conv = ws[base:base + max_cand]  # 1.0 converged, 0.0 not
+    base += max_cand
+    cand_cond = ws[base:base + max_cand]
+    cov = cand_cov[0]
     n_joints = joint_axis.shape[0]
-    cand_cov = np.empty((max_cand, 5, 5))
-    cand_normal = np.empty((max_cand, 3))
-    cand_iter = np.empty(max_cand)
-    cand_conv = np.empty(max_cand, dtype=np.bool_)
     for k in range(n_raw):
         g = raw_prim[k]
-        chi2, iters, conv = refine(kinds[g], sizes[g], gpos[g], gmat[g], w, W, raw_point[k], f, max_iter,
-                                   c, p, nrm, cov)
+        cov = cand_cov[k]
+        chi2, iters, conv, cond = refine(kinds[g], sizes[g], gpos[g], gmat[g], w, W, raw_point[k], f, max_iter,
+                                   c, p, nrm, cov, rws)
         logl = -0.5 * chi2
         if use_tau:
             link = prim_link[g]
@@ -765,14 +726,12 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         cand_score[k] = logl
         cand_chi2[k] = chi2
         cand_iter[k] = iters
-        cand_conv[k] = conv
+        cand_conv[k] = 1.0 if conv else 0.0
+        cand_cond[k] = cond
         for i in range(3):
             cand_point[k, i] = c[i]
             cand_force[k, i] = p[i]
             cand_normal[k, i] = nrm[i]
-        for a in range(5):
-            for b in range(5):
-                cand_cov[k, a, b] = cov[a, b]
     if n_raw == 0:
         out_scalars[0] = flags | F_NO_CANDIDATE
         return 0
@@ -784,7 +743,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     chi2 = cand_chi2[best]
     if chi2 > off_chi2:
         flags |= F_OFF_SURFACE
-    if not cand_conv[best]:
+    if cand_conv[best] == 0.0:
         flags |= F_NOT_CONVERGED
     for i in range(3):
         out_point[i] = cand_point[best, i]
@@ -799,7 +758,6 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     # covariance in the base frame: point (3x3) from the tangent block, force (3x3)
     _tangent_basis(out_normal, t1, t2)
     cb = cand_cov[best]
-    T = np.empty((3, 2))
     for i in range(3):
         T[i, 0] = t1[i]
         T[i, 1] = t2[i]
@@ -816,9 +774,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
                 acc += T[a, i] * cb[i, 2 + b]
             out_cov[a, 3 + b] = acc
             out_cov[3 + b, a] = acc
-    # conditioning: condition number of the information matrix
-    ev = sym_eigvals(cb)
-    out_scalars[6] = ev[-1] / ev[0] if ev[0] > 0 else np.inf
+    out_scalars[6] = cand_cond[best]
     out_scalars[0] = flags
     out_scalars[1] = best
     out_scalars[2] = n_raw
@@ -826,6 +782,13 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     out_scalars[5] = cosi
     out_scalars[7] = cand_iter[best]
     # reorder candidates in place, best first
+    identity = True
+    for k in range(n_raw):
+        if order[k] != k:
+            identity = False
+    if identity:
+        out_scalars[1] = 0
+        return n_raw
     tp = cand_prim[:n_raw].copy()
     tpt = cand_point[:n_raw].copy()
     tf = cand_force[:n_raw].copy()

@@ -1,0 +1,78 @@
+"""``ftc solve``: one output line per input line, in order; bad lines get error lines."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.scene import load_scene
+
+FTC = [str(Path(sys.executable).parent / "ftc")]
+
+
+def _raw_line(model, q, link, point, force, **extra):
+    raw = model.predicted_wrench(q, level="gravity", contacts=[Contact(link, point, force)])
+    return json.dumps({"q": list(q), "wrench": list(raw), **extra})
+
+
+def test_raw_and_compensated_lines_and_errors(tmp_path):
+    scene = load_scene("leng2016")
+    model = ArmModel(scene)
+    q = np.array(scene.robot.home)
+    b_T = model.kinematics(q)["link3"]
+    point = b_T[:3, :3] @ np.array([0.1, 0.0, 0.04]) + b_T[:3, 3]
+    normal = b_T[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    force = -30.0 * normal + 5.0 * (b_T[:3, :3] @ np.array([1.0, 0, 0]))
+    ext = model.predicted_wrench(q, level="bias", contacts=[Contact("link3", point, force)])
+    lines = [
+        _raw_line(model, q, "link3", point, force),
+        json.dumps({"q": list(q), "wrench": list(ext), "compensated": True}),
+        "this is not json",
+        json.dumps({"q": [0.0, 0.0], "wrench": [0, 0, 0, 0, 0, 0]}),
+        json.dumps({"q": list(q)}),
+        '{"q": [0, 0, 0], "wrench": [1, 2, NaN, 0, 0, 0]}',
+        json.dumps({"q": list(q), "wrench": list(ext), "compensated": "yes"}),
+        json.dumps([1, 2, 3]),
+        _raw_line(model, q, "link3", point, force, qd=[0, 0, 0], qdd=[0, 0, 0], tau_ext=[0.1, 0.2, 0.3]),
+    ]
+    src = tmp_path / "in.jsonl"
+    src.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out.jsonl"
+    proc = subprocess.run([*FTC, "solve", "--scene", "leng2016", "--input", str(src), "--output", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    records = [json.loads(line) for line in out.read_text().splitlines()]
+    assert len(records) == len(lines)
+    for r in (records[0], records[1], records[8]):
+        assert r["contact"] and r["link"] == "link3"
+        np.testing.assert_allclose(r["point"], point, atol=1e-9)
+        np.testing.assert_allclose(r["force"], force, atol=1e-7)
+        assert set(r) >= {"normal", "point_std", "force_std", "residual", "flags", "candidates"}
+        assert r["candidates"][0]["link"] == "link3" and "score" in r["candidates"][0]
+    errors = {i: records[i] for i in (2, 3, 4, 5, 6, 7)}
+    for i, r in errors.items():
+        assert r["line"] == i + 1 and r["error"], r
+    assert "not JSON" in errors[2]["error"]
+    assert "'q' must be a list of 3" in errors[3]["error"]
+    assert "missing 'wrench'" in errors[4]["error"]
+    assert "NaN" in errors[5]["error"]
+
+
+def test_stdin_stdout_and_method_choice():
+    scene = load_scene("leng2016")
+    model = ArmModel(scene)
+    q = np.array(scene.robot.home)
+    b_T = model.kinematics(q)["link2"]
+    point = b_T[:3, :3] @ np.array([0.1, 0.04, 0.0]) + b_T[:3, 3]
+    force = -20.0 * (b_T[:3, :3] @ np.array([0.0, 1.0, 0.0]))
+    line = _raw_line(model, q, "link2", point, force)
+    for method in ("ours", "leng2016"):
+        proc = subprocess.run([*FTC, "solve", "--scene", "leng2016", "--method", method], input=line + "\n",
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        r = json.loads(proc.stdout)
+        np.testing.assert_allclose(r["point"], point, atol=1e-6)
