@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from solver_cases import contacts, custom_scene, reading
 
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import builtin_names, load_scene
 from ftc_hw.solver import ContactSolver
+
+from solver_cases import contacts, custom_scene, reading
 
 
 @pytest.fixture(scope="module", params=builtin_names())
