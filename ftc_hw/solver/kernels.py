@@ -455,6 +455,13 @@ def _normal_matrix(J, W, r, H, g, WJ):
 
 
 REFINE_WS = 160  # workspace (float64 entries) refine needs
+WS_RAW = 64 + REFINE_WS
+
+
+@njit(**JIT)
+def workspace_size(max_cand):
+    """Floats of scratch solve_frame needs for max_cand candidates."""
+    return WS_RAW + max_cand * 40
 
 
 @njit(**JIT)
@@ -556,7 +563,7 @@ C_POINT, C_FORCE, C_SCORE, C_CHI2, C_SIZE = 0, 3, 6, 7, 8  # cand_f columns
 
 @njit(**JIT)
 def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_joint, tau_ext, tau_var, use_tau,
-                cfg, out, cand_prim, cand_f):
+                cfg, out, cand_prim, cand_f, ws, raw_prim):
     """One frame: external contact wrench w = (p, c x p) about the base origin, base frame.
 
     ``out`` receives point, force, normal, the scalars (flags, best index, candidate count, chi2,
@@ -601,8 +608,8 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         return 0
     if fn < low_force:
         flags |= F_LOW_FORCE
-    # one workspace for the whole frame (numba allocates on the heap: keep it to a few calls)
-    ws = np.empty(64 + REFINE_WS + max_cand * 37)
+    # ws (workspace_size(max_cand) floats) and raw_prim (max_cand ints) are the caller's scratch:
+    # numba allocates arrays on the heap, so a frame allocates nothing itself
     u = ws[0:3]
     for i in range(3):
         u[i] = f[i] / fn
@@ -620,8 +627,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     x = ws[20:23]
     nb = ws[23:26]
     # raw candidates: (primitive, s) of admissible crossings
-    raw_prim = np.empty(max_cand, dtype=np.int64)
-    raw_point = np.empty((max_cand, 3))
+    raw_point = ws[WS_RAW:WS_RAW + 3 * max_cand].reshape((max_cand, 3))
     n_raw = 0
     for g in range(n_prim):
         if not prim_touch[g]:
@@ -688,7 +694,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     tmp = ws[41:44]
     T = ws[44:50].reshape((3, 2))
     rws = ws[64:64 + REFINE_WS]
-    base = 64 + REFINE_WS
+    base = WS_RAW + 3 * max_cand
     cand_cov = ws[base:base + max_cand * 25].reshape((max_cand, 5, 5))
     base += max_cand * 25
     cand_normal = ws[base:base + max_cand * 3].reshape((max_cand, 3))
@@ -808,19 +814,16 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
 
 @njit(**JIT)
 def solve_frame_posed(w, W, prim_i, sizes, geom_ids, geom_xpos, geom_xmat, joint_axis, joint_anchor, link_joint,
-                      tau_ext, tau_var, use_tau, cfg, out, cand_prim, cand_f):
-    """solve_frame with the primitives' poses picked from MuJoCo's per-geom arrays."""
-    n = geom_ids.shape[0]
-    gpos = np.empty((n, 3))
-    gmat = np.empty((n, 9))
-    for k in range(n):
+                      tau_ext, tau_var, use_tau, cfg, out, cand_prim, cand_f, ws, raw_prim, gpos, gmat):
+    """solve_frame with the primitives' poses picked from MuJoCo's per-geom arrays (into gpos, gmat)."""
+    for k in range(geom_ids.shape[0]):
         g = geom_ids[k]
         for i in range(3):
             gpos[k, i] = geom_xpos[g, i]
         for i in range(9):
             gmat[k, i] = geom_xmat[g, i]
     return solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_joint, tau_ext, tau_var,
-                       use_tau, cfg, out, cand_prim, cand_f)
+                       use_tau, cfg, out, cand_prim, cand_f, ws, raw_prim)
 
 
 # -- forward kinematics of the geoms (batch path) ---------------------------------------------------------
@@ -921,23 +924,26 @@ def tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, 
 @njit(parallel=True, cache=True, nogil=True)
 def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, tau_ext, tau_var, use_tau, cfg, tree_i, tree_f,
                 geom_i, geom_f, out, cand_prim, cand_f, n_cand):
-    """solve_frame over N frames, each with its own joint angles; kinematics inside.
-
-    tree_i (nbody, 1): joint of each body (-1 none); tree_f (nbody, 7): body pos and quat;
-    geom_i (ngeom, 1): body; geom_f (ngeom, 7): pos and quat; joints come packed in tree_j below.
-    """
+    """solve_frame over N frames, each with its own joint angles; kinematics inside. Frames go in
+    chunks over the threads, each chunk with its own scratch buffers."""
     n = wrenches.shape[0]
     nb = tree_i.shape[0]
     ng = geom_i.shape[0]
     nj = tau_var.shape[0]
-    for i in prange(n):
+    max_cand = cand_prim.shape[1]
+    n_chunks = min(n, 64)
+    for ch in prange(n_chunks):
         xpos = np.empty((nb, 3))
         xquat = np.empty((nb, 4))
         gpos = np.empty((ng, 3))
         gmat = np.empty((ng, 9))
         janchor = np.zeros((nj, 3))
         jaxis = np.zeros((nj, 3))
-        tree_kinematics(qs[i], tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis)
-        W = Ws[i] if Ws.shape[0] > 1 else Ws[0]
-        n_cand[i] = solve_frame(wrenches[i], W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint, tau_ext[i],
-                                tau_var, use_tau[i], cfg, out[i], cand_prim[i], cand_f[i])
+        ws = np.empty(workspace_size(max_cand))
+        raw_prim = np.empty(max_cand, dtype=np.int64)
+        for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
+            tree_kinematics(qs[i], tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis)
+            W = Ws[i] if Ws.shape[0] > 1 else Ws[0]
+            n_cand[i] = solve_frame(wrenches[i], W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint,
+                                    tau_ext[i], tau_var, use_tau[i], cfg, out[i], cand_prim[i], cand_f[i], ws,
+                                    raw_prim)

@@ -170,6 +170,10 @@ class ContactSolver:
         self._cand_prim = np.zeros(self.max_candidates, dtype=np.int64)
         self._cand_f = np.zeros((self.max_candidates, K.C_SIZE))
         self._tau = np.zeros(m.njnt)
+        self._ws = np.zeros(K.workspace_size(self.max_candidates))
+        self._raw_prim = np.zeros(self.max_candidates, dtype=np.int64)
+        self._gpos = np.zeros((len(geoms), 3))
+        self._gmat = np.zeros((len(geoms), 9))
 
     # -- frames ---------------------------------------------------------------------------------------
     def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -216,7 +220,8 @@ class ContactSolver:
             self._tau[self._jnt_ids] = tau_arr
         n = K.solve_frame_posed(self.ext_sign * (a @ w), wmat, self.prim_i, self.sizes, self._geom_ids, d.geom_xpos,
                                 d.geom_xmat, d.xaxis, d.xanchor, self.link_joint, self._tau, self.tau_var, use_tau,
-                                self.cfg, self._out, self._cand_prim, self._cand_f)
+                                self.cfg, self._out, self._cand_prim, self._cand_f, self._ws, self._raw_prim,
+                                self._gpos, self._gmat)
         return self._estimate(n, saturated)
 
     def _invalid(self, saturated: bool) -> ContactEstimate:
