@@ -36,19 +36,19 @@ JIT = {"cache": True, "nogil": True, "fastmath": False}
 
 
 # -- small vector helpers ------------------------------------------------------------------------------
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _dot3(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _tangent_basis(n, t1, t2):
     """Orthonormal t1, t2 with t1 x t2 = n (n unit)."""
     ax, ay, az = abs(n[0]), abs(n[1]), abs(n[2])
@@ -72,7 +72,7 @@ def _tangent_basis(n, t1, t2):
 
 # -- line / primitive crossings (local frame) -----------------------------------------------------------
 # Scalar helpers return tuples: numba keeps them on the stack (no heap allocation per call).
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _ball(cz, r, o, d):
     """Crossings of the line o + s d (|d| = 1) with the sphere of radius r at (0, 0, cz), solved about
     the closest approach s0 so the root offset never suffers cancellation: (hit, s_lo, s_hi)."""
@@ -90,7 +90,7 @@ def _ball(cz, r, o, d):
     return True, s0 - h, s0 + h
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _side(r, o, d):
     """Crossings with the infinite cylinder x^2 + y^2 = r^2 (about the xy closest approach)."""
     a = d[0] * d[0] + d[1] * d[1]
@@ -109,7 +109,7 @@ def _side(r, o, d):
     return True, s0 - h, s0 + h
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def normal_local(kind, size, x0, x1, x2):
     """Outward unit normal at the surface point (x0, x1, x2) of a primitive (local frame)."""
     r = size[0]
@@ -219,7 +219,7 @@ def crossings_local(kind, size, o, d, s_out):
     return 2
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def inside_s(kind, size, x0, x1, x2, tol):
     """(x0, x1, x2) strictly inside the solid by more than tol (m), local frame."""
     r = size[0]
@@ -243,7 +243,7 @@ def inside_local(kind, size, x, tol):
     return inside_s(kind, size, x[0], x[1], x[2], tol)
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def project_s(kind, size, x0, x1, x2):
     """A point of the primitive's surface near (x0, x1, x2) (the closest one except for ellipsoids,
     where it is the radial retraction): the Gauss-Newton retraction and the miss initialisation."""
@@ -292,7 +292,7 @@ def project_local(kind, size, x, out):
     out[0], out[1], out[2] = project_s(kind, size, x[0], x[1], x[2])
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _local_s(pos, mat, x0, x1, x2):
     """mat^T (x - pos) with mat row-major 3x3 as MuJoCo stores geom_xmat."""
     dx, dy, dz = x0 - pos[0], x1 - pos[1], x2 - pos[2]
@@ -312,7 +312,7 @@ def _dir_local(mat, v, out):
     out[2] = mat[2] * v[0] + mat[5] * v[1] + mat[8] * v[2]
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _base_s(pos, mat, x0, x1, x2):
     return (pos[0] + mat[0] * x0 + mat[1] * x1 + mat[2] * x2, pos[1] + mat[3] * x0 + mat[4] * x1 + mat[5] * x2,
             pos[2] + mat[6] * x0 + mat[7] * x1 + mat[8] * x2)
@@ -381,7 +381,7 @@ def _chol_solve(L, b, x):
 
 
 # -- Gauss-Newton on one primitive's surface --------------------------------------------------------------
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _project_base(kind, size, pos, mat, x, out_point, out_normal):
     l0, l1, l2 = _local_s(pos, mat, x[0], x[1], x[2])
     p0, p1, p2 = project_s(kind, size, l0, l1, l2)
@@ -391,7 +391,7 @@ def _project_base(kind, size, pos, mat, x, out_point, out_normal):
         out_normal[i] = mat[3 * i] * n0 + mat[3 * i + 1] * n1 + mat[3 * i + 2] * n2
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _jacobian(c, p, t1, t2, J):
     """d(residual)/d(u1, u2, p) with residual = w - (p, c x p); rows: force then moment."""
     for i in range(6):
@@ -413,7 +413,7 @@ def _jacobian(c, p, t1, t2, J):
     J[5, 2], J[5, 3], J[5, 4] = c[1], -c[0], 0.0
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _residual(w, c, p, r):
     r[0] = w[0] - p[0]
     r[1] = w[1] - p[1]
@@ -423,7 +423,7 @@ def _residual(w, c, p, r):
     r[5] = w[5] - (c[0] * p[1] - c[1] * p[0])
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _chi2(r, W):
     s = 0.0
     for i in range(6):
