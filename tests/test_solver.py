@@ -60,6 +60,10 @@ def test_batch_gives_the_same_answers(scene_setup):
         from ftc_hw.solver import flag_names
 
         assert flag_names(int(batch.flags[i])) == e.flags
+        kept = min(len(e.candidates), batch.candidate_link.shape[1])
+        assert [solver.links[k] for k in batch.candidate_link[i, :kept]] == [c.link for c in e.candidates[:kept]]
+        for j in range(kept):
+            np.testing.assert_allclose(batch.candidate_data[i, j, :3], e.candidates[j].point, atol=1e-10)
 
 
 def test_nan_and_inf_are_flagged_never_propagated():

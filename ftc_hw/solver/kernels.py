@@ -338,6 +338,10 @@ def _hidden(x, n, skip, kinds, sizes, gpos, gmat, eps):
     for g in range(kinds.shape[0]):
         if g == skip:
             continue
+        b = sizes[g, 3]  # bounding radius: most primitives are far away
+        dx, dy, dz = y0 - gpos[g, 0], y1 - gpos[g, 1], y2 - gpos[g, 2]
+        if dx * dx + dy * dy + dz * dz > b * b:
+            continue
         l0, l1, l2 = _local_s(gpos[g], gmat[g], y0, y1, y2)
         if inside_s(kinds[g], sizes[g], l0, l1, l2, 0.0):
             return True
@@ -626,11 +630,19 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     n_loc = ws[17:20]
     x = ws[20:23]
     nb = ws[23:26]
+    tmp = ws[41:44]
     # raw candidates: (primitive, s) of admissible crossings
     raw_point = ws[WS_RAW:WS_RAW + 3 * max_cand].reshape((max_cand, 3))
     n_raw = 0
     for g in range(n_prim):
         if not prim_touch[g]:
+            continue
+        # the line's distance to the primitive's centre against its bounding radius
+        for i in range(3):
+            tmp[i] = gpos[g, i] - r0[i]
+        along = _dot3(tmp, u)
+        b = sizes[g, 3]
+        if _dot3(tmp, tmp) - along * along > b * b:
             continue
         _to_local(gpos[g], gmat[g], r0, o_loc)
         _dir_local(gmat[g], u, d_loc)
@@ -691,7 +703,6 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     nrm = ws[32:35]
     t1 = ws[35:38]
     t2 = ws[38:41]
-    tmp = ws[41:44]
     T = ws[44:50].reshape((3, 2))
     rws = ws[64:64 + REFINE_WS]
     base = WS_RAW + 3 * max_cand
@@ -923,14 +934,15 @@ def tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, 
 
 @njit(parallel=True, cache=True, nogil=True)
 def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, tau_ext, tau_var, use_tau, cfg, tree_i, tree_f,
-                geom_i, geom_f, out, cand_prim, cand_f, n_cand):
+                geom_i, geom_f, max_cand, out, cand_prim, cand_f, n_cand):
     """solve_frame over N frames, each with its own joint angles; kinematics inside. Frames go in
-    chunks over the threads, each chunk with its own scratch buffers."""
+    chunks over the threads, each chunk with its own scratch; the best cand_prim.shape[1] candidates
+    of each frame are kept (n_cand counts them all)."""
     n = wrenches.shape[0]
     nb = tree_i.shape[0]
     ng = geom_i.shape[0]
     nj = tau_var.shape[0]
-    max_cand = cand_prim.shape[1]
+    keep = cand_prim.shape[1]
     n_chunks = min(n, 64)
     for ch in prange(n_chunks):
         xpos = np.empty((nb, 3))
@@ -941,9 +953,15 @@ def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, tau_ext, tau_var, u
         jaxis = np.zeros((nj, 3))
         ws = np.empty(workspace_size(max_cand))
         raw_prim = np.empty(max_cand, dtype=np.int64)
+        cp = np.empty(max_cand, dtype=np.int64)
+        cf = np.empty((max_cand, C_SIZE))
         for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
             tree_kinematics(qs[i], tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis)
             W = Ws[i] if Ws.shape[0] > 1 else Ws[0]
-            n_cand[i] = solve_frame(wrenches[i], W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint,
-                                    tau_ext[i], tau_var, use_tau[i], cfg, out[i], cand_prim[i], cand_f[i], ws,
-                                    raw_prim)
+            k = solve_frame(wrenches[i], W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint, tau_ext[i],
+                            tau_var, use_tau[i], cfg, out[i], cp, cf, ws, raw_prim)
+            n_cand[i] = k
+            for j in range(min(k, keep)):
+                cand_prim[i, j] = cp[j]
+                for c in range(C_SIZE):
+                    cand_f[i, j, c] = cf[j, c]

@@ -537,21 +537,7 @@ class Leng2016Solver:
         taus = None if tau_ext is None else np.asarray(tau_ext, dtype=float).reshape(n, self.model.n_joints)
         sat = np.zeros(n, dtype=bool) if saturated is None else np.asarray(saturated, dtype=bool).reshape(n)
         est = [self.solve(w[i], qs[i], None if taus is None else taus[i], bool(sat[i])) for i in range(n)]
-        index = {name: i for i, name in enumerate(self.links)}
-        return BatchEstimate(
-            contact=np.array([e.contact for e in est], dtype=bool),
-            link=np.array([index[e.link] if e.contact and e.link else -1 for e in est], dtype=np.int64),
-            point=np.array([e.point for e in est]).reshape(n, 3),
-            force=np.array([e.force for e in est]).reshape(n, 3),
-            normal=np.array([e.normal for e in est]).reshape(n, 3),
-            residual=np.array([e.residual for e in est], dtype=float),
-            chi2=np.array([e.chi2 for e in est], dtype=float),
-            cov=np.zeros((n, 6, 6)),
-            conditioning=np.full(n, math.inf),
-            flags=np.array([sum(FLAG_BITS[f] for f in e.flags) for e in est], dtype=np.int64),
-            n_candidates=np.array([len(e.candidate_links) for e in est], dtype=np.int64),
-            links=self.links,
-        )
+        return BatchEstimate.from_estimates(est, self.links)
 
 
 # -- helpers -------------------------------------------------------------------------------------------

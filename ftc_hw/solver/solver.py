@@ -34,6 +34,7 @@ FLAG_NAMES = {
     K.F_NOT_CONVERGED: "not_converged",
 }
 CHI2_1DOF_999 = 10.827566170662733  # chi-square quantile, 1 degree of freedom, p = 0.999
+BATCH_CANDIDATES = 4  # candidates kept per frame by solve_batch (the best first)
 
 
 _FLAG_CACHE: dict[int, tuple[str, ...]] = {}
@@ -109,8 +110,36 @@ class BatchEstimate:
     cov: np.ndarray  # (N, 6, 6)
     conditioning: np.ndarray
     flags: np.ndarray  # (N,) int
-    n_candidates: np.ndarray
+    n_candidates: np.ndarray  # (N,) admissible candidates found
+    candidate_link: np.ndarray  # (N, BATCH_CANDIDATES) link index, best first, -1 past n_candidates
+    candidate_data: np.ndarray  # (N, BATCH_CANDIDATES, 8): point (3), force (3), score, chi2
     links: tuple[str, ...]
+
+    @classmethod
+    def from_estimates(cls, estimates: list[ContactEstimate], links: tuple[str, ...]) -> BatchEstimate:
+        """Pack single-frame estimates (a method without a batch kernel) into the batch arrays."""
+        n = len(estimates)
+        index = {name: i for i, name in enumerate(links)}
+        bits = {name: bit for bit, name in FLAG_NAMES.items()}
+        cand_link = np.full((n, BATCH_CANDIDATES), -1, dtype=np.int64)
+        cand_data = np.zeros((n, BATCH_CANDIDATES, K.C_SIZE))
+        for i, e in enumerate(estimates):
+            for j, c in enumerate(e.candidates[:BATCH_CANDIDATES]):
+                cand_link[i, j] = index[c.link]
+                cand_data[i, j] = np.concatenate([c.point, c.force, [c.score, c.chi2]])
+        return cls(
+            contact=np.array([e.contact for e in estimates], dtype=bool),
+            link=np.array([index[e.link] if e.link else -1 for e in estimates], dtype=np.int64),
+            point=np.array([e.point for e in estimates]).reshape(n, 3),
+            force=np.array([e.force for e in estimates]).reshape(n, 3),
+            normal=np.array([e.normal for e in estimates]).reshape(n, 3),
+            residual=np.array([e.residual for e in estimates], dtype=float),
+            chi2=np.array([e.chi2 for e in estimates], dtype=float),
+            cov=np.array([e.cov for e in estimates]).reshape(n, 6, 6),
+            conditioning=np.array([e.conditioning for e in estimates], dtype=float),
+            flags=np.array([sum(bits[f] for f in e.flags) for e in estimates], dtype=np.int64),
+            n_candidates=np.array([len(e.candidate_links) for e in estimates], dtype=np.int64),
+            candidate_link=cand_link, candidate_data=cand_data, links=links)
 
 
 class ContactSolver:
@@ -127,7 +156,9 @@ class ContactSolver:
                  if m.geom_group[g] == SURFACE_GROUP and int(m.geom_type[g]) in GEOM_KINDS]
         self._geom_ids = np.array(geoms, dtype=np.int64)
         self.kinds = np.array([K.KINDS[GEOM_KINDS[int(m.geom_type[g])]] for g in geoms], dtype=np.int64)
-        self.sizes = np.array([m.geom_size[g] for g in geoms], dtype=float)
+        # MuJoCo's size triple and a bounding radius about the geom centre
+        self.sizes = np.array([np.append(m.geom_size[g], _bounding_radius(self.kinds[i], m.geom_size[g]))
+                               for i, g in enumerate(geoms)], dtype=float).reshape(len(geoms), 4)
         self.prim_link = np.array([m.geom_bodyid[g] for g in geoms], dtype=np.int64)
         self.prim_touch = np.array([m.body(int(m.geom_bodyid[g])).name in touch for g in geoms])
         self.prim_pulls = np.array([bool(touch.get(m.body(int(m.geom_bodyid[g])).name) and
@@ -272,14 +303,13 @@ class ContactSolver:
             tau[~use_tau] = 0.0
         bad = ~(np.all(np.isfinite(ext), axis=1) & np.all(np.isfinite(qfull), axis=1))
         qfull[bad] = 0.0
-        nc = self.max_candidates
         out = np.zeros((n, K.O_SIZE))
-        cand_f = np.zeros((n, nc, K.C_SIZE))
-        cand_prim = np.zeros((n, nc), dtype=np.int64)
+        cand_f = np.zeros((n, BATCH_CANDIDATES, K.C_SIZE))
+        cand_prim = np.zeros((n, BATCH_CANDIDATES), dtype=np.int64)
         n_cand = np.zeros(n, dtype=np.int64)
         tr = self._tree
         K.solve_batch(ext, qfull, ws, self.prim_i, self.sizes, self.link_joint, tau, self.tau_var, use_tau, self.cfg,
-                      tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, out, cand_prim, cand_f, n_cand)
+                      tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, self.max_candidates, out, cand_prim, cand_f, n_cand)
         sc = out[:, K.O_SCALARS:K.O_SCALARS + 8]
         flags = sc[:, K.S_FLAGS].astype(np.int64)
         flags[bad] = K.F_INVALID
@@ -287,10 +317,12 @@ class ContactSolver:
             flags[np.asarray(saturated, dtype=bool)] |= K.F_SATURATED
         contact = (n_cand > 0) & ~bad & ((flags & K.F_LOW_FORCE) == 0)
         link = np.where(contact, self.prim_link[cand_prim[:, 0]], -1)
+        cand_link = np.where(np.arange(BATCH_CANDIDATES)[None] < n_cand[:, None], self.prim_link[cand_prim], -1)
         return BatchEstimate(contact=contact, link=link, point=out[:, 0:3], force=out[:, 3:6], normal=out[:, 6:9],
                              residual=sc[:, K.S_RESIDUAL], chi2=sc[:, K.S_CHI2],
                              cov=out[:, K.O_COV:K.O_COV + 36].reshape(n, 6, 6), conditioning=sc[:, K.S_COND],
-                             flags=flags, n_candidates=n_cand, links=self.links)
+                             flags=flags, n_candidates=n_cand, candidate_link=cand_link, candidate_data=cand_f,
+                             links=self.links)
 
 
 class _TreeArrays:
@@ -318,6 +350,21 @@ class _TreeArrays:
                 self.tree_f[b, 10:13] = m.jnt_pos[j]
         self.geom_i = m.geom_bodyid[geom_ids].astype(np.int64).reshape(-1, 1)
         self.geom_f = np.ascontiguousarray(np.concatenate([m.geom_pos[geom_ids], m.geom_quat[geom_ids]], axis=1))
+
+
+def _bounding_radius(kind: int, size: np.ndarray) -> float:
+    r, h = float(size[0]), float(size[1])
+    if kind == K.SPHERE:
+        return r
+    if kind == K.CAPSULE:
+        return r + h
+    if kind == K.CYLINDER:
+        return float(np.hypot(r, h))
+    if kind == K.ELLIPSOID:
+        return float(np.max(size[:3]))
+    if kind == K.BOX:
+        return float(np.linalg.norm(size[:3]))
+    return math.inf  # plane
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
