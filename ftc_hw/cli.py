@@ -47,6 +47,8 @@ def sim(
     realtime: Annotated[bool, typer.Option("--realtime/--fast", help="Pace the world to the wall clock.")] = True,
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="Sensor noise on or off.")] = True,
     list_: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
+    devices: Annotated[bool, typer.Option("--devices/--no-devices",
+                                          help="Start the scene's device emulators.")] = True,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth."""
     from .commands.sim import list_scenarios, run_sim
@@ -56,7 +58,7 @@ def sim(
         return
     if scene is None:
         raise typer.BadParameter("give a scene (ftc scenes lists them) or --list", param_hint="SCENE")
-    run_sim(scene, scenario, duration, seed, truth, realtime, noise)
+    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices)
 
 
 @app.command()

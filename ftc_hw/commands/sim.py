@@ -1,9 +1,8 @@
-"""``ftc sim``: run a scene's physics world, optionally writing ground truth."""
+"""``ftc sim``: run a scene's physics world and its device emulators, optionally writing ground truth."""
 from __future__ import annotations
 
 import json
 import sys
-import time
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -20,36 +19,37 @@ def list_scenarios() -> None:
 
 
 def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: Path | None,
-            realtime: bool, noise: bool) -> None:
-    from sim_devices.world import SCENARIOS, TruthWriter, World, build_scenario
-
-    from ..model import ArmModel
+            realtime: bool, noise: bool, devices: bool = True) -> None:
+    from sim_devices.runner import EmulatorStartError, SimRunner
+    from sim_devices.world import SCENARIOS, TruthWriter
 
     scene = scene_or_exit(scene_name)
     if scenario not in SCENARIOS:
         typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
         raise typer.Exit(2)
-    setup = build_scenario(scenario, scene, ArmModel(scene), seed, duration)
-    world = World(scene, setup, seed=seed, noise=noise)
-    # The first stdout line tells clients what to connect to (the emulators attach here).
-    print(json.dumps({"scene": scene.name, "scenario": scenario, "devices": []}), flush=True)
-    samples = contacts = 0
-    wall0 = time.monotonic()
-    with ExitStack() as stack:
-        writer = None
-        if truth is not None:
-            writer = TruthWriter(stack.enter_context(truth.open("w", encoding="utf-8")))
-        try:
-            for state, _reading in world.run(duration):
-                samples += 1
-                contacts += bool(state.contacts)
+    runner = SimRunner(scene, scenario, duration=duration, seed=seed, noise=noise, devices=devices)
+    try:
+        endpoints = runner.start()
+    except EmulatorStartError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
+    # The first stdout line tells clients what to connect to.
+    print(json.dumps({"scene": scene.name, "scenario": scenario, "devices": endpoints}), flush=True)
+    counts = {"samples": 0, "contact": 0}
+    try:
+        with ExitStack() as stack:
+            writer = TruthWriter(stack.enter_context(truth.open("w", encoding="utf-8"))) if truth else None
+
+            def on_sample(state) -> None:
+                counts["samples"] += 1
+                counts["contact"] += bool(state.contacts)
                 if writer:
                     writer.write(state)
-                if realtime:
-                    ahead = state.t - (time.monotonic() - wall0)
-                    if ahead > 0:
-                        time.sleep(ahead)
-        except KeyboardInterrupt:
-            print("interrupted", file=sys.stderr)
-    print(f"simulated {world.t:.3f} s of {scene.name}/{scenario}: {samples} sensor samples, "
-          f"{contacts} in contact" + (f", truth -> {truth}" if truth else ""), file=sys.stderr)
+
+            runner.run(realtime=realtime, on_sample=on_sample)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+    finally:
+        runner.stop()
+    print(f"simulated {runner.world.t:.3f} s of {scene.name}/{scenario}: {counts['samples']} sensor samples, "
+          f"{counts['contact']} in contact" + (f", truth -> {truth}" if truth else ""), file=sys.stderr)

@@ -118,6 +118,7 @@ class World:
             raise ValueError(f"sensor rate {scene.sensor.rate_hz} Hz is not a divisor of the physics rate "
                              f"{1 / self.dt:g} Hz")
         self.steps_per_sample = int(round(ratio))
+        self.torque_on = True
         self._reference: Trajectory = setup.trajectory
         self._t_ref0 = 0.0
         q0, _, _ = self._reference.reference(0.0)
@@ -151,6 +152,12 @@ class World:
     def set_goal(self, q_goal) -> None:
         self.set_reference(Hold(np.asarray(q_goal, dtype=float).copy()))
 
+    def set_torque(self, on: bool) -> None:
+        """Motor torque on (the joint controller runs) or off (the joints are free: gravity acts)."""
+        if on and not self.torque_on:
+            self.halt()  # a servo holds where it is when its torque comes back on
+        self.torque_on = on
+
     @property
     def t(self) -> float:
         return float(self.data.time)
@@ -168,6 +175,8 @@ class World:
         inertial = np.zeros(m.nv)
         mujoco.mj_mulM(m, d, inertial, acc)
         tau = r.kp * (q_ref - q) + r.kd * (qd_ref - qd) + d.qfrc_bias[self._dadr] + inertial[self._dadr]
+        if not self.torque_on:
+            tau = np.zeros_like(tau)
         d.qfrc_applied[:] = 0.0
         d.qfrc_applied[self._dadr] = tau
         d.xfrc_applied[:] = 0.0

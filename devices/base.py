@@ -1,0 +1,127 @@
+"""The device adapter base: explicit lifecycle, a reader thread that owns the I/O loop, reconnect with
+backoff, counters, and events on the bus instead of silent deaths.
+
+Subclasses implement ``_connect()`` (open the transport, raise on failure), ``_read_once()`` (block
+for at most ``poll_timeout`` s, publish what arrived, return normally; raise ``DeviceIOError`` when
+the link is broken) and ``_disconnect()`` (close, never raise). Everything else is here.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from abc import ABC, abstractmethod
+from collections import Counter
+from typing import Any
+
+from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
+
+
+class DeviceError(Exception):
+    """A device-level failure the caller should see (bad configuration, refused command)."""
+
+
+class DeviceIOError(DeviceError):
+    """The link to the device is broken: the reader reconnects."""
+
+
+class Adapter(ABC):
+    """One device on the bus. ``open``/``close`` are idempotent; use it as a context manager."""
+
+    kind = "device"
+
+    def __init__(self, name: str, bus: Bus, *, reconnect_backoff: tuple[float, float] = (0.05, 1.0),
+                 poll_timeout: float = 0.05) -> None:
+        self.name = name
+        self.bus = bus
+        self.counters: Counter[str] = Counter()
+        self.backoff_min, self.backoff_max = reconnect_backoff
+        self.poll_timeout = poll_timeout
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self.connected = threading.Event()
+
+    # -- lifecycle -----------------------------------------------------------------------------------
+    def open(self) -> Adapter:
+        with self._lock:
+            if self._thread is not None:
+                return self
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name=f"{self.kind}:{self.name}", daemon=True)
+            self._thread.start()
+        return self
+
+    def close(self) -> None:
+        with self._lock:
+            thread, self._thread = self._thread, None
+        if thread is None:
+            return
+        self._stop.set()
+        thread.join(timeout=5.0)
+        self._safe_disconnect()
+        self.connected.clear()
+
+    def __enter__(self) -> Adapter:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def wait_connected(self, timeout: float) -> bool:
+        return self.connected.wait(timeout)
+
+    # -- events ----------------------------------------------------------------------------------------
+    def event(self, kind: str, message: str = "") -> None:
+        self.counters[f"event_{kind}"] += 1
+        self.bus.publish(EVENTS_DEVICE, DeviceEvent.make(time.monotonic_ns(), self.name, kind, message,
+                                                         dict(self.counters)))
+
+    # -- the reader loop -------------------------------------------------------------------------------
+    def _run(self) -> None:
+        backoff = self.backoff_min
+        while not self._stop.is_set():
+            try:
+                self._connect()
+            except Exception as exc:  # noqa: BLE001 - any failure to connect is retried
+                self.counters["connect_failures"] += 1
+                self.event("reconnecting", f"connect failed ({exc}); retry in {backoff:.2f} s")
+                if self._stop.wait(backoff):
+                    break
+                backoff = min(self.backoff_max, backoff * 2)
+                continue
+            backoff = self.backoff_min
+            self.connected.set()
+            self.event("connect", self.describe())
+            try:
+                while not self._stop.is_set():
+                    self._read_once()
+            except DeviceIOError as exc:
+                self.counters["disconnects"] += 1
+                self.event("disconnect", str(exc))
+            except Exception as exc:  # noqa: BLE001 - the reader never dies silently
+                self.counters["errors"] += 1
+                self.event("error", f"{type(exc).__name__}: {exc}")
+            finally:
+                self.connected.clear()
+                self._safe_disconnect()
+
+    def _safe_disconnect(self) -> None:
+        try:
+            self._disconnect()
+        except Exception:  # noqa: BLE001 - closing a broken link may fail; nothing to do about it
+            self.counters["close_errors"] += 1
+
+    def describe(self) -> str:
+        return self.kind
+
+    @abstractmethod
+    def _connect(self) -> None: ...
+
+    @abstractmethod
+    def _read_once(self) -> None: ...
+
+    @abstractmethod
+    def _disconnect(self) -> None: ...
+
+    def status(self) -> dict[str, Any]:
+        return {"name": self.name, "kind": self.kind, "connected": self.connected.is_set(), **self.counters}

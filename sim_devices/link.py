@@ -1,0 +1,198 @@
+"""The link between the physics world's process and the protocol emulators' processes.
+
+The world process owns a :class:`WorldLink`: shared-memory rings that it appends every F/T sample
+and every joint sample to, and a command queue it drains each physics step. Each emulator process
+attaches to the rings by name (:meth:`WorldLink.attach`), reads what is new with a
+:class:`RingReader` (never misses a sample unless it falls a whole ring behind, which it counts),
+and sends commands (:class:`Command`) back: goal positions, stop, torque on/off.
+
+Ring slots: ``[seq, t, payload...]``. The writer fills the payload, then writes ``seq`` last; a
+reader copies the slot and accepts it only if ``seq`` is the one it expects before and after the
+copy (a seqlock: no locks shared across processes).
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue
+from dataclasses import dataclass, field
+from multiprocessing import shared_memory
+from typing import Any
+
+import numpy as np
+
+RING_SLOTS = 4096  # about 4 s of 1 kHz samples
+
+
+@dataclass(frozen=True)
+class Command:
+    """A device's request to the world. ``kind``: ``goal`` (q rad, the joints' order), ``stop``
+    (hold where the arm is), ``torque`` (on: bool), ``pause``/``resume`` (trajectory time)."""
+
+    source: str
+    kind: str
+    q: tuple[float, ...] | None = None
+    on: bool | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Ring:
+    """A single-writer, many-reader ring of fixed-width float64 records in shared memory."""
+
+    def __init__(self, width: int, slots: int = RING_SLOTS, name: str | None = None, create: bool = True) -> None:
+        self.width = width
+        self.slots = slots
+        nbytes = (slots * (width + 2) + 1) * 8
+        self.shm = shared_memory.SharedMemory(name=name, create=create, size=nbytes)
+        self.owner = create
+        if not create:
+            # Python < 3.13 registers attached segments with the resource tracker, which would unlink
+            # the world's rings when this process exits: only the creator owns them.
+            from multiprocessing import resource_tracker
+
+            resource_tracker.unregister(self.shm._name, "shared_memory")  # type: ignore[attr-defined]
+        buf = np.ndarray((slots * (width + 2) + 1,), dtype=np.float64, buffer=self.shm.buf)
+        self._head = buf[:1]  # number of records written so far
+        self._data = buf[1:].reshape(slots, width + 2)
+        if create:
+            self._head[0] = 0.0
+            self._data[:, 0] = -1.0
+
+    @property
+    def name(self) -> str:
+        return self.shm.name
+
+    @property
+    def written(self) -> int:
+        return int(self._head[0])
+
+    def append(self, t: float, payload: np.ndarray) -> None:
+        k = int(self._head[0])
+        slot = self._data[k % self.slots]
+        slot[0] = -1.0  # invalid while being written
+        slot[1] = t
+        slot[2:] = payload
+        slot[0] = float(k)
+        self._head[0] = float(k + 1)
+
+    def read(self, k: int) -> np.ndarray | None:
+        """Record k (t, payload...) or None when it was overwritten or is not written yet."""
+        slot = self._data[k % self.slots]
+        if slot[0] != k:
+            return None
+        copy = slot[1:].copy()
+        return copy if slot[0] == k else None
+
+    def close(self) -> None:
+        self._head = self._data = None  # type: ignore[assignment]
+        self.shm.close()
+        if self.owner:
+            self.shm.unlink()
+
+
+class RingReader:
+    """Reads a ring in order from where it attaches; counts records lost by falling behind."""
+
+    def __init__(self, ring: Ring, from_start: bool = False) -> None:
+        self.ring = ring
+        self.next = 0 if from_start else ring.written
+        self.lost = 0
+
+    def new(self, limit: int = 1 << 30) -> list[np.ndarray]:
+        out = []
+        written = self.ring.written
+        if written - self.next > self.ring.slots:  # fell a whole ring behind
+            skip = written - self.ring.slots - self.next
+            self.lost += skip
+            self.next += skip
+        while self.next < written and len(out) < limit:
+            rec = self.ring.read(self.next)
+            if rec is None:  # overwritten while we read: count it and move on
+                self.lost += 1
+            else:
+                out.append(rec)
+            self.next += 1
+        return out
+
+    def latest(self) -> np.ndarray | None:
+        written = self.ring.written
+        return None if written == 0 else self.ring.read(written - 1)
+
+
+@dataclass(frozen=True)
+class LinkInfo:
+    """What an emulator process needs to attach: ring names and widths, the command queue."""
+
+    ft_ring: str
+    joint_ring: str
+    n_joints: int
+    commands: Any  # multiprocessing.Queue
+
+
+FT_WIDTH = 12  # wrench (6, sensor frame, scene convention, as the device reports it), saturated (6, 0/1)
+
+
+def joint_width(n: int) -> int:
+    return 5 * n  # q, qd, qdd, current, tau
+
+
+class WorldLink:
+    """Created in the world's process. ``info`` goes to each emulator process (picklable)."""
+
+    def __init__(self, n_joints: int, ctx: mp.context.BaseContext | None = None) -> None:
+        ctx = ctx or mp.get_context("spawn")
+        self.n_joints = n_joints
+        self.ft = Ring(FT_WIDTH)
+        self.joints = Ring(joint_width(n_joints))
+        self.commands = ctx.Queue()
+        self.info = LinkInfo(self.ft.name, self.joints.name, n_joints, self.commands)
+
+    def publish_ft(self, t: float, wrench: np.ndarray, saturated: np.ndarray) -> None:
+        self.ft.append(t, np.concatenate([wrench, saturated.astype(float)]))
+
+    def publish_joints(self, t: float, q, qd, qdd, current, tau) -> None:
+        self.joints.append(t, np.concatenate([q, qd, qdd, current, tau]))
+
+    def drain_commands(self, limit: int = 100) -> list[Command]:
+        out = []
+        for _ in range(limit):
+            try:
+                out.append(self.commands.get_nowait())
+            except queue.Empty:
+                break
+        return out
+
+    def close(self) -> None:
+        self.ft.close()
+        self.joints.close()
+        self.commands.close()
+
+
+class EmulatorSide:
+    """Created in an emulator process from ``LinkInfo``: readers of the rings and a command sender."""
+
+    def __init__(self, info: LinkInfo) -> None:
+        self.info = info
+        self.ft = Ring(FT_WIDTH, name=info.ft_ring, create=False)
+        self.joints = Ring(joint_width(info.n_joints), name=info.joint_ring, create=False)
+
+    def ft_reader(self) -> RingReader:
+        return RingReader(self.ft)
+
+    def joint_reader(self) -> RingReader:
+        return RingReader(self.joints)
+
+    def joint_state(self) -> dict[str, Any] | None:
+        """The newest joint sample: t (s), q, qd, qdd, current, tau."""
+        rec = RingReader(self.joints).latest()
+        if rec is None:
+            return None
+        n = self.info.n_joints
+        return {"t": float(rec[0]), "q": rec[1:1 + n], "qd": rec[1 + n:1 + 2 * n], "qdd": rec[1 + 2 * n:1 + 3 * n],
+                "current": rec[1 + 3 * n:1 + 4 * n], "tau": rec[1 + 4 * n:1 + 5 * n]}
+
+    def send(self, command: Command) -> None:
+        self.info.commands.put(command)
+
+    def close(self) -> None:
+        self.ft.close()
+        self.joints.close()

@@ -1,0 +1,163 @@
+"""``ftc sim``: the world in real time, with one emulator process per device the scene declares."""
+from __future__ import annotations
+
+import importlib
+import multiprocessing as mp
+import queue
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ftc_hw.model import ArmModel
+from ftc_hw.scene import DeviceSpec, Scene
+
+from .link import Command, LinkInfo, WorldLink
+from .registry import EMULATORS
+from .world import World, WorldState, build_scenario
+
+
+class EmulatorStartError(RuntimeError):
+    pass
+
+
+def _entry(kind: str):
+    target = EMULATORS.get(kind)
+    if target is None:
+        raise EmulatorStartError(f"no emulator for device kind {kind!r} (known: {', '.join(EMULATORS)})")
+    module, func = target.split(":")
+    return getattr(importlib.import_module(module), func)
+
+
+def _serve(kind: str, device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:
+    """Entry point of an emulator process."""
+    try:
+        serve = _entry(kind)
+    except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
+        ready.put({"error": f"{type(exc).__name__}: {exc}"})
+        return
+    serve(device, scene, link, ready, options)
+
+
+@dataclass
+class EmulatorProcess:
+    device: DeviceSpec
+    process: Any
+    endpoint: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def start(cls, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict | None = None,
+              timeout: float = 30.0) -> EmulatorProcess:
+        ctx = mp.get_context("spawn")
+        ready = ctx.Queue()
+        proc = ctx.Process(target=_serve, args=(device.kind, device, scene, link, ready, options or {}),
+                           name=f"emulator:{device.name}", daemon=True)
+        proc.start()
+        try:
+            endpoint = ready.get(timeout=timeout)
+        except queue.Empty:
+            proc.terminate()
+            raise EmulatorStartError(f"emulator for {device.name!r} ({device.kind}) did not start within "
+                                     f"{timeout:g} s") from None
+        if "error" in endpoint:
+            proc.join(timeout=5)
+            raise EmulatorStartError(f"emulator for {device.name!r} ({device.kind}): {endpoint['error']}")
+        return cls(device, proc, endpoint)
+
+    @property
+    def alive(self) -> bool:
+        return self.process.is_alive()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        if self.process.is_alive():
+            self.process.terminate()
+        self.process.join(timeout)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join(timeout)
+
+    def kill(self) -> None:
+        """Die like a pulled plug (tests use it): no clean shutdown."""
+        self.process.kill()
+        self.process.join(5.0)
+
+
+class SimRunner:
+    """The world and its emulators. ``start()``, then ``step()``/``run()``; ``stop()`` cleans up."""
+
+    def __init__(self, scene: Scene, scenario: str, *, duration: float, seed: int = 0, noise: bool = True,
+                 devices: bool = True, options: dict[str, dict] | None = None) -> None:
+        self.scene = scene
+        self.scenario = scenario
+        self.duration = duration
+        setup = build_scenario(scenario, scene, ArmModel(scene), seed, duration)
+        self.world = World(scene, setup, seed=seed, noise=noise)
+        self.link = WorldLink(scene.n_joints)
+        self.devices = devices
+        self.options = options or {}
+        self.emulators: list[EmulatorProcess] = []
+        self.commands_applied = 0
+
+    def start(self) -> list[dict[str, Any]]:
+        # joint state first, so emulators that answer at once have something to serve
+        self._publish(self.world.state, with_ft=True)
+        if self.devices:
+            try:
+                for d in self.scene.devices:
+                    self.emulators.append(EmulatorProcess.start(d, self.scene, self.link.info,
+                                                                 self.options.get(d.name)))
+            except Exception:
+                self.stop()
+                raise
+        return [e.endpoint for e in self.emulators]
+
+    def _publish(self, state: WorldState, with_ft: bool) -> None:
+        w = self.world
+        if with_ft:
+            reading = w.read_sensor(state)
+            self.link.publish_ft(state.t, reading.wrench, reading.saturated)
+        self.link.publish_joints(state.t, state.q, state.qd, state.qdd, w.read_current(state), state.tau)
+
+    def _apply(self, cmd: Command) -> None:
+        self.commands_applied += 1
+        if cmd.kind == "goal" and cmd.q is not None:
+            self.world.set_goal(np.asarray(cmd.q, dtype=float))
+        elif cmd.kind == "stop":
+            self.world.halt()
+        elif cmd.kind == "torque":
+            self.world.set_torque(bool(cmd.on))
+
+    def step(self) -> WorldState:
+        for cmd in self.link.drain_commands():
+            self._apply(cmd)
+        state = self.world.step()
+        self._publish(state, with_ft=self.world.steps % self.world.steps_per_sample == 0)
+        return state
+
+    def run(self, realtime: bool = True, on_sample=None) -> None:
+        """Until ``duration`` simulated seconds; ``on_sample(state)`` at each sensor sample."""
+        w = self.world
+        t0 = w.t
+        wall0 = time.monotonic()
+        while w.t - t0 < self.duration - 1e-12:
+            state = self.step()
+            if on_sample is not None and w.steps % w.steps_per_sample == 0:
+                on_sample(state)
+            if realtime:
+                ahead = (w.t - t0) - (time.monotonic() - wall0)
+                if ahead > 0.0005:
+                    time.sleep(ahead)
+
+    def stop(self) -> None:
+        for e in self.emulators:
+            e.stop()
+        self.emulators = []
+        self.link.close()
+
+    def __enter__(self) -> SimRunner:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
