@@ -16,8 +16,10 @@ EPS = np.finfo(np.float64).eps
 pytestmark = pytest.mark.filterwarnings("error")
 HYP = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 KINDS = geo.KINDS
-# Error budget: C_ERR * eps * (problem scale) / sin(grazing angle); measured worst cases are ~10x lower.
-C_ERR = 64.0
+# Error budget: C_ERR * eps * (problem scale) / sin(grazing angle); measured worst case ~1.4 (point),
+# ~2.9 (s).  Surface-equation residuals: RES_ULPS ulps (measured <= 4).
+C_ERR = 8.0
+RES_ULPS = 16.0
 
 
 # ----------------------------------------------------------------------------- generators
@@ -155,7 +157,7 @@ def check_entry(kind: str, b: dict[str, np.ndarray], C: float = C_ERR) -> dict[s
     assert not hits.tangent[:, 0].any() or kind in ("box", "cylinder")  # faces: a grazed edge is fine
     both = hits.hit
     res = implicit_residual(kind, b["size"][:, None, :], hits.points)[both]
-    assert (res <= C * EPS).all(), res.max()
+    assert (res <= RES_ULPS * EPS).all(), res.max()
     return dict(point=float(ratio.max()), s=float((s_err / bound).max()),
                 normal=float((n_err / np.maximum(n_bound / C, EPS)).max()),
                 residual_ulps=float(res.max() / EPS))
@@ -202,7 +204,8 @@ def test_grazing_error_grows_like_one_over_sin(kind: str) -> None:
 
 
 def test_ellipsoid_extreme_aspect_surface_equation() -> None:
-    """Aspect ratios 1e-3..1e3: every crossing satisfies the quadric to a few ulps."""
+    """Semi-axes 1e-4..1e2 m (axis ratios up to 1e6): every crossing satisfies the quadric to a few
+    ulps (measured <= 3) and lies on the input line."""
     rng = np.random.default_rng(3)
     n = 20_000
     a = 10.0 ** rng.uniform(-3, 3, (n, 3)) * 0.1
@@ -211,7 +214,7 @@ def test_ellipsoid_extreme_aspect_surface_equation() -> None:
     h = geo.intersect_ellipsoid(o, d, a)
     assert h.hit.mean() > 0.15
     res = np.abs(((h.points / a[:, None, :]) ** 2).sum(-1) - 1.0)[h.hit]
-    assert res.max() <= 32 * EPS, res.max() / EPS
+    assert res.max() <= 8 * EPS, res.max() / EPS
     # points lie on the input line
     on_line = o[:, None, :] + h.s[..., None] * d[:, None, :]
     dev = np.linalg.norm(on_line - h.points, axis=-1)[h.hit]
@@ -226,7 +229,7 @@ def test_crossings_consistent_with_signed_distance(kind: str) -> None:
     """Random lines: crossings lie on the surface with the surface normal, the chord midpoint is inside,
     points just beyond entry/exit are outside; misses never pass inside."""
     rng = np.random.default_rng(11)
-    n = 5000
+    n = 1500 if kind == "ellipsoid" else 5000  # its signed distance is iterative: keep the test quick
     size = make_size(kind, 10.0 ** rng.uniform(-1.5, 0, n), rng.uniform(-1, 1, (n, 3)))
     sc = scale_of(kind, size)
     o = rng.uniform(-1.5, 1.5, (n, 3)) * sc[:, None]
@@ -251,7 +254,7 @@ def test_crossings_consistent_with_signed_distance(kind: str) -> None:
         assert (geo.signed_distance(kind, size, before).distance[both] > 0).all()
         assert (geo.signed_distance(kind, size, after).distance[both] > 0).all()
         miss = ~hit[:, 0]
-        ts = np.linspace(-4, 4, 801)[None, :] * sc[:, None] - (o * d).sum(-1)[:, None]
+        ts = np.linspace(-4, 4, 401)[None, :] * sc[:, None] - (o * d).sum(-1)[:, None]
         pts = o[:, None, :] + ts[..., None] * d[:, None, :]
         sd_line = geo.signed_distance(kind, size[:, None, :], pts).distance
         assert (sd_line[miss] > -1e-9 * sc[miss, None]).all()
@@ -311,9 +314,13 @@ def test_tangent_line_is_double_root(kind, u, psi, s) -> None:
     h = geo.intersect(kind, size, o, d)
     assert h.hit.all() and h.tangent.all()
     assert h.s[0, 0] == h.s[0, 1]
-    assert np.abs(h.cos_incidence).max() <= 1e-6
-    # along a tangent line the crossing is ill-conditioned: an O(eps) offset moves it by O(sqrt(eps))
-    assert np.linalg.norm(h.points[0, 0] - p[0]) <= 1e-6 * (0.2 + abs(s))
+    # Along a tangent line the crossing is ill-conditioned: an offset delta ~ eps (size + |s|) across
+    # the line moves it by ~sqrt(2 rho delta), rho the curvature radius, and turns the normal by that / rho.
+    sz = size[0, :3] if kind == "ellipsoid" else size[0, :1]
+    rho_min, rho_max = sz.min() ** 2 / sz.max(), sz.max() ** 2 / sz.min()
+    delta = 64 * EPS * (sz.max() + abs(s))
+    assert np.abs(h.cos_incidence).max() <= np.sqrt(2 * delta / rho_min)
+    assert np.linalg.norm(h.points[0, 0] - p[0]) <= np.sqrt(2 * rho_max * delta)
 
 
 def test_tangent_sphere_exact_and_slightly_off() -> None:
@@ -604,19 +611,20 @@ def test_closest_point_of_missing_line(kind, u, base_exp, aspect, gap_exp, psi, 
 
 @pytest.mark.parametrize("kind", ["sphere", "capsule", "cylinder", "ellipsoid", "box"])
 def test_closest_point_minimises_brute_force(kind: str) -> None:
-    """Returned distance is never above a dense sampling of the line and matches its minimum."""
+    """Returned distance is never above a dense sampling of the line around the returned parameter and
+    matches its minimum (the distance along a line is convex, so a local minimum is the global one)."""
     rng = np.random.default_rng(21)
     n = 400
     size = make_size(kind, np.full(n, 0.3), rng.uniform(-1, 1, (n, 3)))
     o = rng.uniform(-2, 2, (n, 3))
     d = _unit(rng.normal(size=(n, 3)))
     c = geo.closest_point_on_surface_to_line(kind, size, o, d)
-    ts = c.s[:, None] + np.linspace(-3, 3, 6001)[None, :]
+    ts = c.s[:, None] + np.linspace(-0.5, 0.5, 2001)[None, :]
     pts = o[:, None, :] + ts[..., None] * d[:, None, :]
     sd = geo.signed_distance(kind, size[:, None, :], pts).distance
     brute = np.maximum(sd.min(-1), 0.0)
     assert (c.distance <= brute + 1e-12).all()
-    assert np.allclose(c.distance, brute, atol=2e-6)  # grid spacing 1e-3, quadratic minimum
+    assert np.allclose(c.distance, brute, atol=2e-6)  # grid spacing 5e-4, quadratic minimum
     h = geo.intersect(kind, size, o, d)
     np.testing.assert_array_equal(c.hit, h.hit[:, 0])
     np.testing.assert_array_equal(c.point[c.hit], h.points[c.hit, 0])
