@@ -115,5 +115,19 @@ def bench_solver(
     run(json_path=json_path, plot_path=plot, n=cases, seed=seed, scenes=scene)
 
 
+@bench_app.command("compensation")
+def bench_compensation(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    plot: Annotated[Optional[Path], typer.Option(help="Draw error against cost to this PNG.")] = None,  # noqa: UP045
+    minutes: Annotated[float, typer.Option(min=0.05, help="Simulated minutes per scenario and speed.")] = 1.0,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
+) -> None:
+    """Compensation levels on moving sweeps: free-motion error, false alarms, detection delay, cost."""
+    from .compensation.bench import run
+
+    run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene)
+
+
 def run() -> None:  # pragma: no cover - console entry point
     app()

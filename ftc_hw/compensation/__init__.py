@@ -1,4 +1,6 @@
-"""Compensation: raw sensor wrench -> external contact wrench."""
+"""Compensation: raw sensor wrench -> external contact wrench, and joint-current residuals."""
 from .pipeline import Compensator
+from .qdd import QddEstimator
+from .residuals import JointResiduals
 
-__all__ = ["Compensator"]
+__all__ = ["Compensator", "JointResiduals", "QddEstimator"]

@@ -78,8 +78,11 @@ class ArmModel:
             attach_payload(spec, scene, payload)
         self.model = spec.compile()
         m = self.model
-        # Predictions never include contacts, joint limits or friction loss: only rigid-body dynamics.
+        # Predictions are rigid-body dynamics only: no contacts, joint limits, friction loss or damping
+        # (joint friction is the scene's friction model, applied where joint torques are compared).
         m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+        m.dof_damping[:] = 0.0
+        m.dof_frictionloss[:] = 0.0
         self.data = mujoco.MjData(m)
         self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
         self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
@@ -210,6 +213,66 @@ class ArmModel:
         for c in contacts:
             tau -= self.jacobian(q, c.link, c.point).T @ np.asarray(c.force, dtype=float)
         return tau
+
+    def arm_loads(self, q, qd=None, qdd=None, level: CompensationLevel = "dynamics",
+                  joint_torques: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """The arm's own load on the sensor (sensor frame, scene convention) and, if asked, the joint
+        torques (N m) it needs, computing only what ``level`` asks for: ``bias`` nothing (zeros),
+        ``gravity`` the static weight from the subtree's mass and centre of mass (plus MuJoCo's
+        recursive Newton-Euler at rest for the joint torques), ``dynamics`` MuJoCo's inverse dynamics.
+        """
+        m, d = self.model, self.data
+        if level == "bias":
+            return np.zeros(6), (np.zeros(self.n_joints) if joint_torques else None)
+        if level == "dynamics":
+            self._inverse(q, qd, qdd, "dynamics", ())
+            out = np.empty(6)
+            out[:3] = d.sensordata[self._force_adr:self._force_adr + 3]
+            out[3:] = d.sensordata[self._torque_adr:self._torque_adr + 3]
+            tau = d.qfrc_inverse[self._dadr].copy() if joint_torques else None
+            return self.sign * out, tau
+        if level != "gravity":
+            raise ValueError(f"level must be bias, gravity or dynamics, got {level!r}")
+        self._set(q)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        b = self.sensor_body
+        weight = self.total_mass * np.asarray(self.scene.gravity, dtype=float)  # the load on the arm, base frame
+        com = d.subtree_com[b]
+        site_pos = d.site_xpos[self.site_id]
+        rot = d.site_xmat[self.site_id].reshape(3, 3)
+        # base_on_arm about the sensor origin: minus the weight and its moment
+        f = -weight
+        t = -np.cross(com - site_pos, weight)
+        out = np.concatenate([rot.T @ f, rot.T @ t])
+        tau = None
+        if joint_torques:
+            m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
+            mujoco.mj_comVel(m, d)
+            res = np.zeros(m.nv)
+            mujoco.mj_rne(m, d, 0, res)
+            tau = res[self._dadr]
+        return self.sign * out, tau
+
+    def wrench_qdd_jacobian(self) -> np.ndarray:
+        """d(sensor wrench)/d(qdd) (6 x n, sensor frame, scene convention) at the state of the last
+        ``arm_loads``/``predicted_wrench`` call: the subtree's linear momentum Jacobian (mass times
+        the centre-of-mass Jacobian) and its angular one about the sensor origin. The wrench is
+        linear in qdd, so this maps an acceleration error to the wrench error it causes."""
+        m, d = self.model, self.data
+        b = self.sensor_body
+        jcom = np.zeros((3, m.nv))
+        mujoco.mj_jacSubtreeCom(m, d, jcom, b)
+        ang = np.zeros((3, m.nv))
+        mujoco.mj_angmomMat(m, d, ang, b)  # about the subtree's centre of mass
+        lin = self.total_mass * jcom
+        arm = d.subtree_com[b] - d.site_xpos[self.site_id]
+        rot = d.site_xmat[self.site_id].reshape(3, 3)
+        g = np.empty((6, self.n_joints))
+        g[:3] = rot.T @ lin[:, self._dadr]
+        skew = np.array([[0.0, -arm[2], arm[1]], [arm[2], 0.0, -arm[0]], [-arm[1], arm[0], 0.0]])
+        g[3:] = rot.T @ (skew @ lin[:, self._dadr] + ang[:, self._dadr])
+        return self.sign * g
 
     def _inverse(self, q, qd, qdd, level: CompensationLevel, contacts: Iterable[Contact]) -> None:
         if level not in ("bias", "gravity", "dynamics"):

@@ -201,6 +201,7 @@ class ContactSolver:
         self._cand_prim = np.zeros(self.max_candidates, dtype=np.int64)
         self._cand_f = np.zeros((self.max_candidates, K.C_SIZE))
         self._tau = np.zeros(m.njnt)
+        self._tau_var_frame = self.tau_var.copy()
         self._ws = np.zeros(K.workspace_size(self.max_candidates))
         self._raw_prim = np.zeros(self.max_candidates, dtype=np.int64)
         self._gpos = np.zeros((len(geoms), 3))
@@ -225,12 +226,13 @@ class ContactSolver:
         return self.ext_sign * (a @ np.asarray(wrench_sensor, dtype=float))
 
     # -- single frame ---------------------------------------------------------------------------------
-    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False) -> ContactEstimate:
+    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False, tau_std=None) -> ContactEstimate:
         """Estimate the contact from the compensated wrench (sensor frame, the scene's sign
         convention: the external contact wrench only) at joint angles q (rad).
 
         ``tau_ext``: optional per-joint external torques (N m, the scene's joint order) from the
-        joint currents; they score each candidate by J_c^T p and isolate the link.
+        joint currents; they score each candidate by J_c^T p and isolate the link. ``tau_std``: their
+        standard deviations for this frame (default: the solver's, from the current noise).
         """
         w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
@@ -249,8 +251,11 @@ class ContactSolver:
             if not math.isfinite(tau_arr.sum()):
                 return self._invalid(saturated)
             self._tau[self._jnt_ids] = tau_arr
+            if tau_std is not None:
+                self._tau_var_frame[self._jnt_ids] = np.square(np.asarray(tau_std, dtype=float))
         n = K.solve_frame_posed(self.ext_sign * (a @ w), wmat, self.prim_i, self.sizes, self._geom_ids, d.geom_xpos,
-                                d.geom_xmat, d.xaxis, d.xanchor, self.link_joint, self._tau, self.tau_var, use_tau,
+                                d.geom_xmat, d.xaxis, d.xanchor, self.link_joint, self._tau,
+                                self._tau_var_frame if (use_tau and tau_std is not None) else self.tau_var, use_tau,
                                 self.cfg, self._out, self._cand_prim, self._cand_f, self._ws, self._raw_prim,
                                 self._gpos, self._gmat)
         return self._estimate(n, saturated)

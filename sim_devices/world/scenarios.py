@@ -103,14 +103,18 @@ def build_static_pokes(scene: Scene, model: ArmModel, rng: np.random.Generator, 
     return ScenarioSetup(Hold(q), probes=random_pokes(model, q, rng, count))
 
 
+SWEEP_REST_S = 0.3  # the sweeps start with the arm at rest, long enough to tare the sensor
+
+
 def sweep_trajectory(scene: Scene, speed: float = 1.0) -> Sinusoid:
-    """Base joint sweeps +-0.6 rad, the next joint +-0.25 rad, at 0.25 Hz x speed."""
+    """Base joint sweeps +-0.6 rad, the next joint +-0.25 rad, at 0.25 Hz x speed, from rest at the
+    low end of the swing (after SWEEP_REST_S at rest)."""
     n = scene.n_joints
     amp = np.zeros(n)
     amp[0] = 0.6
     if n > 1:
         amp[1] = 0.25
-    return Sinusoid(np.array(scene.robot.home), amp, 0.25 * speed)
+    return Sinusoid(np.array(scene.robot.home), amp, 0.25 * speed, start_s=SWEEP_REST_S)
 
 
 def build_sweep(scene: Scene, model: ArmModel, rng: np.random.Generator, duration: float,
@@ -127,8 +131,9 @@ def build_sweep_with_collision(scene: Scene, model: ArmModel, rng: np.random.Gen
     """
     traj = sweep_trajectory(scene, speed)
     period = 1.0 / traj.frequency_hz
-    t_touch = math.asin(0.7) / (2 * math.pi) * period
-    t_peak = 0.25 * period
+    # sin(w t + phase) = 0.7 on the way up to its peak at sin = 1
+    t_touch = traj.start_s + (math.asin(0.7) - traj.phase) / (2 * math.pi) * period
+    t_peak = traj.start_s + (math.pi / 2 - traj.phase) / (2 * math.pi) * period
     q_touch, _, _ = traj.reference(t_touch)
     q_peak, _, _ = traj.reference(t_peak)
     link = scene.touchable[-1].link

@@ -24,15 +24,21 @@ class Hold(Trajectory):
 
 @dataclass(frozen=True)
 class Sinusoid(Trajectory):
-    """q(t) = centre + amplitude sin(2 pi f t), per joint (amplitude 0 holds the joint)."""
+    """q(t) = centre + amplitude sin(2 pi f t + phase), per joint (amplitude 0 holds the joint).
+
+    The default phase -pi/2 starts at rest (qd(0) = 0) at centre - amplitude; the arm holds there
+    for ``start_s`` first (time to tare the sensor)."""
 
     centre: np.ndarray
     amplitude: np.ndarray
     frequency_hz: float
+    phase: float = -np.pi / 2
+    start_s: float = 0.0
 
     def reference(self, t: float):
+        t = max(0.0, t - self.start_s)
         w = 2.0 * np.pi * self.frequency_hz
-        s, c = np.sin(w * t), np.cos(w * t)
+        s, c = np.sin(w * t + self.phase), np.cos(w * t + self.phase)
         return self.centre + self.amplitude * s, self.amplitude * w * c, -self.amplitude * w * w * s
 
 

@@ -1,0 +1,45 @@
+"""Per-joint external torques from the motor currents: the paper's current-mutation constraint made
+quantitative.
+
+    tau_ext = model torque (gravity, dynamics) + friction(qd) - torque constant x current = J_c^T p
+
+``tau_ext`` is the torque the external force p at the contact c exerts about each joint (sign: the
+solver's ``tau_ext``); the motors push against it, so their torque is the model torque minus it.
+Friction: viscous ``b qd`` plus Coulomb ``f_c sign(qd)``, smoothed over ``v_eps``; at rest the Coulomb
+friction can hold anything within +-f_c, which the reported standard deviation carries.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import Scene
+
+
+class JointResiduals:
+    def __init__(self, scene: Scene, v_eps: float = 0.01, floor: float = 0.02) -> None:
+        r = scene.robot
+        self.kt = np.asarray(r.torque_constant, dtype=float)
+        self.viscous = np.asarray(r.friction_viscous, dtype=float)
+        self.coulomb = np.asarray(r.friction_coulomb, dtype=float)
+        self.current_std = np.asarray(r.current_noise_std, dtype=float)
+        self.v_eps = v_eps
+        self.floor = floor
+
+    def friction(self, qd) -> np.ndarray:
+        qd = np.asarray(qd, dtype=float)
+        return self.viscous * qd + self.coulomb * np.tanh(qd / self.v_eps)
+
+    def external_torques(self, model_tau, current, qd) -> tuple[np.ndarray, np.ndarray]:
+        """(tau_ext, its standard deviation), N m per joint."""
+        qd = np.asarray(qd, dtype=float)
+        motor = self.kt * np.asarray(current, dtype=float)
+        tau_ext = np.asarray(model_tau, dtype=float) + self.friction(qd) - motor
+        stuck = self.coulomb * (1.0 - np.abs(np.tanh(qd / self.v_eps)))  # static friction: unknown within +-f_c
+        std = np.sqrt((self.kt * self.current_std) ** 2 + stuck**2 + self.floor**2)
+        return tau_ext, std
+
+    def most_distal_significant(self, tau_ext, std, k: float = 3.0) -> int:
+        """Index of the most distal joint whose |tau_ext| exceeds k sigma, or -1: it bounds the
+        touched link (the contact is on that joint's link or beyond)."""
+        significant = np.flatnonzero(np.abs(tau_ext) > k * std)
+        return int(significant[-1]) if significant.size else -1

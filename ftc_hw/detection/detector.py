@@ -1,0 +1,107 @@
+"""Contact onset and offset from the external wrench: a Mahalanobis test with hysteresis and debounce.
+
+Without contact the compensated wrench is noise with covariance ``cov`` (the sensor's, plus what the
+compensation adds), so d2 = w^T cov^-1 w follows a chi-square law with 6 degrees of freedom. Onset:
+d2 above ``on`` (the chi-square quantile for a per-sample false-alarm probability ``p_false``) for
+``n_on`` consecutive samples; the onset time is the first of them. Offset: d2 below ``off`` for
+``n_off`` consecutive samples. ``probability`` = P(chi2_6 < d2): how unlikely this wrench is as noise.
+The compensation can add its own uncertainty per sample (``update(..., model_error=u)``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def chi2_sf6(x: float) -> float:
+    """Survival function of the chi-square law with 6 degrees of freedom."""
+    if x <= 0:
+        return 1.0
+    h = 0.5 * x
+    return math.exp(-h) * (1.0 + h + h * h / 2.0)
+
+
+def chi2_isf6(p: float) -> float:
+    """The x with chi2_sf6(x) = p (bisection; p in (0, 1))."""
+    if not 0.0 < p < 1.0:
+        raise ValueError("p must be in (0, 1)")
+    lo, hi = 0.0, 10.0
+    while chi2_sf6(hi) > p:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if chi2_sf6(mid) > p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+@dataclass(frozen=True, slots=True)
+class Detection:
+    active: bool
+    d2: float
+    probability: float
+    change: str | None  # "onset", "offset" or None
+    onset_t_ns: int | None  # when the current (or just ended) contact began
+
+
+class ContactDetector:
+    def __init__(self, cov, *, p_false: float = 1e-9, release: float = 0.25, n_on: int = 2, n_off: int = 5) -> None:
+        cov = np.asarray(cov, dtype=float)
+        if cov.shape != (6, 6):
+            raise ValueError("cov must be 6x6")
+        self.cov = cov
+        self.inv = np.linalg.inv(cov)
+        self.on = chi2_isf6(p_false)
+        self.off = release * self.on
+        self.n_on = n_on
+        self.n_off = n_off
+        self.active = False
+        self._above = 0
+        self._below = 0
+        self._first_above: int | None = None
+        self.onset_t_ns: int | None = None
+
+    def reset(self) -> None:
+        self.active = False
+        self._above = self._below = 0
+        self._first_above = self.onset_t_ns = None
+
+    def update(self, t_ns: int, wrench, model_error=None) -> Detection:
+        """``model_error``: optional wrench-sized vectors u_k (rows) of the compensation's own
+        uncertainty for this sample: covariance sum u_k u_k^T added to the noise's."""
+        w = np.asarray(wrench, dtype=float)
+        if model_error is None:
+            d2 = float(w @ self.inv @ w)
+        else:
+            u = np.atleast_2d(model_error)
+            cov = self.cov + u.T @ u
+            d2 = float(w @ np.linalg.solve(cov, w))
+        if not math.isfinite(d2):
+            raise ValueError("wrench holds NaN or Inf")
+        change = None
+        if not self.active:
+            if d2 > self.on:
+                if self._above == 0:
+                    self._first_above = t_ns
+                self._above += 1
+                if self._above >= self.n_on:
+                    self.active = True
+                    self.onset_t_ns = self._first_above
+                    self._below = 0
+                    change = "onset"
+            else:
+                self._above = 0
+        else:
+            if d2 < self.off:
+                self._below += 1
+                if self._below >= self.n_off:
+                    self.active = False
+                    self._above = 0
+                    change = "offset"
+            else:
+                self._below = 0
+        return Detection(self.active, d2, 1.0 - chi2_sf6(d2), change, self.onset_t_ns)

@@ -1,0 +1,116 @@
+"""The per-frame contact pipeline: raw wrench and joint state in; external wrench, detection,
+estimate and contact events out. The live monitor, replay and the benchmarks all run this.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bus import ContactEvent
+from .compensation import Compensator, JointResiduals, QddEstimator
+from .detection import ContactDetector, Detection
+from .model import ArmModel, Payload
+from .scene import CompensationLevel, Scene
+from .solver import ContactEstimate, make_solver
+
+
+@dataclass(frozen=True, slots=True)
+class FrameResult:
+    t_ns: int
+    external: np.ndarray  # external contact wrench, sensor frame, scene convention
+    detection: Detection
+    estimate: ContactEstimate | None  # while in contact
+    tau_ext: np.ndarray | None  # J^T p from the currents, N m
+    events: tuple[ContactEvent, ...]
+
+
+class ContactPipeline:
+    """One scene's compensation, detection and localization. Not thread-safe: one per reader thread."""
+
+    def __init__(self, scene: Scene, *, level: CompensationLevel | None = None, bias=None,
+                 payload: Payload | None = None, method: str = "ours", use_currents: bool = True,
+                 p_false: float = 1e-9, n_on: int = 2, n_off: int = 5, update_period_s: float = 0.02,
+                 qdd_tau: float = 0.002, extra_cov=None) -> None:
+        self.scene = scene
+        model = ArmModel(scene, payload)
+        self.compensator = Compensator(model, level, bias)
+        self.level = self.compensator.level
+        self.solver = make_solver(model if method == "ours" else scene, method)
+        self.residuals = JointResiduals(scene) if use_currents else None
+        self.qdd = QddEstimator(scene.n_joints, qdd_tau)
+        cov = scene.sensor.noise_cov + (np.zeros((6, 6)) if extra_cov is None else np.asarray(extra_cov))
+        self.detector = ContactDetector(cov, p_false=p_false, n_on=n_on, n_off=n_off)
+        self.update_period_ns = int(update_period_s * 1e9)
+        self._last_update_ns = 0
+        self._last_estimate: ContactEstimate | None = None
+        self._qdd_hist: deque[tuple[int, np.ndarray]] = deque()
+        self._lag_window_ns = int(2 * qdd_tau * 1e9)
+        self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
+        self.lag_gain = 3.0  # the lag error exceeds the change over the window: 3 covers it with margin
+
+    def process(self, t_ns: int, raw, q, qd=None, current=None, qdd=None, saturated: bool = False) -> FrameResult:
+        """One F/T sample at host time t_ns with the joint state at that time."""
+        q = np.asarray(q, dtype=float)
+        need_dyn = self.level == "dynamics"
+        if need_dyn and qd is None:
+            raise ValueError("dynamics compensation needs the joint velocities qd")
+        lag_error = None
+        if need_dyn and qdd is None:
+            qdd = self.qdd.update(t_ns * 1e-9, qd)
+            lag_error = self._lag_error(t_ns, qdd)
+        want_tau = self.residuals is not None and current is not None
+        loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau)
+        external = np.asarray(raw, dtype=float) - self.compensator.bias - loads
+        model_error = None
+        if lag_error is not None:
+            # the estimated acceleration lags the true one by about the recent change: its effect on
+            # the compensated wrench is the model's response to that change (linear in qdd)
+            joints = np.flatnonzero(np.abs(lag_error) >= self.lag_floor)
+            model_error = (self.compensator.model.wrench_qdd_jacobian()[:, joints] * lag_error[joints]).T
+        tau_ext = tau_std = None
+        if want_tau:
+            if model_tau is None:  # bias level: no model torques; the currents still isolate the link
+                model_tau = np.zeros(self.scene.n_joints)
+            tau_ext, tau_std = self.residuals.external_torques(model_tau, current,
+                                                               qd if qd is not None else np.zeros_like(q))
+        det = self.detector.update(t_ns, external, model_error)
+        events: list[ContactEvent] = []
+        estimate = None
+        if det.active or det.change == "offset":
+            if det.active:
+                estimate = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std)
+                self._last_estimate = estimate
+            if det.change == "onset":
+                events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det))
+                self._last_update_ns = t_ns
+            elif det.change == "offset":
+                events.append(self._event(t_ns, "offset", self._last_estimate, det))
+                self._last_estimate = None
+            elif t_ns - self._last_update_ns >= self.update_period_ns:
+                events.append(self._event(t_ns, "update", estimate, det))
+                self._last_update_ns = t_ns
+        return FrameResult(t_ns, external, det, estimate, tau_ext, tuple(events))
+
+    def _lag_error(self, t_ns: int, qdd: np.ndarray) -> np.ndarray | None:
+        """The change of the acceleration estimate over the last lag window (2 tau): the size of the
+        estimator's lag error right now; None when it is negligible (saves an inverse dynamics)."""
+        hist = self._qdd_hist
+        hist.append((t_ns, qdd))
+        while len(hist) > 2 and t_ns - hist[1][0] >= self._lag_window_ns:
+            hist.popleft()
+        change = self.lag_gain * (qdd - hist[0][1])
+        if float(np.abs(change).max()) < self.lag_floor:
+            return None
+        return change
+
+    @staticmethod
+    def _event(t_ns: int, kind: str, e: ContactEstimate | None, det: Detection) -> ContactEvent:
+        if e is None or not e.contact:
+            z = np.zeros(3)
+            flags = e.flags if e is not None else ("no_estimate",)
+            return ContactEvent.make(t_ns, kind, e.link if e and e.link else "", z, z, z, flags=flags,
+                                     probability=det.probability)
+        return ContactEvent.make(t_ns, kind, e.link, e.point, e.force, e.point_std, flags=e.flags,
+                                 probability=det.probability)
