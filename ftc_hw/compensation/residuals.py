@@ -16,7 +16,8 @@ from ..scene import Scene
 
 
 class JointResiduals:
-    def __init__(self, scene: Scene, v_eps: float = 0.01, floor: float = 0.02) -> None:
+    def __init__(self, scene: Scene, v_eps: float = 0.01, floor: float = 0.02, friction_rel_std: float = 0.25,
+                 model_rel_std: float = 0.02) -> None:
         r = scene.robot
         self.kt = np.asarray(r.torque_constant, dtype=float)
         self.viscous = np.asarray(r.friction_viscous, dtype=float)
@@ -24,6 +25,9 @@ class JointResiduals:
         self.current_std = np.asarray(r.current_noise_std, dtype=float)
         self.v_eps = v_eps
         self.floor = floor
+        # friction models are rough (a quarter of the Coulomb level) and the rigid-body model a little
+        self.friction_rel_std = friction_rel_std
+        self.model_rel_std = model_rel_std
 
     def friction(self, qd) -> np.ndarray:
         qd = np.asarray(qd, dtype=float)
@@ -35,7 +39,9 @@ class JointResiduals:
         motor = self.kt * np.asarray(current, dtype=float)
         tau_ext = np.asarray(model_tau, dtype=float) + self.friction(qd) - motor
         stuck = self.coulomb * (1.0 - np.abs(np.tanh(qd / self.v_eps)))  # static friction: unknown within +-f_c
-        std = np.sqrt((self.kt * self.current_std) ** 2 + stuck**2 + self.floor**2)
+        model = np.asarray(model_tau, dtype=float)
+        std = np.sqrt((self.kt * self.current_std) ** 2 + stuck**2 + self.floor**2
+                      + (self.friction_rel_std * self.coulomb) ** 2 + (self.model_rel_std * model) ** 2)
         return tau_ext, std
 
     def most_distal_significant(self, tau_ext, std, k: float = 3.0) -> int:

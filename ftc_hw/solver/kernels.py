@@ -559,7 +559,7 @@ def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov, ws):
 # -- the whole frame ----------------------------------------------------------------------------------------
 # layout of the packed arguments (one array each: numba's dispatch costs ~0.2 us per argument)
 PI_KIND, PI_LINK, PI_TOUCH, PI_PULLS = 0, 1, 2, 3  # prim_i columns
-CFG_LOW_FORCE, CFG_GRAZING_COS, CFG_OFF_CHI2, CFG_AMBIGUITY, CFG_HIDE_TOL, CFG_MAX_ITER = 0, 1, 2, 3, 4, 5
+CFG_LOW_FORCE, CFG_GRAZING_COS, CFG_OFF_CHI2, CFG_AMBIGUITY, CFG_HIDE_TOL, CFG_MAX_ITER, CFG_MISS_TOL = range(7)
 O_POINT, O_FORCE, O_NORMAL, O_SCALARS, O_COV, O_SIZE = 0, 3, 6, 9, 17, 53  # out vector
 S_FLAGS, S_BEST, S_NCAND, S_CHI2, S_RESIDUAL, S_COS, S_COND, S_ITER = 0, 1, 2, 3, 4, 5, 6, 7  # scalars
 C_POINT, C_FORCE, C_SCORE, C_CHI2, C_SIZE = 0, 3, 6, 7, 8  # cand_f columns
@@ -585,6 +585,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     ambiguity_dlogl = cfg[CFG_AMBIGUITY]
     hide_tol = cfg[CFG_HIDE_TOL]
     max_iter = int(cfg[CFG_MAX_ITER])
+    miss_num = cfg[CFG_MISS_TOL]  # N m: divided by |f| below, the line position's uncertainty (m)
     out_point = out[O_POINT:O_POINT + 3]
     out_force = out[O_FORCE:O_FORCE + 3]
     out_normal = out[O_NORMAL:O_NORMAL + 3]
@@ -612,6 +613,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         return 0
     if fn < low_force:
         flags |= F_LOW_FORCE
+    miss_tol = miss_num / fn
     # ws (workspace_size(max_cand) floats) and raw_prim (max_cand ints) are the caller's scratch:
     # numba allocates arrays on the heap, so a frame allocates nothing itself
     u = ws[0:3]
@@ -671,6 +673,56 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
                 for i in range(3):
                     raw_point[n_raw, i] = x[i]
                 n_raw += 1
+    n_crossed = n_raw
+    if miss_tol > 0.0:
+        # Near misses within the line's own uncertainty are candidates too: noise can push the line
+        # off the touched link. One per link that has no crossing, the closest; the fit decides.
+        for g in range(n_prim):
+            if not prim_touch[g]:
+                continue
+            crossed = False
+            for kk in range(n_crossed):
+                if prim_link[raw_prim[kk]] == prim_link[g]:
+                    crossed = True
+            if crossed:
+                continue
+            for i in range(3):
+                tmp[i] = gpos[g, i] - r0[i]
+            along = _dot3(tmp, u)
+            b = sizes[g, 3] + miss_tol
+            if _dot3(tmp, tmp) - along * along > b * b:
+                continue
+            for i in range(3):
+                x[i] = r0[i] + along * u[i]
+            _project_base(kinds[g], sizes[g], gpos[g], gmat[g], x, x, nb)
+            for i in range(3):
+                tmp[i] = x[i] - r0[i]
+            off = _dot3(tmp, u)
+            miss2 = _dot3(tmp, tmp) - off * off
+            cosn = _dot3(u, nb)
+            # a clear push (or pull where allowed): a grazing near miss is no evidence of a touch there
+            if miss2 >= miss_tol * miss_tol or abs(cosn) < grazing_cos or (cosn > 0.0 and not prim_pulls[g]):
+                continue
+            if _hidden(x, nb, g, kinds, sizes, gpos, gmat, hide_tol):
+                continue
+            slot = -1
+            for kk in range(n_crossed, n_raw):  # one per link: keep the closest
+                if prim_link[raw_prim[kk]] == prim_link[g]:
+                    slot = kk
+            if slot >= 0:
+                for i in range(3):
+                    tmp[i] = raw_point[slot, i] - r0[i]
+                o2 = _dot3(tmp, u)
+                if _dot3(tmp, tmp) - o2 * o2 <= miss2:
+                    continue
+            elif n_raw < max_cand:
+                slot = n_raw
+                n_raw += 1
+            else:
+                continue
+            raw_prim[slot] = g
+            for i in range(3):
+                raw_point[slot, i] = x[i]
     if n_raw == 0:
         # the line misses (noise, or not a contact on the arm): start from the surface point
         # nearest the line on the closest touchable primitive(s)
@@ -823,20 +875,6 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     return n_raw
 
 
-@njit(**JIT)
-def solve_frame_posed(w, W, prim_i, sizes, geom_ids, geom_xpos, geom_xmat, joint_axis, joint_anchor, link_joint,
-                      tau_ext, tau_var, use_tau, cfg, out, cand_prim, cand_f, ws, raw_prim, gpos, gmat):
-    """solve_frame with the primitives' poses picked from MuJoCo's per-geom arrays (into gpos, gmat)."""
-    for k in range(geom_ids.shape[0]):
-        g = geom_ids[k]
-        for i in range(3):
-            gpos[k, i] = geom_xpos[g, i]
-        for i in range(9):
-            gmat[k, i] = geom_xmat[g, i]
-    return solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_joint, tau_ext, tau_var,
-                       use_tau, cfg, out, cand_prim, cand_f, ws, raw_prim)
-
-
 # -- forward kinematics of the geoms (batch path) ---------------------------------------------------------
 @njit(**JIT)
 def _quat_mul(a, b, out):
@@ -930,6 +968,16 @@ def tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, 
             gpos[g, i] = xpos[b, i] + v[i]
         _quat_mul(xquat[b], geom_quat[g], qtmp)
         _quat_mat(qtmp, gmat[g])
+
+
+@njit(**JIT)
+def solve_frame_q(w, q, W, prim_i, sizes, link_joint, tau_ext, tau_var, use_tau, cfg, tree_i, tree_f, geom_i, geom_f,
+                  out, cand_prim, cand_f, ws, raw_prim, xpos, xquat, gpos, gmat, janchor, jaxis):
+    """solve_frame at joint angles q (the model's qpos): the same kinematics as the batch path, so a
+    frame gets bit-identical answers on either path."""
+    tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis)
+    return solve_frame(w, W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint, tau_ext, tau_var, use_tau, cfg,
+                       out, cand_prim, cand_f, ws, raw_prim)
 
 
 @njit(parallel=True, cache=True, nogil=True)

@@ -147,7 +147,7 @@ class ContactSolver:
 
     def __init__(self, scene: Scene | ArmModel, *, low_force_sigma: float = 5.0, grazing_deg: float = 5.0,
                  ambiguity_dlogl: float = 2.0, hide_tol: float = 1e-8, max_iter: int = 20,
-                 tau_std: np.ndarray | None = None) -> None:
+                 tau_std: np.ndarray | None = None, miss_sigma: float = 3.0) -> None:
         self.model = scene if isinstance(scene, ArmModel) else ArmModel(scene)
         self.scene = self.model.scene
         m = self.model.model
@@ -194,7 +194,14 @@ class ContactSolver:
         self.prim_i = np.ascontiguousarray(np.stack([self.kinds, self.prim_link, self.prim_touch.astype(np.int64),
                                                      self.prim_pulls.astype(np.int64)], axis=1))
         self.cfg = np.array([self.low_force, self.grazing_cos, self.off_chi2, self.ambiguity_dlogl, self.hide_tol,
-                             self.max_iter], dtype=float)
+                             self.max_iter, 0.0], dtype=float)
+        # the line's position uncertainty: moment noise over force, and force noise times the arm's
+        # reach; near misses within miss_sigma of it stay candidates
+        kin = self.model.kinematics(q0)
+        reach = max(float(np.linalg.norm((kin[self.links[self.prim_link[i]]] @ np.append(
+            m.geom_pos[g], 1.0))[:3])) + self.sizes[i, 3] for i, g in enumerate(geoms) if self.kinds[i] != K.PLANE)
+        sig = np.sqrt(np.diag(np.linalg.inv(self._W0)))
+        self.cfg[K.CFG_MISS_TOL] = miss_sigma * float(np.linalg.norm(sig[3:]) + np.linalg.norm(sig[:3]) * reach)
         self._tree = _TreeArrays(m, self._geom_ids)
         self.max_candidates = 2 * len(geoms)
         self._out = np.zeros(K.O_SIZE)
@@ -204,8 +211,9 @@ class ContactSolver:
         self._tau_var_frame = self.tau_var.copy()
         self._ws = np.zeros(K.workspace_size(self.max_candidates))
         self._raw_prim = np.zeros(self.max_candidates, dtype=np.int64)
-        self._gpos = np.zeros((len(geoms), 3))
-        self._gmat = np.zeros((len(geoms), 9))
+        self._qfull = np.zeros(m.nq)
+        self._scratch = (np.zeros((m.nbody, 3)), np.zeros((m.nbody, 4)), np.zeros((len(geoms), 3)),
+                         np.zeros((len(geoms), 9)), np.zeros((m.njnt, 3)), np.zeros((m.njnt, 3)))
 
     # -- frames ---------------------------------------------------------------------------------------
     def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -238,26 +246,26 @@ class ContactSolver:
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
         if not (math.isfinite(w.sum()) and math.isfinite(q.sum())):  # NaN or Inf anywhere
             return self._invalid(saturated)
-        m, d = self.model.model, self.model.data
-        d.qpos[self.model._qadr] = q
-        mujoco.mj_kinematics(m, d)
+        self._qfull[self.model._qadr] = q
         if self.sensor_moves:
             a, wmat = self._frame_transform(q)
         else:
             a, wmat = self._A0, self._W0
+        ext = self.ext_sign * (a @ w)
         use_tau = tau_ext is not None
+        tau_var = self.tau_var
         if use_tau:
             tau_arr = np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
             if not math.isfinite(tau_arr.sum()):
                 return self._invalid(saturated)
             self._tau[self._jnt_ids] = tau_arr
             if tau_std is not None:
-                self._tau_var_frame[self._jnt_ids] = np.square(np.asarray(tau_std, dtype=float))
-        n = K.solve_frame_posed(self.ext_sign * (a @ w), wmat, self.prim_i, self.sizes, self._geom_ids, d.geom_xpos,
-                                d.geom_xmat, d.xaxis, d.xanchor, self.link_joint, self._tau,
-                                self._tau_var_frame if (use_tau and tau_std is not None) else self.tau_var, use_tau,
-                                self.cfg, self._out, self._cand_prim, self._cand_f, self._ws, self._raw_prim,
-                                self._gpos, self._gmat)
+                tau_var = self._tau_var_frame
+                tau_var[self._jnt_ids] = np.square(np.asarray(tau_std, dtype=float))
+        tr, sc = self._tree, self._scratch
+        n = K.solve_frame_q(ext, self._qfull, wmat, self.prim_i, self.sizes, self.link_joint, self._tau, tau_var,
+                            use_tau, self.cfg, tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, self._out, self._cand_prim,
+                            self._cand_f, self._ws, self._raw_prim, *sc)
         return self._estimate(n, saturated)
 
     def _invalid(self, saturated: bool) -> ContactEstimate:

@@ -106,6 +106,9 @@ class World:
         self._dadr = np.array([m.joint(j).dofadr[0] for j in r.joints])
         m.dof_damping[self._dadr] = r.friction_viscous
         m.dof_frictionloss[self._dadr] = r.friction_coulomb
+        # MuJoCo's friction loss is a soft constraint: its default softness lets joints creep at a
+        # fraction of the friction torque. The stiffest stable setting makes it Coulomb-like.
+        m.dof_solref[self._dadr, 0] = 2.0 * m.opt.timestep
         self._fadr = m.sensor(FORCE_SENSOR).adr[0]
         self._tadr = m.sensor(TORQUE_SENSOR).adr[0]
         self._sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
