@@ -90,9 +90,9 @@ def bench_bus(
 
 @app.command()
 def demo(
-    scene: Annotated[str, typer.Option(help="Built-in scene or scene file.")] = "leng2016",
-    scenario: Annotated[str, typer.Option(help="Scenario name.")] = "static-pokes",
-    duration: Annotated[float, typer.Option(min=1.0, help="Seconds of live view.")] = 15.0,
+    scene: Annotated[str, typer.Option(help="Built-in scene or scene file.")] = "ur5e",
+    scenario: Annotated[str, typer.Option(help="Scenario name.")] = "sweep-with-collision",
+    duration: Annotated[float, typer.Option(min=1.0, help="Seconds of live view.")] = 20.0,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """The live monitor on emulated devices, then a summary. Ends by itself."""

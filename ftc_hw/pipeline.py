@@ -50,16 +50,19 @@ class ContactPipeline:
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
         self.lag_gain = 3.0  # the lag error exceeds the change over the window: 3 covers it with margin
 
-    def process(self, t_ns: int, raw, q, qd=None, current=None, qdd=None, saturated: bool = False) -> FrameResult:
-        """One F/T sample at host time t_ns with the joint state at that time."""
+    def process(self, t_ns: int, raw, q, qd=None, current=None, qdd=None, saturated: bool = False,
+                t_device_ns: int | None = None) -> FrameResult:
+        """One F/T sample at host time t_ns with the joint state at that time. ``t_device_ns``: the
+        sample's device time, the steadier clock for differentiating qd (else t_ns is used)."""
         q = np.asarray(q, dtype=float)
         need_dyn = self.level == "dynamics"
         if need_dyn and qd is None:
             raise ValueError("dynamics compensation needs the joint velocities qd")
         lag_error = None
         if need_dyn and qdd is None:
-            qdd = self.qdd.update(t_ns * 1e-9, qd)
-            lag_error = self._lag_error(t_ns, qdd)
+            t_clock = t_ns if t_device_ns is None else t_device_ns
+            qdd = self.qdd.update(t_clock * 1e-9, qd)
+            lag_error = self._lag_error(t_clock, qdd)
         want_tau = self.residuals is not None and current is not None
         loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau)
         external = np.asarray(raw, dtype=float) - self.compensator.bias - loads

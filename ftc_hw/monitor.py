@@ -1,0 +1,192 @@
+"""The contact pipeline on the bus: every F/T frame, with the joint state interpolated at its
+timestamp, goes through compensation, detection and localization; contact events go back on the bus.
+
+Timestamps: frames that carry device time are placed on the host clock through each source's
+``ClockAligner`` (a minimum-delay filter), so the F/T and joint streams line up without the jitter of
+their delivery; frames without device time use their host receive time.
+
+A worker thread owns the pipeline (a bounded queue decouples it from the F/T reader: a slow pipeline
+drops frames, counted, instead of stalling the device). Without a calibration the sensor is tared
+on the first ``tare_s`` of frames, which must be taken with the arm still and untouched.
+"""
+from __future__ import annotations
+
+import bisect
+import queue
+import threading
+import time
+from collections import Counter, deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bus import EVENTS_CONTACT, Bus, ClockAligner, WrenchFlag, joints_topic, wrench_topic
+from .pipeline import ContactPipeline, FrameResult
+from .scene import Scene
+
+
+@dataclass(frozen=True, slots=True)
+class MonitoredFrame:
+    t_host_ns: int
+    t_device_ns: int | None
+    result: FrameResult
+
+
+class LiveMonitor:
+    def __init__(self, bus: Bus, scene: Scene, *, ft_source: str = "ft", arm_source: str = "arm",
+                 tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
+                 **pipeline_options) -> None:
+        self.bus = bus
+        self.scene = scene
+        self.pipeline = ContactPipeline(scene, **pipeline_options)
+        self.ft_topic = wrench_topic(ft_source)
+        self.joint_topic = joints_topic(arm_source)
+        self.tare_s = tare_s
+        self.max_gap_ns = int(max_gap_ms * 1e6)
+        self.wait_s = 0.005
+        self.keep_frames = keep_frames
+        self.frames: list[MonitoredFrame] = []
+        self.latest: MonitoredFrame | None = None
+        self.counters: Counter[str] = Counter()
+        self._sub = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._tare_buf: list[tuple[np.ndarray, np.ndarray]] = []
+        self._tare_until_ns: int | None = None
+        self.tared = tare_s is None
+        self._ft_clock = ClockAligner()
+        self._arm_clock = ClockAligner()
+        self._joint_lock = threading.Lock()
+        self._joint_t: deque[int] = deque(maxlen=4096)
+        self._joint_x: deque[np.ndarray] = deque(maxlen=4096)
+        self._joint_sub = None
+
+    def start(self) -> LiveMonitor:
+        if self._thread is None:
+            self._joint_sub = self.bus.subscribe(self.joint_topic, callback=self.on_joints)
+            self._sub = self.bus.subscribe(self.ft_topic, maxsize=4096)
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="contact-monitor", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        if self._thread is None:
+            return
+        self._stop.set()
+        self._sub.close()
+        self._joint_sub.close()
+        self._thread.join(timeout=5.0)
+        self._thread = None
+        self.counters["ft_frames_dropped"] = self._sub.drops
+
+    def __enter__(self) -> LiveMonitor:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        # An F/T frame waits (at most wait_s) until the joint stream has passed its time, so the
+        # joint state is interpolated rather than extrapolated; the onset time does not change.
+        pending: deque = deque()
+        while not self._stop.is_set():
+            try:
+                frame = self._sub.get(timeout=0.001 if pending else 0.1)
+                pending.append((time.monotonic(), self._aligned(self._ft_clock, frame), frame))
+            except queue.Empty:
+                pass
+            except Exception:  # noqa: BLE001 - the subscription was closed: we are stopping
+                break
+            now = time.monotonic()
+            while pending:
+                arrived, t, frame = pending[0]
+                with self._joint_lock:
+                    newest = self._joint_t[-1] if self._joint_t else None
+                if newest is not None and newest < t and now - arrived < self.wait_s:
+                    break
+                pending.popleft()
+                try:
+                    self.handle(frame, t)
+                except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor
+                    self.counters["errors"] += 1
+                    self.counters[f"error:{type(exc).__name__}"] += 1
+
+    @staticmethod
+    def _aligned(clock: ClockAligner, frame) -> int:
+        if frame.t_device_ns is None:
+            return frame.t_host_ns
+        clock.update(frame.t_device_ns, frame.t_host_ns)
+        return clock.to_host(frame.t_device_ns)
+
+    def on_joints(self, frame) -> None:
+        """A JointFrame: kept with its aligned time for interpolation at the F/T samples."""
+        t = self._aligned(self._arm_clock, frame)
+        x = np.concatenate([frame.q, frame.qd, frame.current])
+        with self._joint_lock:
+            if self._joint_t and t <= self._joint_t[-1]:
+                return  # out of order or duplicate: the newer sample is already there
+            self._joint_t.append(t)
+            self._joint_x.append(x)
+
+    def _joints_at(self, t: int) -> np.ndarray | None:
+        with self._joint_lock:
+            ts = self._joint_t
+            i = bisect.bisect_right(ts, t)
+            if i == 0:
+                return None
+            t0, x0 = ts[i - 1], self._joint_x[i - 1]
+            if i == len(ts):
+                # Newer than the newest joint sample (the F/T frame often arrives first): extrapolate
+                # linearly from the last two, within the gap. Holding would lag the arm by up to a
+                # joint period, which the dynamics compensation would read as a contact.
+                if t - t0 > self.max_gap_ns:
+                    return None
+                if i < 2 or t0 - ts[i - 2] > self.max_gap_ns:
+                    return x0
+                tp, xp = ts[i - 2], self._joint_x[i - 2]
+                return x0 + (t - t0) / (t0 - tp) * (x0 - xp)
+            t1, x1 = ts[i], self._joint_x[i]
+        if t1 - t0 > self.max_gap_ns:
+            return None
+        w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
+        return x0 + w * (x1 - x0)
+
+    def handle(self, frame, t: int | None = None) -> MonitoredFrame | None:
+        """Process one WrenchFrame (also usable without the thread, e.g. in replay); ``t``: its
+        aligned time when already computed."""
+        if t is None:
+            t = self._aligned(self._ft_clock, frame)
+        x = self._joints_at(t)
+        if x is None:
+            self.counters["no_joint_state"] += 1
+            return None
+        n = self.scene.n_joints
+        q, qd, current = x[:n], x[n:2 * n], x[2 * n:]
+        if not self.tared:
+            self._tare(t, frame, q)
+            return None
+        result = self.pipeline.process(t, frame.wrench, q, qd, current,
+                                       saturated=bool(frame.flags & WrenchFlag.SATURATED),
+                                       t_device_ns=frame.t_device_ns)
+        self.counters["frames"] += 1
+        for event in result.events:
+            self.counters[f"event_{event.kind}"] += 1
+            self.bus.publish(EVENTS_CONTACT, event)
+        mf = MonitoredFrame(frame.t_host_ns, frame.t_device_ns, result)
+        self.latest = mf
+        if self.keep_frames:
+            self.frames.append(mf)
+        return mf
+
+    def _tare(self, t: int, frame, q) -> None:
+        if self._tare_until_ns is None:
+            self._tare_until_ns = t + int(self.tare_s * 1e9)
+        self._tare_buf.append((np.asarray(frame.wrench), np.asarray(q)))
+        if t >= self._tare_until_ns:
+            w = np.mean([b[0] for b in self._tare_buf], axis=0)
+            q = np.mean([b[1] for b in self._tare_buf], axis=0)
+            zero = np.zeros(self.scene.n_joints)
+            self.pipeline.compensator.tare(w, q, zero, zero)
+            self.tared = True
+            self._tare_buf.clear()
