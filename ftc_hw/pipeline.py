@@ -15,6 +15,8 @@ from .model import ArmModel, Payload
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, make_solver
 
+G_REFRESH_NS = 10_000_000
+
 
 @dataclass(frozen=True, slots=True)
 class FrameResult:
@@ -46,6 +48,8 @@ class ContactPipeline:
         self._last_update_ns = 0
         self._last_estimate: ContactEstimate | None = None
         self._qdd_hist: deque[tuple[int, np.ndarray]] = deque()
+        self._g_cache: np.ndarray | None = None
+        self._g_time = 0
         self._lag_window_ns = int(2 * qdd_tau * 1e9)
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
         self.lag_gain = 3.0  # the lag error exceeds the change over the window: 3 covers it with margin
@@ -64,21 +68,29 @@ class ContactPipeline:
             qdd = self.qdd.update(t_clock * 1e-9, qd)
             lag_error = self._lag_error(t_clock, qdd)
         want_tau = self.residuals is not None and current is not None
-        loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau)
+        # the joint torques come free with the inverse dynamics; at the gravity level they cost an
+        # extra pass, paid only in contact (below)
+        loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau and need_dyn)
         external = np.asarray(raw, dtype=float) - self.compensator.bias - loads
         model_error = None
         if lag_error is not None:
             # the estimated acceleration lags the true one by about the recent change: its effect on
             # the compensated wrench is the model's response to that change (linear in qdd)
+            # (an uncertainty, not a correction: the Jacobian is refreshed every G_REFRESH_NS, ~1 % of
+            # change at 1 rad/s)
+            if self._g_cache is None or t_clock - self._g_time >= G_REFRESH_NS:
+                self._g_cache = self.compensator.model.wrench_qdd_jacobian()
+                self._g_time = t_clock
             joints = np.flatnonzero(np.abs(lag_error) >= self.lag_floor)
-            model_error = (self.compensator.model.wrench_qdd_jacobian()[:, joints] * lag_error[joints]).T
+            model_error = (self._g_cache[:, joints] * lag_error[joints]).T
+        det = self.detector.update(t_ns, external, model_error)
         tau_ext = tau_std = None
-        if want_tau:
-            if model_tau is None:  # bias level: no model torques; the currents still isolate the link
-                model_tau = np.zeros(self.scene.n_joints)
+        if want_tau and det.active:  # only the solver needs them
+            if model_tau is None:
+                model_tau = (self.compensator.loads(q, qd, qdd, joint_torques=True)[1]
+                             if self.level == "gravity" else np.zeros(self.scene.n_joints))
             tau_ext, tau_std = self.residuals.external_torques(model_tau, current,
                                                                qd if qd is not None else np.zeros_like(q))
-        det = self.detector.update(t_ns, external, model_error)
         events: list[ContactEvent] = []
         estimate = None
         if det.active or det.change == "offset":

@@ -74,12 +74,14 @@ class ContactDetector:
         """``model_error``: optional wrench-sized vectors u_k (rows) of the compensation's own
         uncertainty for this sample: covariance sum u_k u_k^T added to the noise's."""
         w = np.asarray(wrench, dtype=float)
-        if model_error is None:
-            d2 = float(w @ self.inv @ w)
-        else:
+        iw = self.inv @ w
+        d2 = float(w @ iw)
+        if model_error is not None and len(model_error):
+            # Woodbury: (C + U^T U)^-1 = C^-1 - C^-1 U^T (I + U C^-1 U^T)^-1 U C^-1, a k x k solve
             u = np.atleast_2d(model_error)
-            cov = self.cov + u.T @ u
-            d2 = float(w @ np.linalg.solve(cov, w))
+            ui = u @ self.inv
+            a = ui @ w
+            d2 -= float(a @ np.linalg.solve(np.eye(len(u)) + ui @ u.T, a))
         if not math.isfinite(d2):
             raise ValueError("wrench holds NaN or Inf")
         change = None
