@@ -129,5 +129,27 @@ def bench_compensation(
     run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene)
 
 
+@bench_app.command("devices")
+def bench_devices(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    duration: Annotated[float, typer.Option(min=1.0, help="Seconds per streaming run.")] = 60.0,
+) -> None:
+    """F/T adapters against their emulators: rates, loss, corruption, reconnects."""
+    from devices.bench import run
+
+    run(json_path=json_path, duration=duration)
+
+
+@bench_app.command("arms")
+def bench_arms(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    duration: Annotated[float, typer.Option(min=1.0, help="Seconds per streaming run.")] = 60.0,
+) -> None:
+    """Arm adapters against their emulators: RTDE rate and accuracy, Dynamixel reads, stop, reconnects."""
+    from devices.arm_bench import run
+
+    run(json_path=json_path, duration=duration)
+
+
 def run() -> None:  # pragma: no cover - console entry point
     app()

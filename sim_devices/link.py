@@ -42,14 +42,22 @@ class Ring:
         self.width = width
         self.slots = slots
         nbytes = (slots * (width + 2) + 1) * 8
-        self.shm = shared_memory.SharedMemory(name=name, create=create, size=nbytes)
-        self.owner = create
-        if not create:
+        if create:
+            self.shm = shared_memory.SharedMemory(name=name, create=True, size=nbytes)
+        else:
             # Python < 3.13 registers attached segments with the resource tracker, which would unlink
-            # the world's rings when this process exits: only the creator owns them.
+            # the world's rings when this process exits: only the creator owns them. Not registering
+            # (rather than unregistering afterwards) matters when the tracker is shared with the world's
+            # process (spawned children share it): an unregister would drop the world's own entry.
             from multiprocessing import resource_tracker
 
-            resource_tracker.unregister(self.shm._name, "shared_memory")  # type: ignore[attr-defined]
+            register = resource_tracker.register
+            resource_tracker.register = lambda *args, **kwargs: None
+            try:
+                self.shm = shared_memory.SharedMemory(name=name, create=False, size=nbytes)
+            finally:
+                resource_tracker.register = register
+        self.owner = create
         buf = np.ndarray((slots * (width + 2) + 1,), dtype=np.float64, buffer=self.shm.buf)
         self._head = buf[:1]  # number of records written so far
         self._data = buf[1:].reshape(slots, width + 2)

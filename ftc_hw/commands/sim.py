@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import signal
 import sys
 from contextlib import ExitStack
 from pathlib import Path
@@ -27,6 +28,8 @@ def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: P
     if scenario not in SCENARIOS:
         typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
         raise typer.Exit(2)
+    # SIGTERM stops like Ctrl-C: the emulators are shut down, never orphaned
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
     runner = SimRunner(scene, scenario, duration=duration, seed=seed, noise=noise, devices=devices)
     try:
         endpoints = runner.start()

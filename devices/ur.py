@@ -1,0 +1,291 @@
+"""Universal Robots arm adapter: ur_rtde's receive interface for joint state, the dashboard for stop/pause.
+
+Publishes a ``JointFrame`` on ``joints/<name>`` for every RTDE packet (500 Hz e-Series, 125 Hz CB3:
+the device's ``frequency``): ``t_device_ns`` is the controller's ``timestamp``, ``seq`` counts
+controller periods (``round(timestamp * frequency)``, so a packet the poller missed is a sequence
+gap, flagged ``SEQ_GAP``), ``tau = torque_constant * current`` when torque constants are known
+(device ``torque_constant`` or the scene's ``[robot] torque_constant``), else None.
+
+ur_rtde keeps serving the last values when the controller goes away and only ``isConnected()``
+says so; this adapter polls the timestamp and checks ``isConnected()`` itself: no new packet for
+``stale_after`` s (default max(50 ms, 10 periods)) publishes ``stale``, the next one ``recovered``;
+a closed connection, or ``dead_after`` s without data (a hung controller), is a broken link,
+reopened with backoff by the base class.
+
+Measured with ur_rtde 1.6.5 (see tests): ``reconnect()`` and the dashboard client's ``connect()``
+block forever against a controller that accepts TCP but never answers, and ``disconnect()`` then
+takes ~3 s; the constructor holds the GIL during its handshake. So before any ur_rtde call that
+connects, a plain socket with a timeout checks that the controller answers the RTDE version request;
+a hung interface is retired to a background thread (its ``disconnect()`` runs there) and replaced by
+a new one; and the dashboard, the stop path, is a plain socket with timeouts, not ur_rtde's client.
+
+``stop()``, the monitor's reflex: dashboard ``stop`` (the program stops, the arm brakes to a halt
+on its path); ``pause()``: dashboard ``pause``. A reply "Failed to execute: stop" is accepted when
+the program is already stopped.
+"""
+from __future__ import annotations
+
+import contextlib
+import socket
+import struct
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ftc_hw.bus import Bus, JointFlag, JointFrame, joints_topic
+
+from .base import Adapter, DeviceError, DeviceIOError
+
+RTDE_PORT = 30004
+VARIABLES = ["timestamp", "actual_q", "actual_qd", "actual_current", "robot_mode", "safety_mode", "runtime_state"]
+RUNTIME_STOPPED, RUNTIME_PAUSED = 1, 4
+
+
+def probe_rtde(host: str, timeout: float = 0.3, port: int = RTDE_PORT) -> None:
+    """Raise DeviceIOError unless the controller at ``host`` answers an RTDE v2 version request in time."""
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as s:
+            s.settimeout(timeout)
+            s.sendall(struct.pack(">HBH", 5, ord("V"), 2))
+            reply = b""
+            while len(reply) < 4:
+                chunk = s.recv(4 - len(reply))
+                if not chunk:
+                    raise DeviceIOError(f"{host}:{port} closed the connection")
+                reply += chunk
+    except OSError as exc:
+        raise DeviceIOError(f"RTDE at {host}:{port} does not answer: {exc}") from exc
+    size, cmd, accepted = struct.unpack(">HBB", reply)
+    if cmd != ord("V") or not accepted:
+        raise DeviceIOError(f"RTDE at {host}:{port} refused protocol version 2")
+
+
+class DashboardLink:
+    """A dashboard server connection (port 29999) with timeouts; one command at a time."""
+
+    def __init__(self, host: str, port: int = 29999, timeout: float = 0.5) -> None:
+        self.host, self.port, self.timeout = host, port, timeout
+        self._sock: socket.socket | None = None
+        self._buf = b""
+        self._lock = threading.Lock()
+
+    def _open(self) -> None:
+        self.close()
+        self._sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._buf = b""
+        welcome = self._line()
+        if "Dashboard" not in welcome:
+            raise DeviceIOError(f"{self.host}:{self.port} is no dashboard server ({welcome!r})")
+
+    def _line(self) -> str:
+        assert self._sock is not None
+        while b"\n" not in self._buf:
+            chunk = self._sock.recv(1024)
+            if not chunk:
+                raise ConnectionError("dashboard server closed the connection")
+            self._buf += chunk
+        line, self._buf = self._buf.split(b"\n", 1)
+        return line.decode(errors="replace").strip()
+
+    def command(self, text: str) -> str:
+        """Send one command, return its reply line; reconnects once if the connection broke."""
+        with self._lock:
+            for attempt in (0, 1):
+                try:
+                    if self._sock is None:
+                        self._open()
+                    assert self._sock is not None
+                    self._sock.sendall(text.encode() + b"\n")
+                    return self._line()
+                except (OSError, ConnectionError) as exc:
+                    self.close()
+                    if attempt:
+                        raise DeviceIOError(f"dashboard {self.host}:{self.port}: {exc}") from exc
+            raise AssertionError("unreachable")
+
+    def close(self) -> None:
+        if self._sock is not None:
+            with contextlib.suppress(OSError):
+                self._sock.close()
+            self._sock = None
+
+
+def _retire(rtde: Any) -> None:
+    """Disconnect an interface in the background (ur_rtde's disconnect sleeps 0.5-3 s)."""
+    def run() -> None:
+        with contextlib.suppress(Exception):  # it is being thrown away
+            rtde.disconnect()
+
+    threading.Thread(target=run, name="ur-rtde-retire", daemon=True).start()
+
+
+class URArm(Adapter):
+    kind = "ur-rtde"
+
+    def __init__(self, name: str, bus: Bus, host: str, *, frequency: float = 500.0,
+                 torque_constant: Sequence[float] | None = None, stale_after: float | None = None,
+                 dead_after: float = 0.5, dashboard_port: int = 29999, probe_timeout: float = 0.3,
+                 reconnect_backoff: tuple[float, float] = (0.05, 0.5)) -> None:
+        super().__init__(name, bus, reconnect_backoff=reconnect_backoff)
+        self.host = host
+        self.rate = float(frequency)
+        self.period = 1.0 / self.rate
+        self.torque_constant = None if torque_constant is None else np.asarray(torque_constant, dtype=float)
+        self.stale_after = stale_after if stale_after is not None else max(0.05, 10.0 * self.period)
+        self.dead_after = dead_after
+        self.probe_timeout = probe_timeout
+        self.topic = joints_topic(name)
+        self.dashboard = DashboardLink(host, dashboard_port)
+        self.robot_mode: int | None = None
+        self.safety_mode: int | None = None
+        self.runtime_state: int | None = None
+        self._rtde: Any = None
+        self._last_ts: float | None = None
+        self._last_seq: int | None = None
+        self._last_new = 0.0
+        self._stale = False
+
+    @classmethod
+    def from_spec(cls, spec: Any, bus: Bus, endpoint: dict | str | None = None, *, scene: Any = None,
+                  **overrides: Any) -> URArm:
+        """From a scene's ``[[devices]]`` entry; ``endpoint``: ``ftc sim``'s endpoint dict or an address."""
+        p = dict(spec.params)
+        host = endpoint.get("address", endpoint.get("endpoint")) if isinstance(endpoint, dict) else endpoint
+        host = host or spec.address
+        if not host:
+            raise DeviceError(f"device {spec.name!r}: no controller address")
+        kwargs: dict[str, Any] = {k: p[k] for k in ("frequency", "torque_constant", "stale_after", "dead_after",
+                                                    "dashboard_port") if k in p}
+        if "torque_constant" not in kwargs and scene is not None:
+            kwargs["torque_constant"] = list(scene.robot.torque_constant)
+        if isinstance(endpoint, dict) and "dashboard_port" in endpoint:
+            kwargs.setdefault("dashboard_port", endpoint["dashboard_port"])
+        kwargs.update(overrides)
+        return cls(spec.name, bus, host, **kwargs)
+
+    def describe(self) -> str:
+        return f"{self.kind} {self.host} at {self.rate:g} Hz"
+
+    # -- link -------------------------------------------------------------------------------------------
+    def _connect(self) -> None:
+        import rtde_receive
+
+        probe_rtde(self.host, self.probe_timeout)
+        rtde = self._rtde
+        try:
+            if rtde is not None and not rtde.isConnected():
+                rtde.reconnect()
+            else:
+                if rtde is not None:  # connected but silent: a hung controller
+                    _retire(rtde)
+                self._rtde = rtde = None
+                rtde = rtde_receive.RTDEReceiveInterface(self.host, self.rate, VARIABLES)
+                self._rtde = rtde
+        except RuntimeError as exc:
+            raise DeviceIOError(f"ur_rtde: {exc}") from exc
+        if not rtde.isConnected():
+            raise DeviceIOError("ur_rtde connected but reports no connection")
+        self._last_new = time.monotonic()
+        try:  # open the stop path now, not when the monitor needs it
+            self.dashboard.command("robotmode")
+        except DeviceIOError as exc:
+            self.counters["dashboard_failures"] += 1
+            self.event("error", f"dashboard unavailable: {exc} (stop() will retry)")
+
+    def _disconnect(self) -> None:
+        self.dashboard.close()  # ur_rtde's interface is kept for reconnect() (or retired if hung)
+
+    def close(self) -> None:
+        super().close()
+        if self._rtde is not None:
+            rtde, self._rtde = self._rtde, None
+            if rtde.isConnected() and not self._stale:
+                rtde.disconnect()  # sleeps 0.5 s inside ur_rtde
+            elif rtde.isConnected():
+                _retire(rtde)  # hung: its disconnect takes seconds
+
+    # -- the reader loop ----------------------------------------------------------------------------------
+    def _read_once(self) -> None:
+        rtde = self._rtde
+        deadline = time.monotonic() + self.poll_timeout
+        while not self._stop.is_set():
+            ts = rtde.getTimestamp()
+            if ts != self._last_ts:
+                self._publish(rtde, ts)
+                return
+            now = time.monotonic()
+            if not rtde.isConnected():
+                self._mark_stale("RTDE connection closed")
+                raise DeviceIOError("RTDE connection closed")
+            silent = now - self._last_new
+            if silent > self.stale_after:
+                self._mark_stale(f"no RTDE packet for {silent:.3f} s")
+            if silent > self.dead_after:
+                raise DeviceIOError(f"no RTDE packet for {silent:.3f} s: controller hung")
+            if now > deadline:
+                return
+            # sleep most of a period after a packet, then poll finely
+            time.sleep(0.0002 if silent > 0.7 * self.period else 0.5 * self.period)
+
+    def _publish(self, rtde: Any, ts: float) -> None:
+        for _ in range(3):  # the getters are separate calls: make sure they saw the same packet
+            q, qd, cur = rtde.getActualQ(), rtde.getActualQd(), rtde.getActualCurrent()
+            ts2 = rtde.getTimestamp()
+            if ts2 == ts:
+                break
+            ts = ts2
+        t_host = time.monotonic_ns()
+        self.robot_mode, self.safety_mode = rtde.getRobotMode(), rtde.getSafetyMode()
+        self.runtime_state = rtde.getRuntimeState()
+        seq = round(ts * self.rate)
+        flags = JointFlag.NONE
+        if self._last_seq is not None:
+            if seq - self._last_seq > 1:
+                flags |= JointFlag.SEQ_GAP
+                self.counters["missed_packets"] += seq - self._last_seq - 1
+            elif seq <= self._last_seq:  # controller clock went back (restart)
+                flags |= JointFlag.CLOCK_SUSPECT
+                seq = self._last_seq + 1
+        cur = np.asarray(cur, dtype=float)
+        tau = None if self.torque_constant is None else self.torque_constant * cur
+        frame = JointFrame.make(t_host, q, qd, cur, tau, source=self.name, seq=seq, t_device_ns=round(ts * 1e9),
+                                flags=flags)
+        self._last_ts, self._last_seq, self._last_new = ts, seq, time.monotonic()
+        self.counters["frames"] += 1
+        self.bus.publish(self.topic, frame)
+        if self._stale:
+            self._stale = False
+            self.event("recovered", "RTDE packets again")
+
+    @property
+    def stale(self) -> bool:
+        """True between a ``stale`` event and the next good sample."""
+        return self._stale
+
+    def _mark_stale(self, why: str) -> None:
+        if not self._stale:
+            self._stale = True
+            self.event("stale", why)
+
+    # -- commands ----------------------------------------------------------------------------------------
+    def _dashboard(self, command: str, ok: str, already: int) -> None:
+        reply = self.dashboard.command(command)
+        if reply == ok:
+            return
+        if reply.startswith("Failed to execute") and self.dashboard.command("programState").split()[0] in (
+                {RUNTIME_STOPPED: "STOPPED", RUNTIME_PAUSED: "PAUSED"}[already], "STOPPED"):
+            return
+        raise DeviceError(f"dashboard {command!r}: {reply!r}")
+
+    def stop(self) -> None:
+        """The monitor's reflex: stop the program (dashboard ``stop``); the arm halts."""
+        self._dashboard("stop", "Stopped", RUNTIME_STOPPED)
+        self.counters["stops"] += 1
+
+    def pause(self) -> None:
+        self._dashboard("pause", "Pausing program", RUNTIME_PAUSED)
+        self.counters["pauses"] += 1

@@ -1,0 +1,607 @@
+"""Universal Robots controller emulator: an RTDE server (protocol v2) and a dashboard server subset.
+
+Binds ``<address>:30004`` (RTDE; ur_rtde hard-codes the port, so every emulator gets its own loopback
+address: the device spec's ``address`` or ``options["address"]``; non-loopback addresses are refused)
+and ``<address>:29999`` (dashboard).
+
+RTDE: the version request is accepted for protocol 2 only; the controller version is the device's
+``controller_version`` (default "5.9"). Output recipes may hold any variable of ``ur_data.OUTPUTS``
+(every one ur_rtde's receive interface asks for at 3.x or 5.x); an unknown name is answered
+``NOT_FOUND`` (recipe id 0), a frequency outside (0, max] refused (id 0), max = 500 Hz for e-Series
+(5.x and later), 125 Hz for CB3. Input recipes (ids from 1, separate from output ids) may hold any
+``ur_data.INPUTS`` name, ``IN_USE`` if another connection's recipe holds it; data packages set the
+digital/analog outputs, speed slider and input registers, which output recipes then report.
+
+Stream: paced by the world's clock. Each world joint sample whose time crosses a multiple of a
+recipe's period (1/frequency) is sent to that recipe's clients: ``timestamp`` is the world time of the
+sample and ``actual_q/qd/current`` its values, bit for bit. ``target_*`` report the actual values.
+``joint_temperatures`` come from a thermal model on the world's currents (``thermal.py``);
+``actual_TCP_force`` is the controller's own current-based estimate of the external wrench at the TCP
+(base frame) and ``ft_raw_wrench`` the same wrench in the flange frame (``ur_model.py``: the world's
+F/T ring holds the base sensor, which no UR has). Not modelled: momentum, tool I/O, euromap (0).
+
+Options: ``address``, ``rtde_port``, ``dashboard_port``, ``controller_version`` and ``frequency``
+(override the device's).
+
+Dashboard: power on / power off / brake release / play / pause / stop / robotmode / safetymode /
+safetystatus / PolyscopeVersion / get serial number / get robot model / running / programState /
+load / get loaded program / is in remote control / unlock protective stop / close (safety) popup /
+popup / addToLog / quit. The emulated robot starts powered, brakes released, its program (the
+world's scenario) playing. ``stop`` and ``pause`` (while playing) and ``power off`` halt the arm
+(``Command("stop")``: it holds where it is); ``play`` only changes the runtime state (the world has
+no command to resume its scenario). Modes show in RTDE's robot_mode, safety_mode, runtime_state,
+robot_status_bits and joint_mode.
+"""
+from __future__ import annotations
+
+import contextlib
+import ipaddress
+import math
+import os
+import signal
+import socket
+import struct
+import sys
+import threading
+import time
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from . import ur_data as D
+from .link import Command, EmulatorSide
+from .thermal import ThermalModel
+from .ur_model import URKinematics
+
+
+def parse_version(text: str) -> tuple[int, int, int, int]:
+    parts = [int(p) for p in str(text).split(".")]
+    if not 1 <= len(parts) <= 4:
+        raise ValueError(f"controller_version {text!r}: expected major.minor[.bugfix[.build]]")
+    return tuple(parts + [0] * (4 - len(parts)))  # type: ignore[return-value]
+
+
+# -- the controller's state (modes, I/O) ------------------------------------------------------------------
+class Controller:
+    def __init__(self, version: tuple[int, int, int, int], world: Any, source: str, serial: str, model: str) -> None:
+        self.version = version
+        self.world = world  # .send(Command)
+        self.source = source
+        self.serial = serial
+        self.model = model
+        self.lock = threading.Lock()
+        self.robot_mode = D.ROBOT_RUNNING
+        self.safety_mode = D.SAFETY_NORMAL
+        self.runtime = D.RUNTIME_PLAYING
+        self.program = "ftc-scenario.urp"
+        self.digital_out = 0  # standard bits 0-7, configurable 8-15, tool 16-17
+        self.analog_out = [0.0, 0.0]
+        self.analog_types = 0
+        self.speed_fraction = 1.0
+        self.input_int = [0] * 48
+        self.input_double = [0.0] * 48
+        self.input_bits = 0  # input bit registers 0..127
+        self.external_wrench = [0.0] * 6
+        self.halts = 0
+
+    def halt(self) -> None:
+        self.halts += 1
+        self.world.send(Command(self.source, "stop"))
+
+    # -- RTDE views ----------------------------------------------------------------------------------------
+    @property
+    def robot_status_bits(self) -> int:
+        powered = self.robot_mode in (4, D.ROBOT_IDLE, D.ROBOT_RUNNING)
+        return int(powered) | (int(self.runtime == D.RUNTIME_PLAYING) << 1)
+
+    @property
+    def safety_status_bits(self) -> int:
+        return 1 if self.safety_mode == D.SAFETY_NORMAL else 1 << 10
+
+    @property
+    def joint_mode(self) -> int:
+        return {D.ROBOT_POWER_OFF: D.JOINT_POWER_OFF, D.ROBOT_IDLE: D.JOINT_IDLE}.get(self.robot_mode, D.JOINT_RUNNING)
+
+    def apply_input(self, values: dict[str, Any]) -> None:
+        with self.lock:
+            def masked(name: str, shift: int) -> None:
+                mask = values.get(f"{name}_mask")
+                if mask is not None and name in values:
+                    self.digital_out = (self.digital_out & ~(mask << shift)) | ((values[name] & mask) << shift)
+            masked("standard_digital_output", 0)
+            masked("configurable_digital_output", 8)
+            masked("tool_digital_output", 16)
+            if values.get("speed_slider_mask", 0) & 1 and "speed_slider_fraction" in values:
+                self.speed_fraction = min(max(float(values["speed_slider_fraction"]), 0.0), 1.0)
+            amask = values.get("standard_analog_output_mask", 0)
+            for k in (0, 1):
+                if amask & (1 << k) and f"standard_analog_output_{k}" in values:
+                    self.analog_out[k] = float(values[f"standard_analog_output_{k}"])
+                    kind = values.get("standard_analog_output_type", 0) >> k & 1
+                    self.analog_types = (self.analog_types & ~(1 << (k + 2))) | (kind << (k + 2))
+            for name, v in values.items():
+                if name.startswith("input_int_register_"):
+                    self.input_int[int(name.rsplit("_", 1)[1])] = int(v)
+                elif name.startswith("input_double_register_"):
+                    self.input_double[int(name.rsplit("_", 1)[1])] = float(v)
+                elif name.startswith("input_bit_register_"):
+                    bit = int(name.rsplit("_", 1)[1])
+                    self.input_bits = (self.input_bits & ~(1 << bit)) | (int(bool(v)) << bit)
+                elif name == "input_bit_registers0_to_31":
+                    self.input_bits = (self.input_bits & ~0xFFFFFFFF) | int(v)
+                elif name == "input_bit_registers32_to_63":
+                    self.input_bits = (self.input_bits & ~(0xFFFFFFFF << 32)) | (int(v) << 32)
+                elif name == "external_force_torque":
+                    self.external_wrench = list(v)
+
+    # -- dashboard ------------------------------------------------------------------------------------------
+    def dashboard(self, line: str) -> str:
+        cmd = line.strip()
+        low = cmd.lower()
+        with self.lock:
+            return self._dashboard(cmd, low)
+
+    def _dashboard(self, cmd: str, low: str) -> str:
+        modes = D.ROBOT_MODES
+        if low == "power on":
+            if self.robot_mode == D.ROBOT_POWER_OFF:
+                self.robot_mode = D.ROBOT_IDLE
+            return "Powering on"
+        if low == "power off":
+            if self.robot_mode != D.ROBOT_POWER_OFF:
+                self.robot_mode = D.ROBOT_POWER_OFF
+                self.runtime = D.RUNTIME_STOPPED
+                self.halt()  # the brakes hold the arm
+            return "Powering off"
+        if low == "brake release":
+            if self.robot_mode == D.ROBOT_IDLE:
+                self.robot_mode = D.ROBOT_RUNNING
+            return "Brake releasing"
+        if low == "play":
+            if self.robot_mode != D.ROBOT_RUNNING or self.safety_mode != D.SAFETY_NORMAL:
+                return "Failed to execute: play"
+            self.runtime = D.RUNTIME_PLAYING
+            return "Starting program"
+        if low == "pause":
+            if self.runtime != D.RUNTIME_PLAYING:
+                return "Failed to execute: pause"
+            self.runtime = D.RUNTIME_PAUSED
+            self.halt()
+            return "Pausing program"
+        if low == "stop":
+            if self.runtime == D.RUNTIME_STOPPED:
+                return "Failed to execute: stop"
+            self.runtime = D.RUNTIME_STOPPED
+            self.halt()
+            return "Stopped"
+        if low == "robotmode":
+            return f"Robotmode: {modes[self.robot_mode]}"
+        if low == "safetymode":
+            return f"Safetymode: {D.SAFETY_MODES[self.safety_mode]}"
+        if low == "safetystatus":
+            return f"Safetystatus: {D.SAFETY_MODES[self.safety_mode]}"
+        if low == "polyscopeversion":
+            return "URSoftware {}.{}.{}.{} (emulated)".format(*self.version)
+        if low == "get serial number":
+            return self.serial
+        if low == "get robot model":
+            return self.model
+        if low == "running":
+            return f"Program running: {str(self.runtime == D.RUNTIME_PLAYING).lower()}"
+        if low == "programstate":
+            return f"{D.RUNTIME_NAMES.get(self.runtime, 'STOPPED')} {self.program}"
+        if low.startswith("load "):
+            self.program = cmd[5:].strip().rsplit("/", 1)[-1]
+            return f"Loading program: {cmd[5:].strip()}"
+        if low == "get loaded program":
+            return f"Loaded program: /programs/{self.program}"
+        if low == "isprogramsaved":
+            return f"true {self.program}"
+        if low == "is in remote control":
+            return "true"
+        if low == "unlock protective stop":
+            return "Protective stop releasing"
+        if low == "close safety popup":
+            return "closing safety popup"
+        if low == "close popup":
+            return "closing popup"
+        if low.startswith("popup "):
+            return "showing popup"
+        if low.startswith("addtolog "):
+            return "Added log message"
+        if low == "quit":
+            return "Disconnected"
+        return f"could not understand: '{cmd}'"
+
+
+# -- one stream sample and the value of every output variable ----------------------------------------------
+class Tick:
+    def __init__(self, rec: np.ndarray, n: int, ctl: Controller, kin: URKinematics | None,
+                 temperatures: np.ndarray, exec_ms: float) -> None:
+        self.t = float(rec[0])
+        self.q, self.qd, self.qdd = rec[1:1 + n], rec[1 + n:1 + 2 * n], rec[1 + 2 * n:1 + 3 * n]
+        self.current, self.tau = rec[1 + 3 * n:1 + 4 * n], rec[1 + 4 * n:1 + 5 * n]
+        self.ctl, self.kin, self.temperatures, self.exec_ms = ctl, kin, temperatures, exec_ms
+
+    @cached_property
+    def _kin(self) -> URKinematics:
+        if self.kin is None:
+            raise RuntimeError("no kinematics")
+        self.kin.update(self.q, self.qd, self.qdd)
+        return self.kin
+
+    @cached_property
+    def tcp_pose(self) -> np.ndarray:
+        return self._kin.tcp_pose()
+
+    @cached_property
+    def tcp_speed(self) -> np.ndarray:
+        return self._kin.tcp_speed(self.qd)
+
+    @cached_property
+    def tcp_force(self) -> np.ndarray:
+        return self._kin.tcp_wrench(self.qd, self.tau)
+
+    @cached_property
+    def ft_raw(self) -> np.ndarray:
+        r = self._kin.tcp_rotation()
+        return np.concatenate([r.T @ self.tcp_force[:3], r.T @ self.tcp_force[3:]])
+
+    @cached_property
+    def elbow(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._kin.elbow()
+
+
+def _powered(c: Controller) -> bool:
+    return c.robot_mode != D.ROBOT_POWER_OFF
+
+
+_Z3, _Z6 = (0.0,) * 3, (0.0,) * 6
+VALUES: dict[str, Any] = {
+    "timestamp": lambda k: k.t,
+    "target_q": lambda k: k.q, "target_qd": lambda k: k.qd, "target_qdd": lambda k: k.qdd,
+    "target_current": lambda k: k.current, "target_moment": lambda k: k.tau,
+    "actual_q": lambda k: k.q, "actual_qd": lambda k: k.qd, "actual_current": lambda k: k.current,
+    "actual_current_window": lambda k: _Z6, "actual_current_as_torque": lambda k: k.tau,
+    "joint_control_output": lambda k: k.current,
+    "actual_TCP_pose": lambda k: k.tcp_pose, "target_TCP_pose": lambda k: k.tcp_pose,
+    "actual_TCP_speed": lambda k: k.tcp_speed, "target_TCP_speed": lambda k: k.tcp_speed,
+    "actual_TCP_force": lambda k: k.tcp_force, "tcp_force_scalar": lambda k: float(np.linalg.norm(k.tcp_force[:3])),
+    "ft_raw_wrench": lambda k: k.ft_raw,
+    "actual_digital_input_bits": lambda k: 0, "joint_temperatures": lambda k: k.temperatures,
+    "actual_execution_time": lambda k: k.exec_ms,
+    "robot_mode": lambda k: k.ctl.robot_mode, "joint_mode": lambda k: (k.ctl.joint_mode,) * 6,
+    "safety_mode": lambda k: k.ctl.safety_mode, "safety_status": lambda k: k.ctl.safety_mode,
+    "actual_tool_accelerometer": lambda k: k._kin.accelerometer(),
+    "speed_scaling": lambda k: k.ctl.speed_fraction, "target_speed_fraction": lambda k: k.ctl.speed_fraction,
+    "actual_momentum": lambda k: 0.0, "actual_main_voltage": lambda k: 48.0,
+    "actual_robot_voltage": lambda k: 48.0 if _powered(k.ctl) else 0.0,
+    "actual_robot_current": lambda k: 0.3 + float(np.abs(k.tau * k.qd).sum()) / 48.0 if _powered(k.ctl) else 0.0,
+    "actual_joint_voltage": lambda k: (48.0 if _powered(k.ctl) else 0.0,) * 6,
+    "actual_digital_output_bits": lambda k: k.ctl.digital_out, "runtime_state": lambda k: k.ctl.runtime,
+    "elbow_position": lambda k: k.elbow[0], "elbow_velocity": lambda k: k.elbow[1],
+    "robot_status_bits": lambda k: k.ctl.robot_status_bits, "safety_status_bits": lambda k: k.ctl.safety_status_bits,
+    "analog_io_types": lambda k: k.ctl.analog_types,
+    "standard_analog_input0": lambda k: 0.0, "standard_analog_input1": lambda k: 0.0,
+    "standard_analog_output0": lambda k: k.ctl.analog_out[0], "standard_analog_output1": lambda k: k.ctl.analog_out[1],
+    "io_current": lambda k: 0.0, "euromap67_input_bits": lambda k: 0, "euromap67_output_bits": lambda k: 0,
+    "euromap67_24V_voltage": lambda k: 0.0, "euromap67_24V_current": lambda k: 0.0,
+    "tool_mode": lambda k: 0, "tool_analog_input_types": lambda k: 0, "tool_analog_input0": lambda k: 0.0,
+    "tool_analog_input1": lambda k: 0.0, "tool_output_voltage": lambda k: 0, "tool_output_current": lambda k: 0.0,
+    "tool_temperature": lambda k: float(k.temperatures[-1]),
+    "output_bit_registers0_to_31": lambda k: 0, "output_bit_registers32_to_63": lambda k: 0,
+    "input_bit_registers0_to_31": lambda k: k.ctl.input_bits & 0xFFFFFFFF,
+    "input_bit_registers32_to_63": lambda k: (k.ctl.input_bits >> 32) & 0xFFFFFFFF,
+    "tool_output_mode": lambda k: 0, "tool_digital_output0_mode": lambda k: 0, "tool_digital_output1_mode": lambda k: 0,
+    "payload": lambda k: 0.0, "payload_cog": lambda k: _Z3, "payload_inertia": lambda k: _Z6,
+    "script_control_line": lambda k: 0,
+    "joint_position_deviation_ratio": lambda k: 0.0, "collision_detection_ratio": lambda k: 0.0,
+}
+for _k in range(48):
+    VALUES[f"output_int_register_{_k}"] = lambda k: 0
+    VALUES[f"output_double_register_{_k}"] = lambda k: 0.0
+    VALUES[f"input_int_register_{_k}"] = lambda k, i=_k: k.ctl.input_int[i]
+    VALUES[f"input_double_register_{_k}"] = lambda k, i=_k: k.ctl.input_double[i]
+for _k in range(64, 128):
+    VALUES[f"output_bit_register_{_k}"] = lambda k: False
+    VALUES[f"input_bit_register_{_k}"] = lambda k, i=_k: bool(k.ctl.input_bits >> i & 1)
+assert set(VALUES) == set(D.OUTPUTS), set(VALUES) ^ set(D.OUTPUTS)
+
+
+def _format(types: list[str]) -> struct.Struct:
+    return struct.Struct(">B" + "".join(D.TYPES[t] for t in types))
+
+
+class OutputRecipe:
+    def __init__(self, rid: int, names: list[str], frequency: float) -> None:
+        self.id, self.names, self.frequency = rid, names, frequency
+        self.types = [D.OUTPUTS[n] for n in names]
+        self.vector = [t.startswith("VECTOR") for t in self.types]
+        self.getters = [VALUES[n] for n in names]
+        self.struct = _format(self.types)
+        self.last_k: int | None = None
+
+    def pack(self, tick: Tick) -> bytes:
+        vals: list[Any] = [self.id]
+        for get, vec in zip(self.getters, self.vector, strict=True):
+            v = get(tick)
+            if vec:
+                vals.extend(v)
+            else:
+                vals.append(v)
+        return self.struct.pack(*vals)
+
+
+class InputRecipe:
+    def __init__(self, rid: int, names: list[str]) -> None:
+        self.id, self.names = rid, names
+        self.types = [D.INPUTS[n] for n in names]
+        self.struct = _format(self.types)
+
+    def unpack(self, payload: bytes) -> dict[str, Any]:
+        flat = list(self.struct.unpack(payload))[1:]
+        out: dict[str, Any] = {}
+        for name, typ in zip(self.names, self.types, strict=True):
+            size = int(D.TYPES[typ][0]) if D.TYPES[typ][0].isdigit() else 1
+            out[name] = tuple(flat[:size]) if size > 1 else flat[0]
+            del flat[:size]
+        return out
+
+
+# -- RTDE connections ---------------------------------------------------------------------------------------
+class RtdeSession:
+    def __init__(self, server: RtdeServer, sock: socket.socket) -> None:
+        self.server, self.sock = server, sock
+        self.send_lock = threading.Lock()
+        self.outputs: dict[int, OutputRecipe] = {}
+        self.inputs: dict[int, InputRecipe] = {}
+        self.started = False
+        self.closed = False
+        self.counts = {"data_in": 0, "data_out": 0, "bad": 0}
+
+    def send(self, cmd: int, payload: bytes) -> None:
+        with self.send_lock:
+            self.sock.sendall(struct.pack(">HB", len(payload) + 3, cmd) + payload)
+
+    def text(self, message: str, level: int = 1) -> None:
+        m, s = message.encode()[:255], b"ftc-emulator"
+        self.send(D.TEXT_MESSAGE, bytes([len(m)]) + m + bytes([len(s)]) + s + bytes([level]))
+
+    def _recv(self, n: int) -> bytes:
+        buf = bytearray()
+        while len(buf) < n:
+            try:
+                chunk = self.sock.recv(n - len(buf))
+            except TimeoutError:
+                if self.closed:
+                    raise ConnectionError("closed") from None
+                continue
+            if not chunk:
+                raise ConnectionError("peer closed")
+            buf += chunk
+        return bytes(buf)
+
+    def run(self) -> None:
+        try:
+            while True:
+                size, cmd = struct.unpack(">HB", self._recv(3))
+                self.handle(cmd, self._recv(size - 3) if size > 3 else b"")
+        except (OSError, ConnectionError, struct.error):
+            pass
+        finally:
+            self.server.drop(self)
+
+    def handle(self, cmd: int, payload: bytes) -> None:
+        srv = self.server
+        if cmd == D.REQUEST_PROTOCOL_VERSION:
+            version = struct.unpack(">H", payload[:2])[0] if len(payload) >= 2 else 0
+            self.send(cmd, bytes([int(version == D.PROTOCOL_VERSION)]))
+        elif cmd == D.GET_URCONTROL_VERSION:
+            self.send(cmd, struct.pack(">IIII", *srv.controller.version))
+        elif cmd == D.SETUP_OUTPUTS:
+            frequency = struct.unpack(">d", payload[:8])[0] if len(payload) >= 8 else 0.0
+            names = [n for n in payload[8:].decode(errors="replace").split(",") if n]
+            types = [D.OUTPUTS.get(n, "NOT_FOUND") for n in names]
+            ok = bool(names) and "NOT_FOUND" not in types and 0.0 < frequency <= srv.max_rate
+            rid = 0
+            if ok:
+                rid = len(self.outputs) + 1
+                self.outputs[rid] = OutputRecipe(rid, names, frequency)
+            self.send(cmd, bytes([rid]) + ",".join(types).encode())  # id 0: refused
+        elif cmd == D.SETUP_INPUTS:
+            names = [n for n in payload.decode(errors="replace").split(",") if n]
+            types = [D.INPUTS.get(n, "NOT_FOUND") if not srv.input_taken(n, self) else "IN_USE" for n in names]
+            rid = 0
+            if names and "NOT_FOUND" not in types and "IN_USE" not in types:
+                rid = len(self.inputs) + 1
+                self.inputs[rid] = InputRecipe(rid, names)
+            self.send(cmd, bytes([rid]) + ",".join(types).encode())
+        elif cmd == D.START:
+            self.started = True
+            self.send(cmd, b"\x01")
+        elif cmd == D.PAUSE:
+            self.started = False
+            self.send(cmd, b"\x01")
+        elif cmd == D.DATA_PACKAGE:
+            recipe = self.inputs.get(payload[0]) if payload else None
+            if recipe is None or len(payload) != recipe.struct.size:
+                self.counts["bad"] += 1
+                self.text(f"data package for unknown input recipe or of wrong size ({len(payload)} bytes)", level=2)
+                return
+            self.counts["data_in"] += 1
+            srv.controller.apply_input(recipe.unpack(payload))
+        elif cmd == D.TEXT_MESSAGE:
+            return
+        else:
+            self.counts["bad"] += 1
+            self.text(f"unknown RTDE command {cmd}", level=2)
+
+    def stream(self, tick: Tick) -> None:
+        if not self.started:
+            return
+        for r in self.outputs.values():
+            k = math.floor(tick.t * r.frequency + 1e-6)
+            if r.last_k is None and abs(tick.t * r.frequency - k) > 1e-6:
+                r.last_k = k  # a slower recipe starts on its own grid
+            if r.last_k is not None and k <= r.last_k:
+                continue
+            r.last_k = k
+            self.send(D.DATA_PACKAGE, r.pack(tick))
+            self.counts["data_out"] += 1
+
+
+class _Listener:
+    """A listening TCP socket on a loopback address and an accept thread calling ``on_client``."""
+
+    def __init__(self, address: str, port: int, on_client: Any, name: str) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.sock.bind((address, port))
+        self.sock.listen(8)
+        self.on_client = on_client
+        threading.Thread(target=self._accept, name=name, daemon=True).start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self.on_client(conn)
+
+
+class RtdeServer:
+    def __init__(self, controller: Controller, address: str, port: int, max_rate: float) -> None:
+        self.controller, self.max_rate = controller, max_rate
+        self.sessions: list[RtdeSession] = []
+        self.lock = threading.Lock()
+        self.listener = _Listener(address, port, self._client, "rtde-accept")
+
+    def _client(self, conn: socket.socket) -> None:
+        conn.settimeout(0.2)  # bounds a send to a client that stopped reading
+        s = RtdeSession(self, conn)
+        with self.lock:
+            self.sessions.append(s)
+        threading.Thread(target=s.run, name="rtde-session", daemon=True).start()
+
+    def input_taken(self, name: str, me: RtdeSession) -> bool:
+        with self.lock:
+            return any(name in r.names for s in self.sessions if s is not me for r in s.inputs.values())
+
+    def drop(self, s: RtdeSession) -> None:
+        s.closed = True
+        with self.lock:
+            if s in self.sessions:
+                self.sessions.remove(s)
+        with contextlib.suppress(OSError):
+            s.sock.close()
+
+    def stream(self, tick: Tick) -> None:
+        with self.lock:
+            sessions = list(self.sessions)
+        for s in sessions:
+            try:
+                s.stream(tick)
+            except OSError:
+                self.drop(s)
+
+
+class DashboardServer:
+    def __init__(self, controller: Controller, address: str, port: int) -> None:
+        self.controller = controller
+        self.listener = _Listener(address, port, self._client, "dashboard-accept")
+
+    def _client(self, conn: socket.socket) -> None:
+        threading.Thread(target=self._serve, args=(conn,), name="dashboard", daemon=True).start()
+
+    def _serve(self, conn: socket.socket) -> None:
+        with conn, conn.makefile("rb") as lines:
+            try:
+                conn.sendall((D.DASHBOARD_WELCOME + "\n").encode())
+                for raw in lines:
+                    reply = self.controller.dashboard(raw.decode(errors="replace"))
+                    conn.sendall((reply + "\n").encode())
+                    if reply == "Disconnected":
+                        return
+            except OSError:
+                return
+
+
+# -- the emulator process ---------------------------------------------------------------------------------
+def check_loopback(address: str) -> str:
+    try:
+        ip = ipaddress.ip_address(address)
+    except ValueError:
+        raise ValueError(f"address {address!r} is not an IP address") from None
+    if not ip.is_loopback:
+        raise ValueError(f"refusing to bind {address}: the emulator binds loopback addresses only (127.0.0.x)")
+    return address
+
+
+class Emulator:
+    """Servers, controller state and the stream loop, for one UR device."""
+
+    def __init__(self, device: Any, scene: Any, link: Any, options: dict) -> None:
+        p = {**device.params, **{k: options[k] for k in ("controller_version", "frequency") if k in options}}
+        if scene.n_joints != 6:
+            raise ValueError(f"a UR arm has 6 joints; scene {scene.name!r} has {scene.n_joints}")
+        self.address = check_loopback(options.get("address") or device.address or "127.0.0.1")
+        self.version = parse_version(p.get("controller_version", "5.9"))
+        version_max = 500.0 if self.version[0] >= 5 else 125.0
+        self.rate = float(p.get("frequency", version_max))
+        if not 0.0 < self.rate <= version_max:
+            raise ValueError(f"frequency {self.rate:g} Hz: a {'e-Series' if version_max > 125 else 'CB3'} "
+                             f"controller streams at most {version_max:g} Hz")
+        self.side = EmulatorSide(link)
+        self.n = scene.n_joints
+        self.controller = Controller(self.version, self.side, device.name, str(p.get("serial", "20205500001")),
+                                     str(p.get("robot_model", "UR5")))
+        self.kin = URKinematics(scene)
+        self.thermal = ThermalModel(self.n, ambient_c=25.0, gain_c_per_a2=0.5, tau_s=900.0)
+        self.rtde_port = int(options.get("rtde_port", D.RTDE_PORT))
+        self.dashboard_port = int(options.get("dashboard_port", D.DASHBOARD_PORT))
+        self.rtde = RtdeServer(self.controller, self.address, self.rtde_port, self.rate)
+        self.dashboard = DashboardServer(self.controller, self.address, self.dashboard_port)
+
+    def endpoint(self, device: Any) -> dict[str, Any]:
+        return {"name": device.name, "kind": device.kind, "transport": "tcp", "endpoint": self.address,
+                "address": self.address, "rtde_port": self.rtde_port, "dashboard_port": self.dashboard_port,
+                "frequency": self.rate, "controller_version": ".".join(map(str, self.version))}
+
+    def run(self) -> None:
+        reader = self.side.joint_reader()
+        latest = reader.latest()  # start at the next grid point, never mid-period
+        last_k = math.floor(float(latest[0]) * self.rate + 1e-6) if latest is not None else None
+        exec_ms = 0.0
+        parent, next_check = os.getppid(), time.monotonic() + 1.0
+        while True:
+            if time.monotonic() > next_check:
+                next_check += 1.0
+                if os.getppid() != parent:  # the world's process is gone: so are we
+                    return
+            for rec in reader.new():
+                k = math.floor(rec[0] * self.rate + 1e-6)
+                if last_k is None and abs(rec[0] * self.rate - k) > 1e-6:
+                    last_k = k  # the first sample is off the grid: wait for the next grid point
+                if last_k is not None and k <= last_k:
+                    continue
+                last_k = k
+                t0 = time.perf_counter()
+                temps = self.thermal.update(float(rec[0]), rec[1 + 3 * self.n:1 + 4 * self.n])
+                self.rtde.stream(Tick(rec, self.n, self.controller, self.kin, temps, exec_ms))
+                exec_ms = (time.perf_counter() - t0) * 1e3
+            time.sleep(0.0005)
+
+
+def serve(device: Any, scene: Any, link: Any, ready: Any, options: dict) -> None:
+    """The emulator process: bind, report the endpoint on ``ready``, stream until terminated."""
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+    try:
+        emu = Emulator(device, scene, link, options)
+    except Exception as exc:  # noqa: BLE001 - reported to the parent
+        ready.put({"error": f"{type(exc).__name__}: {exc}"})
+        return
+    ready.put(emu.endpoint(device))
+    emu.run()
