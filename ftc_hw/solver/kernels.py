@@ -287,11 +287,6 @@ def project_s(kind, size, x0, x1, x2):
     return x0, x1, 0.0
 
 
-@njit(**JIT)
-def project_local(kind, size, x, out):
-    out[0], out[1], out[2] = project_s(kind, size, x[0], x[1], x[2])
-
-
 @njit(inline="always", **JIT)
 def _local_s(pos, mat, x0, x1, x2):
     """mat^T (x - pos) with mat row-major 3x3 as MuJoCo stores geom_xmat."""
@@ -382,6 +377,26 @@ def _chol_solve(L, b, x):
         for k in range(i + 1, n):
             acc -= L[k, i] * x[k]
         x[i] = acc / L[i, i]
+
+
+@njit(inline="always", **JIT)
+def _line_dist2(x, r0, u):
+    """Squared distance of x from the line r0 + s u (u unit)."""
+    d0, d1, d2 = x[0] - r0[0], x[1] - r0[1], x[2] - r0[2]
+    along = d0 * u[0] + d1 * u[1] + d2 * u[2]
+    return d0 * d0 + d1 * d1 + d2 * d2 - along * along
+
+
+@njit(**JIT)
+def _surface_near_line(kind, size, pos, mat, r0, u, point, normal):
+    """The surface point below the line's closest approach to the primitive's centre (and its
+    normal): where a line that misses comes nearest, up to the surface's curvature. Returns its
+    squared distance from the line."""
+    along = (pos[0] - r0[0]) * u[0] + (pos[1] - r0[1]) * u[1] + (pos[2] - r0[2]) * u[2]
+    for i in range(3):
+        point[i] = r0[i] + along * u[i]
+    _project_base(kind, size, pos, mat, point, point, normal)
+    return _line_dist2(point, r0, u)
 
 
 # -- Gauss-Newton on one primitive's surface --------------------------------------------------------------
@@ -640,11 +655,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         if not prim_touch[g]:
             continue
         # the line's distance to the primitive's centre against its bounding radius
-        for i in range(3):
-            tmp[i] = gpos[g, i] - r0[i]
-        along = _dot3(tmp, u)
-        b = sizes[g, 3]
-        if _dot3(tmp, tmp) - along * along > b * b:
+        if _line_dist2(gpos[g], r0, u) > sizes[g, 3] ** 2:
             continue
         _to_local(gpos[g], gmat[g], r0, o_loc)
         _dir_local(gmat[g], u, d_loc)
@@ -686,19 +697,10 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
                     crossed = True
             if crossed:
                 continue
-            for i in range(3):
-                tmp[i] = gpos[g, i] - r0[i]
-            along = _dot3(tmp, u)
             b = sizes[g, 3] + miss_tol
-            if _dot3(tmp, tmp) - along * along > b * b:
+            if _line_dist2(gpos[g], r0, u) > b * b:
                 continue
-            for i in range(3):
-                x[i] = r0[i] + along * u[i]
-            _project_base(kinds[g], sizes[g], gpos[g], gmat[g], x, x, nb)
-            for i in range(3):
-                tmp[i] = x[i] - r0[i]
-            off = _dot3(tmp, u)
-            miss2 = _dot3(tmp, tmp) - off * off
+            miss2 = _surface_near_line(kinds[g], sizes[g], gpos[g], gmat[g], r0, u, x, nb)
             cosn = _dot3(u, nb)
             # a clear push (or pull where allowed): a grazing near miss is no evidence of a touch there
             if miss2 >= miss_tol * miss_tol or abs(cosn) < grazing_cos or (cosn > 0.0 and not prim_pulls[g]):
@@ -710,10 +712,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
                 if prim_link[raw_prim[kk]] == prim_link[g]:
                     slot = kk
             if slot >= 0:
-                for i in range(3):
-                    tmp[i] = raw_point[slot, i] - r0[i]
-                o2 = _dot3(tmp, u)
-                if _dot3(tmp, tmp) - o2 * o2 <= miss2:
+                if _line_dist2(raw_point[slot], r0, u) <= miss2:
                     continue
             elif n_raw < max_cand:
                 slot = n_raw
@@ -731,17 +730,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         for g in range(n_prim):
             if not prim_touch[g]:
                 continue
-            # the point on the line closest to the primitive's centre, projected on its surface
-            for i in range(3):
-                x[i] = gpos[g][i] - r0[i]
-            sc = _dot3(x, u)
-            for i in range(3):
-                x[i] = r0[i] + sc * u[i]
-            _project_base(kinds[g], sizes[g], gpos[g], gmat[g], x, nb, n_loc)
-            for i in range(3):
-                x[i] = nb[i] - r0[i]
-            along = _dot3(x, u)
-            dist2 = _dot3(x, x) - along * along
+            dist2 = _surface_near_line(kinds[g], sizes[g], gpos[g], gmat[g], r0, u, nb, n_loc)
             if dist2 < best:
                 best = dist2
                 raw_prim[0] = g
