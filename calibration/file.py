@@ -1,0 +1,193 @@
+"""The calibration file: TOML with a schema version, the sensor's serial, the scene, the date, the
+parameters with their standard errors, the fit's figures and the pose set.
+
+``load_calibration(path, scene=..., sensor_serial=...)`` checks it against the setup it is meant for
+and raises :class:`CalibrationError` (with the file and the key) on anything wrong: schema, scene,
+sensor serial, missing or malformed values. ``cal.pipeline_kwargs()`` gives ``ContactPipeline`` /
+``Compensator`` their ``bias`` and ``payload``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+
+from ftc_hw.model import Payload
+from ftc_hw.scene import Scene
+
+SCHEMA = 1
+KIND = "ftc-hw calibration"
+
+
+class CalibrationError(Exception):
+    """A calibration file that cannot be used: malformed, another schema, scene or sensor."""
+
+
+@dataclass
+class Calibration:
+    scene: str
+    sensor_serial: str | None
+    date: str  # ISO 8601, UTC
+    bias: np.ndarray  # [fx, fy, fz, tx, ty, tz] N, N m: what the sensor reads with nothing on it
+    payload: Payload | None  # mass kg, com m in the flange frame
+    std: dict[str, Any] = field(default_factory=dict)  # 1-sigma: force_bias, torque_bias, mass, com, ...
+    verdict: str = "good"
+    reasons: list[str] = field(default_factory=list)
+    poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (N, n) rad
+    samples_per_pose: int = 0
+    extras: dict[str, Any] = field(default_factory=dict)  # mount_yaw, gravity_tilt_*, arm_gravity_*
+    fit: dict[str, Any] = field(default_factory=dict)  # residual_rms, condition_number, chi2, dof
+    rezero: list[dict[str, Any]] = field(default_factory=list)  # {date, bias}: re-zero history
+
+    def pipeline_kwargs(self) -> dict[str, Any]:
+        """``ContactPipeline(scene, **cal.pipeline_kwargs())``."""
+        return {"bias": self.bias.copy(), "payload": self.payload}
+
+    def with_bias(self, bias, when: str | None = None) -> Calibration:
+        """A copy with a new bias (a re-zero), the old one kept in the history."""
+        when = when or now_iso()
+        history = [*self.rezero, {"date": when, "bias": [float(x) for x in bias]}]
+        return dataclasses.replace(self, bias=np.asarray(bias, dtype=float).copy(), rezero=history)
+
+    def to_dict(self) -> dict[str, Any]:
+        params: dict[str, Any] = {"force_bias_N": _floats(self.bias[:3]), "torque_bias_Nm": _floats(self.bias[3:])}
+        if self.payload is not None:
+            params["mass_kg"] = float(self.payload.mass)
+            params["com_m"] = _floats(self.payload.com)
+        else:
+            params["mass_kg"] = 0.0
+        params.update({k: _clean(v) for k, v in self.extras.items()})
+        out: dict[str, Any] = {
+            "schema": SCHEMA, "kind": KIND, "scene": self.scene, "sensor_serial": self.sensor_serial or "",
+            "date": self.date, "verdict": self.verdict, "reasons": list(self.reasons),
+            "parameters": params, "uncertainty": {k: _clean(v) for k, v in self.std.items() if v is not None},
+            "fit": {k: _clean(v) for k, v in self.fit.items()},
+            "poses": {"q_rad": [_floats(q) for q in self.poses], "samples_per_pose": int(self.samples_per_pose)},
+        }
+        if self.rezero:
+            out["rezero"] = [{"date": r["date"], "bias": _floats(r["bias"])} for r in self.rezero]
+        return out
+
+
+def now_iso() -> str:
+    return dt.datetime.now(dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+
+
+def _floats(v) -> list[float]:
+    return [float(x) for x in np.asarray(v, dtype=float).ravel()]
+
+
+def _clean(v: Any) -> Any:
+    """TOML has no null and no inf: drop None, write non-finite numbers as the string "inf"."""
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items() if x is not None}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_clean(x) for x in (v.tolist() if isinstance(v, np.ndarray) else v)]
+    if isinstance(v, (float, np.floating)):
+        return float(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf" if v < 0 else "nan")
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def save_calibration(cal: Calibration, path: str | Path) -> Path:
+    path = Path(path)
+    path.write_text(tomli_w.dumps(cal.to_dict()))
+    return path
+
+
+def _get(data: dict, key: str, kind: type | tuple[type, ...], where: str) -> Any:
+    if key not in data:
+        raise CalibrationError(f"{where}: {key}: missing")
+    v = data[key]
+    if not isinstance(v, kind) or isinstance(v, bool) and kind is not bool:
+        raise CalibrationError(f"{where}: {key}: expected {getattr(kind, '__name__', kind)}, got {v!r}")
+    return v
+
+
+def _vec(data: dict, key: str, n: int, where: str) -> np.ndarray:
+    v = _get(data, key, list, where)
+    try:
+        a = np.array(v, dtype=float)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{where}: {key}: expected {n} numbers, got {v!r}") from None
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise CalibrationError(f"{where}: {key}: expected {n} finite numbers, got {v!r}")
+    return a
+
+
+def load_calibration(path: str | Path, scene: Scene | str | None = None,
+                     sensor_serial: str | None = None) -> Calibration:
+    """Read and check a calibration file. ``scene`` (a Scene or its name) and ``sensor_serial``: what
+    it must have been made for (None: not checked). A file without a serial (the sensor reports none)
+    passes any serial; a file with one must match the given serial exactly."""
+    path = Path(path)
+    where = path.name
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise CalibrationError(f"{where}: cannot read: {exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise CalibrationError(f"{where}: not valid TOML: {exc}") from exc
+    schema = _get(data, "schema", int, where)
+    if schema != SCHEMA:
+        raise CalibrationError(f"{where}: schema: this version reads schema {SCHEMA}, the file has {schema}")
+    if data.get("kind", KIND) != KIND:
+        raise CalibrationError(f"{where}: kind: expected {KIND!r}, got {data.get('kind')!r}")
+    scene_name = _get(data, "scene", str, where)
+    if scene is not None:
+        want = scene if isinstance(scene, str) else scene.name
+        if want != scene_name:
+            raise CalibrationError(f"{where}: scene: made for scene {scene_name!r}, not {want!r}")
+    serial = str(data.get("sensor_serial", "")) or None
+    if sensor_serial is not None and serial is not None and str(sensor_serial) != serial:
+        raise CalibrationError(f"{where}: sensor_serial: made for sensor {serial!r}, but the connected sensor is "
+                               f"{sensor_serial!r}: calibrate this sensor (ftc calibrate)")
+    params = _get(data, "parameters", dict, where)
+    pw = f"{where}: parameters"
+    bias = np.concatenate([_vec(params, "force_bias_N", 3, pw), _vec(params, "torque_bias_Nm", 3, pw)])
+    mass = float(_get(params, "mass_kg", (int, float), pw))
+    payload = None
+    if mass > 0:
+        com = _vec(params, "com_m", 3, pw)
+        payload = Payload(mass, (float(com[0]), float(com[1]), float(com[2])))
+    elif mass < 0 or not math.isfinite(mass):
+        raise CalibrationError(f"{pw}: mass_kg: expected a mass >= 0 kg, got {mass}")
+    extras = {k: v for k, v in params.items() if k not in ("force_bias_N", "torque_bias_Nm", "mass_kg", "com_m")}
+    poses = data.get("poses", {})
+    try:
+        q = np.array(poses.get("q_rad", []), dtype=float)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{where}: poses: q_rad: expected a list of joint vectors") from None
+    return Calibration(scene=scene_name, sensor_serial=serial, date=str(data.get("date", "")), bias=bias,
+                       payload=payload, std=dict(data.get("uncertainty", {})), verdict=str(data.get("verdict", "")),
+                       reasons=list(data.get("reasons", [])), poses=q,
+                       samples_per_pose=int(poses.get("samples_per_pose", 0)), extras=extras,
+                       fit=dict(data.get("fit", {})), rezero=list(data.get("rezero", [])))
+
+
+def calibration_from_fit(fit, scene: Scene, sensor_serial: str | None, poses: np.ndarray,
+                         samples_per_pose: int) -> Calibration:
+    """A Calibration from :class:`calibration.identify.Fit`. No payload when the fit found none."""
+    d, s = fit.derived, fit.derived_std
+    payload = None
+    if d.get("com") is not None and fit.mass > 0:
+        c = d["com"]
+        payload = Payload(float(fit.mass), (float(c[0]), float(c[1]), float(c[2])))
+    extras = {k: float(d[k]) for k in fit.names[10:]}
+    std = {"force_bias_N": s["force_bias"], "torque_bias_Nm": s["torque_bias"], "mass_kg": s["mass"]}
+    if s.get("com") is not None:
+        std["com_m"] = s["com"]
+    std.update({k: s[k] for k in fit.names[10:]})
+    figures = {"residual_rms": fit.residual_rms.tolist(), "condition_number": fit.condition_number,
+               "chi2": fit.chi2, "dof": fit.dof, "parameters": list(fit.names), "covariance": fit.cov.tolist()}
+    return Calibration(scene=scene.name, sensor_serial=sensor_serial, date=now_iso(), bias=fit.bias, payload=payload,
+                       std=std, verdict=fit.verdict, reasons=list(fit.reasons), poses=np.asarray(poses, dtype=float),
+                       samples_per_pose=int(samples_per_pose), extras=extras, fit=figures)

@@ -1,0 +1,225 @@
+"""The devices a calibration talks to: the scene's F/T sensor and arm adapters on a bus, real or
+emulated (``sim=True``: the world in its own process with one emulator process per device, and an
+optional payload the clients are not told about).
+
+How the arm gets to a pose depends on what its protocol can do:
+- DYNAMIXEL: Goal Position, streamed along a minimum-jerk path (the servos run without profiles).
+- UR (RTDE receive only: no motion commands): a person jogs it there; with ``sim=True`` the world's
+  joint targets are set directly through the world process (:meth:`WorldProcess.goal`), which the
+  wizard says on screen.
+"""
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ftc_hw.bus import Bus, joints_topic, wrench_topic
+from ftc_hw.model import Payload
+from ftc_hw.scene import DeviceSpec, Scene
+
+from .samples import PoseSample
+
+FT_KINDS = ("ft300", "modbus-ft", "ft-serial-stream", "ft-can")
+ARM_KINDS = ("dynamixel", "ur-rtde")
+
+
+class SessionError(RuntimeError):
+    pass
+
+
+@dataclass
+class Window:
+    """Raw samples over one collection window."""
+
+    wrench: np.ndarray  # (N, 6)
+    t: np.ndarray  # (N,) host s
+    q: np.ndarray  # (k, n)
+    qd: np.ndarray  # (k, n)
+    sim_t: tuple[float, float] | None = None  # world time at the start and end (sim only)
+    duration: float = 0.0
+
+    def gap(self, rate_hz: float) -> str | None:
+        """Why the window is not a complete record (a device dropped out and is reconnecting), or None."""
+        expected = self.duration * rate_hz
+        if len(self.q) == 0 or len(self.wrench) < 0.8 * expected:
+            return (f"data interrupted ({len(self.wrench)} of ~{expected:.0f} F/T frames, {len(self.q)} joint "
+                    "frames): waiting for the devices")
+        return None
+
+    def sample(self) -> PoseSample:
+        return PoseSample.from_arrays(self.q, self.wrench, self.qd, self.t)
+
+
+def _device(scene: Scene, kinds: tuple[str, ...], what: str) -> DeviceSpec:
+    for d in scene.devices:
+        if d.kind in kinds:
+            return d
+    raise SessionError(f"scene {scene.name!r} declares no {what} device (kinds {', '.join(kinds)})")
+
+
+class DeviceSession:
+    def __init__(self, scene: Scene, *, sim: bool = False, sim_payload: Payload | None = None, seed: int = 0,
+                 noise: bool = True) -> None:
+        self.scene = scene
+        self.sim = sim
+        self.sim_payload = sim_payload
+        self.seed = seed
+        self.noise = noise
+        self.ft_spec = _device(scene, FT_KINDS, "F/T sensor")
+        self.arm_spec = _device(scene, ARM_KINDS, "arm")
+        self.bus = Bus()
+        self.world = None
+        self.ft = None
+        self.arm = None
+        self._wrench = None
+        self._joints = None
+        self.goal_retries = 0  # goals sent again after the arm's link dropped
+
+    # -- lifecycle ---------------------------------------------------------------------------------------
+    def start(self, timeout: float = 20.0) -> None:
+        from devices.arm_registry import make_arm_adapter
+        from devices.registry import make_adapter
+
+        endpoints: dict[str, dict] = {}
+        if self.sim:
+            from sim_devices.world_process import WorldProcess
+
+            self.world = WorldProcess(self.scene, "hold", devices=[self.ft_spec.name, self.arm_spec.name],
+                                      seed=self.seed, noise=self.noise, payload=self.sim_payload)
+            self.world.start()
+            endpoints = {e["name"]: e for e in self.world.endpoints if "name" in e}
+        try:
+            self._wrench = self.bus.subscribe(wrench_topic(self.ft_spec.name), maxsize=200_000)
+            self._joints = self.bus.subscribe(joints_topic(self.arm_spec.name), maxsize=200_000)
+            self.ft = make_adapter(self.ft_spec, self.bus, endpoints.get(self.ft_spec.name), scene=self.scene)
+            self.arm = make_arm_adapter(self.arm_spec, self.bus, endpoints.get(self.arm_spec.name), scene=self.scene)
+            self.ft.open()
+            self.arm.open()
+            for a in (self.ft, self.arm):
+                if not a.wait_connected(timeout):
+                    raise SessionError(f"no connection to {a.describe()} within {timeout:g} s")
+            end = time.monotonic() + timeout
+            while (self.bus.latest(self.ft.topic) is None or self.bus.latest(self.arm.topic) is None) \
+                    and time.monotonic() < end:
+                time.sleep(0.02)
+            if self.bus.latest(self.ft.topic) is None or self.bus.latest(self.arm.topic) is None:
+                raise SessionError("connected, but no F/T or joint data arrives")
+        except Exception:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        for a in (self.arm, self.ft):
+            if a is not None:
+                with contextlib.suppress(Exception):  # closing everything else matters more
+                    a.close()
+        self.arm = self.ft = None
+        if self.world is not None:
+            self.world.close()
+            self.world = None
+
+    def __enter__(self) -> DeviceSession:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- state ---------------------------------------------------------------------------------------------
+    @property
+    def sensor_serial(self) -> str | None:
+        ident = getattr(self.ft, "identity", {}) or {}
+        return ident.get("serial") or None
+
+    @property
+    def can_command(self) -> bool:
+        """True when the wizard can move the arm itself (DYNAMIXEL; UR only in simulation)."""
+        return self.arm_spec.kind == "dynamixel" or self.sim
+
+    @property
+    def q_resolution(self) -> float:
+        """Joint encoder resolution (rad): DYNAMIXEL ticks; UR reports doubles (taken as 1e-5 rad)."""
+        model = getattr(self.arm, "model", None)
+        return float(getattr(model, "rad_per_tick", 1e-5))
+
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        f = self.bus.latest(self.arm.topic)
+        return np.array(f.q), np.array(f.qd)
+
+    def truth_bias(self, t_sim: float) -> np.ndarray:
+        s = self.scene.sensor
+        return np.asarray(s.bias, dtype=float) + np.asarray(s.drift_per_s, dtype=float) * t_sim
+
+    # -- motion --------------------------------------------------------------------------------------------
+    def torque_on(self) -> None:
+        if self.arm_spec.kind == "dynamixel":
+            self.arm.set_torque(True)
+
+    def move_to(self, q_goal: np.ndarray, speed: float = 0.6, rate_hz: float = 50.0,
+                progress: Callable[[float], None] | None = None) -> None:
+        """Move along a minimum-jerk path at about ``speed`` rad/s on the joint that moves most."""
+        if not self.can_command:
+            raise SessionError("this arm cannot be commanded: jog it to the pose")
+        q0, _ = self.joint_state()
+        q_goal = np.asarray(q_goal, dtype=float)
+        duration = max(1.0, 1.875 * float(np.abs(q_goal - q0).max()) / speed)  # peak speed of min-jerk
+        t0 = time.monotonic()
+        while True:
+            s = min(1.0, (time.monotonic() - t0) / duration)
+            blend = 10 * s**3 - 15 * s**4 + 6 * s**5
+            self._send_goal(q0 + blend * (q_goal - q0))
+            if progress is not None:
+                progress(s)
+            if s >= 1.0:
+                break
+            time.sleep(1.0 / rate_hz)
+
+    def _send_goal(self, q: np.ndarray, timeout: float = 5.0) -> None:
+        """One goal; if the adapter's link drops meanwhile (it reconnects by itself), wait for it and
+        send again. The adapter's reader may close the port under a concurrent write, which the SDK
+        reports with whatever its serial call raises, hence the broad except."""
+        if self.arm_spec.kind != "dynamixel":
+            self.world.goal(q)
+            return
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                self.arm.set_goal(q)
+                return
+            except Exception as exc:  # noqa: BLE001 - see above; a persistent failure is raised
+                self.goal_retries += 1
+                if time.monotonic() > end:
+                    raise SessionError(f"cannot send goal positions to {self.arm.describe()}: {exc}") from exc
+                self.arm.wait_connected(max(0.0, end - time.monotonic()))
+                time.sleep(0.05)
+
+    # -- sampling ------------------------------------------------------------------------------------------
+    def flush(self) -> None:
+        self._wrench.drain()
+        self._joints.drain()
+
+    def collect(self, duration: float, progress: Callable[[float], None] | None = None) -> Window:
+        """Every F/T and joint frame over the next ``duration`` s."""
+        self.flush()
+        sim0 = self.world.sim_time() if self.world is not None else None
+        t0 = time.monotonic()
+        ws: list = []
+        js: list = []
+        while time.monotonic() - t0 < duration:
+            time.sleep(0.02)
+            ws += self._wrench.drain()
+            js += self._joints.drain()
+            if progress is not None:
+                progress(min(1.0, (time.monotonic() - t0) / duration))
+        ws += self._wrench.drain()
+        js += self._joints.drain()
+        sim1 = self.world.sim_time() if self.world is not None else None
+        n = self.scene.n_joints
+        return Window(wrench=np.array([f.wrench for f in ws]).reshape(-1, 6),
+                      t=np.array([f.t_host_ns for f in ws], dtype=float) / 1e9,
+                      q=np.array([f.q for f in js]).reshape(-1, n), qd=np.array([f.qd for f in js]).reshape(-1, n),
+                      sim_t=None if sim0 is None else (sim0, sim1), duration=duration)
