@@ -83,6 +83,7 @@ class Adapter(ABC):
             try:
                 self._connect()
             except Exception as exc:  # noqa: BLE001 - any failure to connect is retried
+                self._safe_disconnect()  # a half-open transport would hold the port (exclusive lock) for good
                 self.counters["connect_failures"] += 1
                 self.event("reconnecting", f"connect failed ({exc}); retry in {backoff:.2f} s")
                 if self._stop.wait(backoff):
@@ -96,9 +97,11 @@ class Adapter(ABC):
                 while not self._stop.is_set():
                     self._read_once()
             except DeviceIOError as exc:
+                self.connected.clear()  # before the event: whoever sees it sees the adapter disconnected
                 self.counters["disconnects"] += 1
                 self.event("disconnect", str(exc))
             except Exception as exc:  # noqa: BLE001 - the reader never dies silently
+                self.connected.clear()
                 self.counters["errors"] += 1
                 self.event("error", f"{type(exc).__name__}: {exc}")
             finally:

@@ -22,11 +22,16 @@ broken and reopened with backoff (the base class). Hardware Error Status is poll
 ``stop()``, the monitor's reflex: a Sync Write of Goal Position := Present Position (the cyclic
 read's, or a fresh one when that is older than two cycles) to every servo -- the servos hold where
 they are, torque stays on (a torque-off "stop" would let the arm fall). One bus transaction, and the
-servos answer none: well under one cycle.
+servos answer none; it waits only for a transaction the reader has in flight (a half-duplex bus).
+
+The reader sleeps on the port until the answer arrives (``select``) instead of letting
+dynamixel_sdk's rxPacket poll the non-blocking port in a busy loop: the spinning took the CPU the
+answer (and, on a loaded host, the stop) needed.
 """
 from __future__ import annotations
 
 import contextlib
+import select
 import threading
 import time
 from collections.abc import Iterator, Sequence
@@ -40,6 +45,13 @@ from ftc_hw.bus import Bus, JointFrame, joints_topic
 
 from .base import Adapter, DeviceError, DeviceIOError
 from .dxl_table import MODELS, PRESENT_LENGTH, PRESENT_START
+
+try:
+    import termios
+
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (OSError, serial.SerialException, termios.error)
+except ImportError:  # Windows: pyserial raises SerialException / OSError only
+    _PORT_ERRORS = (OSError, serial.SerialException)
 
 _HW_ERROR_NAMES = {1: "input voltage", 4: "overheating", 8: "motor encoder", 16: "electrical shock", 32: "overload"}
 
@@ -78,6 +90,7 @@ class DynamixelArm(Adapter):
         self.topic = joints_topic(name)
         self.hardware_errors: dict[int, int] = {}
         self.latest_ticks: np.ndarray | None = None
+        self.stop_position_age_s: float | None = None
         self._port: Any = None
         self._ph: Any = None
         self._io = threading.RLock()  # one bus transaction at a time (the reader, stop(), commands)
@@ -122,7 +135,11 @@ class DynamixelArm(Adapter):
         self._port, self._ph = port, ph
         with self._io:
             for i in self.ids:
-                number, res, _ = self._guard(ph.ping, port, i)
+                for _ in range(3):  # a device that is just starting answers soon: not worth a backoff
+                    number, res, _ = self._guard(ph.ping, port, i)
+                    if res == sdk.COMM_SUCCESS:
+                        break
+                    self._resync()
                 if res != sdk.COMM_SUCCESS:
                     raise DeviceIOError(f"servo {i} does not answer ping: {ph.getTxRxResult(res)}")
                 if number != self.model.model_number:
@@ -138,10 +155,12 @@ class DynamixelArm(Adapter):
             port.closePort()
 
     def _guard(self, fn: Any, *args: Any) -> Any:
-        """Run one SDK call; a failing port (pty closed, adapter unplugged) is a broken link."""
+        """Run one SDK call; a failing port (pty closed, adapter unplugged) is a broken link. The SDK
+        flushes the input (termios) before every packet it sends: on a port that is gone that raises
+        termios.error, which is no OSError."""
         try:
             return fn(*args)
-        except (OSError, serial.SerialException) as exc:
+        except _PORT_ERRORS as exc:
             if self._port is not None:
                 self._port.is_using = False
             raise DeviceIOError(f"{self.port_name}: {exc}") from exc
@@ -154,8 +173,11 @@ class DynamixelArm(Adapter):
         self._next = max(self._next + self.period, time.monotonic())
         try:
             self._cycle()
-        except DeviceIOError:
-            self._mark_stale("link lost")
+        except DeviceIOError as exc:
+            self._mark_stale(f"link lost: {exc}")
+            raise
+        except Exception as exc:  # the base reports it and reconnects: either way no sample comes
+            self._mark_stale(f"reader failed: {type(exc).__name__}: {exc}")
             raise
 
     def _sync_read(self, address: int, size: int) -> tuple[int, dict[int, bytes], int]:
@@ -171,6 +193,7 @@ class DynamixelArm(Adapter):
         errors = 0
         if self.fast_read:
             while True:
+                self._wait_readable()
                 pkt, res = self._guard(ph.rxPacket, port, True)
                 if res != sdk.COMM_SUCCESS:
                     return res, {}, 0
@@ -187,6 +210,7 @@ class DynamixelArm(Adapter):
         for i in ids:
             port.is_using = True  # rxPacket releases the port after each packet
             while True:
+                self._wait_readable()
                 pkt, res = self._guard(ph.rxPacket, port, False)
                 if res != sdk.COMM_SUCCESS:
                     return res, {}, 0
@@ -197,6 +221,15 @@ class DynamixelArm(Adapter):
             errors |= pkt[8]
             out[i] = bytes(pkt[9:9 + size])
         return res, out, errors
+
+    def _wait_readable(self) -> None:
+        """Sleep until the port has input or the SDK's packet timeout has passed. rxPacket polls a
+        non-blocking port in a busy loop: spinning while the servos answer takes a CPU from whatever
+        produces the answer (on a loaded host, the emulator, the world, the caller of stop())."""
+        port = self._port
+        left = (port.packet_timeout - port.getTimeSinceStart()) / 1000.0
+        if left > 0:
+            self._guard(select.select, [port.ser.fileno()], [], [], left)
 
     def _resync(self) -> None:
         """After a failed transaction: let late answers arrive, then drop them."""
@@ -209,6 +242,11 @@ class DynamixelArm(Adapter):
             t_ns = time.monotonic_ns()
             if res != sdk.COMM_SUCCESS:
                 self._resync()
+            else:  # under the lock: a stop() that waited for this transaction holds its position
+                cur, vel, ticks = (np.array([np.frombuffer(data[i][a:b], fmt)[0] for i in self.ids], dtype=float)
+                                   for a, b, fmt in ((0, 2, "<i2"), (2, 6, "<i4"), (6, 10, "<i4")))
+                self.latest_ticks = ticks
+                self._last_ok = t_ns / 1e9
         now = t_ns / 1e9
         if res != sdk.COMM_SUCCESS:
             self.counters["read_failures"] += 1
@@ -218,18 +256,12 @@ class DynamixelArm(Adapter):
             if now - self._last_ok > self.dead_after:
                 raise DeviceIOError(f"no answer for {now - self._last_ok:.3f} s")
             return
-        raw = np.array([np.frombuffer(data[i][0:2], "<i2")[0] for i in self.ids], dtype=float), \
-            np.array([np.frombuffer(data[i][2:6], "<i4")[0] for i in self.ids], dtype=float), \
-            np.array([np.frombuffer(data[i][6:10], "<i4")[0] for i in self.ids], dtype=float)
-        cur, vel, ticks = raw
-        self.latest_ticks = ticks
         m = self.model
         current = self.direction * cur * m.current_unit_a
         frame = JointFrame.make(t_ns, self.direction * (ticks - self.zero) * m.rad_per_tick,
                                 self.direction * vel * m.rad_s_per_unit, current, self.torque_constant * current,
                                 source=self.name, seq=self._seq)
         self._seq += 1
-        self._last_ok = now
         self.counters["frames"] += 1
         self.bus.publish(self.topic, frame)
         if self._stale:
@@ -322,20 +354,35 @@ class DynamixelArm(Adapter):
     def stop(self) -> None:
         """The monitor's reflex: Goal Position := Present Position for every servo (they hold there).
 
-        Present Position is the cyclic read's when it is younger than two cycles (the arm has moved
-        at most ~2 ms worth since: it is pulled back by that), else a fresh Sync Read; then one Sync
-        Write of Goal Position to all servos.
+        Present Position is the cyclic read's when that read completed less than two cycles ago --
+        on schedule it is less than one cycle old; the second cycle only absorbs the reader's jitter --
+        else a fresh Sync Read (if that fails, the cyclic read's while it is younger than
+        ``stale_after``); then one Sync Write of Goal Position to all servos, which no servo answers.
+        Why a position up to a cycle old is safe: it is a point the arm passed on its way here, so
+        holding it pulls the arm back along the path it came (away from what it hit) by speed x age
+        (at the XM430's 4.8 rad/s no-load speed, < 10 mrad per cycle); a fresh read would delay the
+        halt by a whole transaction while the arm keeps going. ``stop_position_age_s``: the age of
+        the position the last stop() held.
         """
         self._require_link()
         with self._io:
-            fresh = self.latest_ticks is not None and time.monotonic() - self._last_ok < 2.0 * self.period
-            if fresh:
-                present = {i: int(t) for i, t in zip(self.ids, self.latest_ticks, strict=True)}
-            else:
+            age = time.monotonic() - self._last_ok
+            cached = None if self.latest_ticks is None else \
+                {i: int(t) for i, t in zip(self.ids, self.latest_ticks, strict=True)}
+            present = cached if cached is not None and age < 2.0 * self.period else None
+            if present is None:
                 res, data, _ = self._sync_read(PRESENT_START, PRESENT_LENGTH)
-                if res != sdk.COMM_SUCCESS:
+                if res == sdk.COMM_SUCCESS:
+                    present = {i: int(np.frombuffer(d[6:10], "<i4")[0]) for i, d in data.items()}
+                    age = 0.0
+                    self.counters["stop_fresh_reads"] += 1
+                else:
                     self._resync()
-                    raise DeviceIOError(f"stop: cannot read Present Position ({self._ph.getTxRxResult(res)})")
-                present = {i: int(np.frombuffer(d[6:10], "<i4")[0]) for i, d in data.items()}
+                    self.counters["stop_read_failures"] += 1
+                    if cached is None or time.monotonic() - self._last_ok >= self.stale_after:
+                        raise DeviceIOError(f"stop: cannot read Present Position ({self._ph.getTxRxResult(res)})"
+                                            " and no recent one")
+                    present, age = cached, time.monotonic() - self._last_ok
             self.write_item(116, 4, present)
+        self.stop_position_age_s = age
         self.counters["stops"] += 1

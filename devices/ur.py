@@ -210,6 +210,16 @@ class URArm(Adapter):
 
     # -- the reader loop ----------------------------------------------------------------------------------
     def _read_once(self) -> None:
+        try:
+            self._poll()
+        except DeviceIOError as exc:
+            self._mark_stale(f"link lost: {exc}")
+            raise
+        except Exception as exc:  # the base reports it and reconnects: either way no packet comes
+            self._mark_stale(f"reader failed: {type(exc).__name__}: {exc}")
+            raise
+
+    def _poll(self) -> None:
         rtde = self._rtde
         deadline = time.monotonic() + self.poll_timeout
         while not self._stop.is_set():
@@ -219,7 +229,6 @@ class URArm(Adapter):
                 return
             now = time.monotonic()
             if not rtde.isConnected():
-                self._mark_stale("RTDE connection closed")
                 raise DeviceIOError("RTDE connection closed")
             silent = now - self._last_new
             if silent > self.stale_after:

@@ -122,6 +122,7 @@ class DxlBus:
         self._world_torque = True  # the world starts under joint control
         self._goal_dirty = False
         self.line_baud: int | None = None  # the pty's baud rate as the client set it (None: unknown)
+        self.t_rx_ns = 0  # when the instruction being handled was read off the line (monotonic ns)
         self.counts: dict[str, int] = {}
         self._handlers = {PING: self._ping, READ: self._read, WRITE: self._write, REG_WRITE: self._reg_write,
                           ACTION: self._action, FACTORY_RESET: self._factory_reset, REBOOT: self._reboot,
@@ -193,7 +194,7 @@ class DxlBus:
         on = any(s.torque_on for s in self.servos)
         if on != self._world_torque:
             self._world_torque = on
-            self.world.send(Command(self.world.source, "torque", on=on))
+            self.world.send(Command(self.world.source, "torque", on=on, extra={"t_rx_ns": self.t_rx_ns}))
             if on:
                 self.goal_q = [None] * self.world.n
         if self._goal_dirty:
@@ -201,7 +202,7 @@ class DxlBus:
             q = self.world.state()[1] if None in self.goal_q else None
             goal = [float(q[j]) if g is None else g for j, g in enumerate(self.goal_q)]
             self.goal_q = list(goal)
-            self.world.send(Command(self.world.source, "goal", q=tuple(goal)))
+            self.world.send(Command(self.world.source, "goal", q=tuple(goal), extra={"t_rx_ns": self.t_rx_ns}))
 
     # -- instructions --------------------------------------------------------------------------------------
     def _ping(self, ins: Instruction) -> list[Reply]:
@@ -406,6 +407,7 @@ class PtyTransport:
                 continue
             data = os.read(self.master, 4096)
             t_rx = time.perf_counter()
+            bus.t_rx_ns = time.monotonic_ns()
             for ins in reader.feed(data):
                 bus.line_baud = self.line_baud()
                 replies = bus.handle(ins)

@@ -1,10 +1,15 @@
 """The link between the physics world's process and the protocol emulators' processes.
 
 The world process owns a :class:`WorldLink`: shared-memory rings that it appends every F/T sample
-and every joint sample to, and a command queue it drains each physics step. Each emulator process
-attaches to the rings by name (:meth:`WorldLink.attach`), reads what is new with a
-:class:`RingReader` (never misses a sample unless it falls a whole ring behind, which it counts),
-and sends commands (:class:`Command`) back: goal positions, stop, torque on/off.
+and every joint sample to, and a command socket. Each emulator process attaches to the rings by
+name (:class:`EmulatorSide`), reads what is new with a :class:`RingReader` (never misses a sample
+unless it falls a whole ring behind, which it counts), and sends commands (:class:`Command`) back:
+goal positions, stop, torque on/off.
+
+Commands travel as JSON datagrams on a Unix socket in a private (0700) directory: any number of
+senders, one message per datagram, sent from the emulator's own thread (no feeder thread, unlike a
+``multiprocessing.Queue``), and a file descriptor the world can wait on, so that it applies a
+command as soon as it arrives instead of at its next paced step (the stop reflex's latency).
 
 Ring slots: ``[seq, t, payload...]``. The writer fills the payload, then writes ``seq`` last; a
 reader copies the slot and accepts it only if ``seq`` is the one it expects before and after the
@@ -12,8 +17,16 @@ copy (a seqlock: no locks shared across processes).
 """
 from __future__ import annotations
 
+import contextlib
+import dataclasses
+import json
 import multiprocessing as mp
-import queue
+import os
+import select
+import shutil
+import socket
+import tempfile
+import time
 from dataclasses import dataclass, field
 from multiprocessing import shared_memory
 from typing import Any
@@ -33,6 +46,25 @@ class Command:
     q: tuple[float, ...] | None = None
     on: bool | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    t_sent_ns: int = 0  # time.monotonic_ns() when the emulator sent it (set by EmulatorSide.send)
+
+    def encode(self) -> bytes:
+        return json.dumps({"source": self.source, "kind": self.kind, "q": self.q, "on": self.on, "extra": self.extra,
+                           "t_sent_ns": self.t_sent_ns}).encode()
+
+    @classmethod
+    def decode(cls, data: bytes) -> Command:
+        """Raises ValueError (or a subclass) for anything that is not an encoded Command."""
+        d = json.loads(data)
+        if not isinstance(d, dict) or not isinstance(d.get("source"), str) or not isinstance(d.get("kind"), str):
+            raise ValueError("not a command")
+        q = d.get("q")
+        return cls(d["source"], d["kind"], None if q is None else tuple(float(x) for x in q), d.get("on"),
+                   dict(d.get("extra") or {}), int(d.get("t_sent_ns", 0)))
+
+
+class CommandLinkError(ConnectionError):
+    """A command could not be handed to the world (its process is gone or not draining)."""
 
 
 class Ring:
@@ -128,12 +160,12 @@ class RingReader:
 
 @dataclass(frozen=True)
 class LinkInfo:
-    """What an emulator process needs to attach: ring names and widths, the command queue."""
+    """What an emulator process needs to attach: ring names and widths, the command socket's path."""
 
     ft_ring: str
     joint_ring: str
     n_joints: int
-    commands: Any  # multiprocessing.Queue
+    commands: str  # the world's command socket (AF_UNIX, SOCK_DGRAM)
 
 
 FT_WIDTH = 12  # wrench (6, sensor frame, scene convention, as the device reports it), saturated (6, 0/1)
@@ -143,16 +175,25 @@ def joint_width(n: int) -> int:
     return 5 * n  # q, qd, qdd, current, tau
 
 
+MAX_COMMAND_BYTES = 65536
+SEND_TIMEOUT_S = 1.0  # a world that drains nothing for this long is hung
+
+
 class WorldLink:
     """Created in the world's process. ``info`` goes to each emulator process (picklable)."""
 
     def __init__(self, n_joints: int, ctx: mp.context.BaseContext | None = None) -> None:
-        ctx = ctx or mp.get_context("spawn")
+        # ctx: accepted for compatibility; nothing here needs a multiprocessing context any more
         self.n_joints = n_joints
         self.ft = Ring(FT_WIDTH)
         self.joints = Ring(joint_width(n_joints))
-        self.commands = ctx.Queue()
-        self.info = LinkInfo(self.ft.name, self.joints.name, n_joints, self.commands)
+        self._dir = tempfile.mkdtemp(prefix="ftc-link-")  # 0700: only this user's processes can send
+        self.command_path = os.path.join(self._dir, "commands")
+        self._commands = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self._commands.bind(self.command_path)
+        self._commands.setblocking(False)
+        self.bad_commands = 0  # datagrams that were no Command (counted, dropped)
+        self.info = LinkInfo(self.ft.name, self.joints.name, n_joints, self.command_path)
 
     def publish_ft(self, t: float, wrench: np.ndarray, saturated: np.ndarray) -> None:
         self.ft.append(t, np.concatenate([wrench, saturated.astype(float)]))
@@ -164,15 +205,25 @@ class WorldLink:
         out = []
         for _ in range(limit):
             try:
-                out.append(self.commands.get_nowait())
-            except queue.Empty:
+                data = self._commands.recv(MAX_COMMAND_BYTES)
+            except BlockingIOError:
                 break
+            try:
+                out.append(Command.decode(data))
+            except (ValueError, TypeError):
+                self.bad_commands += 1
         return out
+
+    def wait_commands(self, timeout: float) -> bool:
+        """Block up to ``timeout`` s; True as soon as a command is waiting."""
+        ready, _, _ = select.select([self._commands], [], [], max(0.0, timeout))
+        return bool(ready)
 
     def close(self) -> None:
         self.ft.close()
         self.joints.close()
-        self.commands.close()
+        self._commands.close()
+        shutil.rmtree(self._dir, ignore_errors=True)
 
 
 class EmulatorSide:
@@ -182,6 +233,8 @@ class EmulatorSide:
         self.info = info
         self.ft = Ring(FT_WIDTH, name=info.ft_ring, create=False)
         self.joints = Ring(joint_width(info.n_joints), name=info.joint_ring, create=False)
+        self._commands = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self._commands.settimeout(SEND_TIMEOUT_S)
 
     def ft_reader(self) -> RingReader:
         return RingReader(self.ft)
@@ -199,8 +252,15 @@ class EmulatorSide:
                 "current": rec[1 + 3 * n:1 + 4 * n], "tau": rec[1 + 4 * n:1 + 5 * n]}
 
     def send(self, command: Command) -> None:
-        self.info.commands.put(command)
+        """Hand ``command`` to the world; raises CommandLinkError when the world cannot take it."""
+        data = dataclasses.replace(command, t_sent_ns=time.monotonic_ns()).encode()  # ~10 us
+        try:
+            self._commands.sendto(data, self.info.commands)
+        except OSError as exc:
+            raise CommandLinkError(f"world command socket {self.info.commands}: {exc}") from exc
 
     def close(self) -> None:
         self.ft.close()
         self.joints.close()
+        with contextlib.suppress(OSError):
+            self._commands.close()

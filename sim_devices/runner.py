@@ -1,6 +1,7 @@
 """``ftc sim``: the world in real time, with one emulator process per device the scene declares."""
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import multiprocessing as mp
 import queue
@@ -10,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.model import ArmModel
+from ftc_hw.model import ArmModel, Payload
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .link import Command, LinkInfo, WorldLink
@@ -87,17 +88,20 @@ class SimRunner:
     """The world and its emulators. ``start()``, then ``step()``/``run()``; ``stop()`` cleans up."""
 
     def __init__(self, scene: Scene, scenario: str, *, duration: float, seed: int = 0, noise: bool = True,
-                 devices: bool = True, options: dict[str, dict] | None = None) -> None:
+                 devices: bool = True, options: dict[str, dict] | None = None, payload: Payload | None = None) -> None:
         self.scene = scene
         self.scenario = scenario
         self.duration = duration
         setup = build_scenario(scenario, scene, ArmModel(scene), seed, duration)
+        if payload is not None:  # a payload the devices' clients do not know about (calibration tests)
+            setup = dataclasses.replace(setup, payload=payload)
         self.world = World(scene, setup, seed=seed, noise=noise)
         self.link = WorldLink(scene.n_joints)
         self.devices = devices
         self.options = options or {}
         self.emulators: list[EmulatorProcess] = []
         self.commands_applied = 0
+        self._clock: tuple[int, float] | None = None  # (host ns, world s) at the start of run()
 
     def start(self) -> list[dict[str, Any]]:
         # joint state first, so emulators that answer at once have something to serve
@@ -128,26 +132,43 @@ class SimRunner:
         elif cmd.kind == "torque":
             self.world.set_torque(bool(cmd.on))
 
-    def step(self) -> WorldState:
+    def apply_pending(self) -> None:
+        """Apply every command that has arrived (from the world's current time on)."""
         for cmd in self.link.drain_commands():
             self._apply(cmd)
+
+    def step(self) -> WorldState:
+        self.apply_pending()
         state = self.world.step()
         self._publish(state, with_ft=self.world.steps % self.world.steps_per_sample == 0)
         return state
 
+    def due_ns(self, t: float) -> int | None:
+        """The host time (``time.monotonic_ns``) at which world time ``t`` is due in a real-time run."""
+        if self._clock is None:
+            return None
+        wall0_ns, t0 = self._clock
+        return wall0_ns + round((t - t0) * 1e9)
+
     def run(self, realtime: bool = True, on_sample=None) -> None:
-        """Until ``duration`` simulated seconds; ``on_sample(state)`` at each sensor sample."""
+        """Until ``duration`` simulated seconds; ``on_sample(state)`` at each sensor sample.
+
+        Real time: a step is computed when the host clock reaches its start time (states are never
+        published ahead of their time), and while waiting for it the world wakes on every command
+        and applies it at once, so a stop takes effect within the transport's latency, not the
+        world's step pacing."""
         w = self.world
         t0 = w.t
-        wall0 = time.monotonic()
+        self._clock = (time.monotonic_ns(), t0) if realtime else None
         while w.t - t0 < self.duration - 1e-12:
             state = self.step()
             if on_sample is not None and w.steps % w.steps_per_sample == 0:
                 on_sample(state)
             if realtime:
-                ahead = (w.t - t0) - (time.monotonic() - wall0)
-                if ahead > 0.0005:
-                    time.sleep(ahead)
+                due = self.due_ns(w.t)
+                while (left := due - time.monotonic_ns()) > 0:
+                    if self.link.wait_commands(left / 1e9):
+                        self.apply_pending()
 
     def stop(self) -> None:
         for e in self.emulators:

@@ -84,10 +84,11 @@ class Controller:
         self.input_bits = 0  # input bit registers 0..127
         self.external_wrench = [0.0] * 6
         self.halts = 0
+        self._t_rx_ns = 0  # when the dashboard line being handled was read (monotonic ns)
 
     def halt(self) -> None:
         self.halts += 1
-        self.world.send(Command(self.source, "stop"))
+        self.world.send(Command(self.source, "stop", extra={"t_rx_ns": self._t_rx_ns}))
 
     # -- RTDE views ----------------------------------------------------------------------------------------
     @property
@@ -136,10 +137,12 @@ class Controller:
                     self.external_wrench = list(v)
 
     # -- dashboard ------------------------------------------------------------------------------------------
-    def dashboard(self, line: str) -> str:
+    def dashboard(self, line: str, t_rx_ns: int = 0) -> str:
+        """The reply to one dashboard line; ``t_rx_ns``: when it was read (recorded with a halt)."""
         cmd = line.strip()
         low = cmd.lower()
         with self.lock:
+            self._t_rx_ns = t_rx_ns
             return self._dashboard(cmd, low)
 
     def _dashboard(self, cmd: str, low: str) -> str:
@@ -521,7 +524,7 @@ class DashboardServer:
             try:
                 conn.sendall((D.DASHBOARD_WELCOME + "\n").encode())
                 for raw in lines:
-                    reply = self.controller.dashboard(raw.decode(errors="replace"))
+                    reply = self.controller.dashboard(raw.decode(errors="replace"), time.monotonic_ns())
                     conn.sendall((reply + "\n").encode())
                     if reply == "Disconnected":
                         return

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ftc_hw.model import Payload
 from ftc_hw.scene import Scene, load_scene
 
 from .link import Command, Ring, RingReader, joint_width
@@ -34,6 +35,9 @@ class AppliedCommand:
     kind: str
     q: tuple[float, ...] | None
     on: bool | None = None
+    t_sent_ns: int = 0  # when the emulator sent it (time.monotonic_ns() in its process)
+    t_due_ns: int = 0  # host time at which t_sim is due in the real-time run: the arm's own clock
+    t_rx_ns: int = 0  # when the emulator read the request that caused it (0: not recorded)
 
 
 class _RecordingRunner(SimRunner):
@@ -44,7 +48,9 @@ class _RecordingRunner(SimRunner):
         self.applied: list[AppliedCommand] = []
 
     def _apply(self, cmd: Command) -> None:
-        self.applied.append(AppliedCommand(time.monotonic_ns(), self.world.t, cmd.kind, cmd.q, cmd.on))
+        t = self.world.t
+        self.applied.append(AppliedCommand(time.monotonic_ns(), t, cmd.kind, cmd.q, cmd.on, cmd.t_sent_ns,
+                                           self.due_ns(t) or 0, int(cmd.extra.get("t_rx_ns", 0))))
         super()._apply(cmd)
 
 
@@ -52,8 +58,9 @@ class _Quit(Exception):
     pass
 
 
-def _main(conn, scene: Scene, scenario: str, seed: int, noise: bool, options: dict) -> None:
-    runner = _RecordingRunner(scene, scenario, duration=1e6, seed=seed, noise=noise, options=options)
+def _main(conn, scene: Scene, scenario: str, seed: int, noise: bool, options: dict, payload=None) -> None:
+    runner = _RecordingRunner(scene, scenario, duration=1e6, seed=seed, noise=noise, options=options,
+                              payload=payload)
     try:
         endpoints = runner.start()
     except Exception as exc:  # noqa: BLE001 - reported to the parent
@@ -93,11 +100,16 @@ def _main(conn, scene: Scene, scenario: str, seed: int, noise: bool, options: di
                 threading.Thread(target=restart, args=arg, daemon=True).start()
                 return
             elif op == "applied":
-                reply("ok", list(runner.applied))
+                reply("ok", runner.applied[arg or 0:])
+                return
+            elif op == "applied_count":
+                reply("ok", len(runner.applied))
                 return
             elif op == "time":
                 reply("ok", runner.world.t)
                 return
+            elif op == "goal":  # applied like an emulator's goal command, between two steps
+                runner._apply(Command("world-process", "goal", q=tuple(float(x) for x in arg)))
             reply("ok", None)
         except Exception as exc:  # noqa: BLE001
             reply("error", f"{type(exc).__name__}: {exc}")
@@ -123,7 +135,8 @@ class WorldProcess:
     """
 
     def __init__(self, scene: Scene | str, scenario: str = "hold", *, devices: list[str] | None = None,
-                 options: dict[str, dict] | None = None, seed: int = 0, noise: bool = False) -> None:
+                 options: dict[str, dict] | None = None, seed: int = 0, noise: bool = False,
+                 payload: Payload | None = None) -> None:
         scene = load_scene(scene) if isinstance(scene, str) else scene
         if devices is not None:
             missing = set(devices) - {d.name for d in scene.devices}
@@ -131,7 +144,7 @@ class WorldProcess:
                 raise ValueError(f"scene {scene.name!r} has no device(s) {sorted(missing)}")
             scene = dataclasses.replace(scene, devices=tuple(d for d in scene.devices if d.name in devices))
         self.scene = scene
-        self._args = (scene, scenario, seed, noise, options or {})
+        self._args = (scene, scenario, seed, noise, options or {}, payload)
         self._proc: Any = None
         self._conn: Any = None
         self._ring: Ring | None = None
@@ -186,11 +199,20 @@ class WorldProcess:
     def resume(self, name: str) -> None:
         self._call("resume", name)
 
-    def applied(self) -> list[AppliedCommand]:
-        return self._call("applied")
+    def applied(self, since: int = 0) -> list[AppliedCommand]:
+        """The commands the world applied, from the ``since``-th on."""
+        return self._call("applied", since)
+
+    def applied_count(self) -> int:
+        return self._call("applied_count")
 
     def sim_time(self) -> float:
         return self._call("time")
+
+    def goal(self, q) -> None:
+        """Set the world's joint targets (a hold at q, rad), applied like an emulator's goal command:
+        how a simulated arm whose protocol has no motion command (UR RTDE receive) is moved."""
+        self._call("goal", [float(x) for x in q])
 
     # -- the world's joint samples ----------------------------------------------------------------------
     def joint_reader(self, from_start: bool = False) -> RingReader:

@@ -1,0 +1,63 @@
+"""The world's command link: JSON datagrams from emulator processes, woken on, bad input counted."""
+from __future__ import annotations
+
+import multiprocessing as mp
+import socket
+
+import pytest
+
+from sim_devices.link import Command, CommandLinkError, EmulatorSide, LinkInfo, WorldLink
+
+GOAL = Command("arm", "goal", q=(0.1, -1.05, 0.35 + 1e-12, 0.7), extra={"t_rx_ns": 123})
+
+
+def _send(info: LinkInfo, commands: list[Command]) -> None:
+    side = EmulatorSide(info)
+    try:
+        for c in commands:
+            side.send(c)
+    finally:
+        side.close()
+
+
+def test_commands_from_another_process_arrive_whole_and_in_order():
+    link = WorldLink(4)
+    try:
+        sent = [GOAL, Command("arm", "torque", on=False), Command("ur", "stop")]
+        p = mp.get_context("spawn").Process(target=_send, args=(link.info, sent))
+        p.start()
+        got: list[Command] = []
+        while len(got) < len(sent):
+            assert link.wait_commands(30.0), "no command arrived"
+            got += link.drain_commands()
+        p.join(10)
+        assert [(c.source, c.kind, c.q, c.on, c.extra) for c in got] == \
+            [(c.source, c.kind, c.q, c.on, c.extra) for c in sent]  # floats exact through JSON
+        assert all(c.t_sent_ns > 0 for c in got)
+        assert not link.wait_commands(0.0) and link.drain_commands() == []
+    finally:
+        link.close()
+
+
+def test_malformed_datagrams_are_counted_and_dropped():
+    link = WorldLink(2)
+    try:
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        for junk in (b"not json", b"[1, 2]", b'{"kind": "goal"}', b'{"source": "a", "kind": "goal", "q": "xy"}'):
+            s.sendto(junk, link.command_path)
+        s.sendto(GOAL.encode(), link.command_path)
+        s.close()
+        got = link.drain_commands()
+        assert [c.q for c in got] == [GOAL.q]
+        assert link.bad_commands == 4
+    finally:
+        link.close()
+
+
+def test_a_closed_world_is_a_typed_error():
+    link = WorldLink(2)
+    side = EmulatorSide(link.info)
+    link.close()
+    with pytest.raises(CommandLinkError):
+        side.send(GOAL)
+    side.close()
