@@ -8,6 +8,12 @@ their delivery; frames without device time use their host receive time.
 A worker thread owns the pipeline (a bounded queue decouples it from the F/T reader: a slow pipeline
 drops frames, counted, instead of stalling the device). Without a calibration the sensor is tared
 on the first ``tare_s`` of frames, which must be taken with the arm still and untouched.
+
+What the pipeline consumes for each F/T frame (its aligned time, the raw wrench, the joint state
+interpolated there, whether it went to the tare) is published on ``monitor/input`` as a
+:class:`PipelineInput`: the alignment and interpolation depend on arrival order and thread timing,
+so a recording keeps their result and a replay feeds it to :meth:`LiveMonitor.consume`, which
+reproduces the events exactly.
 """
 from __future__ import annotations
 
@@ -24,6 +30,25 @@ from .bus import EVENTS_CONTACT, Bus, ClockAligner, WrenchFlag, joints_topic, wr
 from .pipeline import ContactPipeline, FrameResult
 from .scene import Scene
 
+MONITOR_INPUT = "monitor/input"
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PipelineInput:
+    """One F/T sample as the pipeline consumed it. ``t_host_ns``: the sample's aligned host time (the
+    pipeline's ``t_ns``); ``seq``/``source``: the F/T frame's; ``tare``: it went to the tare."""
+
+    t_host_ns: int
+    t_device_ns: int | None
+    seq: int
+    source: str
+    wrench: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    current: np.ndarray
+    saturated: bool = False
+    tare: bool = False
+
 
 @dataclass(frozen=True, slots=True)
 class MonitoredFrame:
@@ -35,7 +60,7 @@ class MonitoredFrame:
 class LiveMonitor:
     def __init__(self, bus: Bus, scene: Scene, *, ft_source: str = "ft", arm_source: str = "arm",
                  tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
-                 **pipeline_options) -> None:
+                 max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, **pipeline_options) -> None:
         self.bus = bus
         self.scene = scene
         self.pipeline = ContactPipeline(scene, **pipeline_options)
@@ -43,8 +68,13 @@ class LiveMonitor:
         self.joint_topic = joints_topic(arm_source)
         self.tare_s = tare_s
         self.max_gap_ns = int(max_gap_ms * 1e6)
-        self.wait_s = 0.005
+        self.max_extrapolate_ns = int(max_extrapolate_ms * 1e6)
+        # a frame waits for the joint stream to pass it as long as a joint gap may last: on a loaded
+        # host the joint reader can be late by several periods, and extrapolating over that span near
+        # a reversal of the motion reads as a contact (normally the wait is under a joint period)
+        self.wait_s = max_gap_ms / 1e3
         self.keep_frames = keep_frames
+        self.publish_inputs = publish_inputs
         self.frames: list[MonitoredFrame] = []
         self.latest: MonitoredFrame | None = None
         self.counters: Counter[str] = Counter()
@@ -89,6 +119,7 @@ class LiveMonitor:
     def _run(self) -> None:
         # An F/T frame waits (at most wait_s) until the joint stream has passed its time, so the
         # joint state is interpolated rather than extrapolated; the onset time does not change.
+        # The wait is in the worker's time: frames queued behind a waiting one wait with it.
         pending: deque = deque()
         while not self._stop.is_set():
             try:
@@ -137,10 +168,10 @@ class LiveMonitor:
                 return None
             t0, x0 = ts[i - 1], self._joint_x[i - 1]
             if i == len(ts):
-                # Newer than the newest joint sample (the F/T frame often arrives first): extrapolate
-                # linearly from the last two, within the gap. Holding would lag the arm by up to a
-                # joint period, which the dynamics compensation would read as a contact.
-                if t - t0 > self.max_gap_ns:
+                # Newer than the newest joint sample (the joint stream did not pass it within wait_s):
+                # extrapolate linearly from the last two, at most max_extrapolate ahead. Holding would
+                # lag the arm, which the dynamics compensation would read as a contact.
+                if t - t0 > self.max_extrapolate_ns:
                     return None
                 if i < 2 or t0 - ts[i - 2] > self.max_gap_ns:
                     return x0
@@ -153,8 +184,7 @@ class LiveMonitor:
         return x0 + w * (x1 - x0)
 
     def handle(self, frame, t: int | None = None) -> MonitoredFrame | None:
-        """Process one WrenchFrame (also usable without the thread, e.g. in replay); ``t``: its
-        aligned time when already computed."""
+        """Process one WrenchFrame; ``t``: its aligned time when already computed."""
         if t is None:
             t = self._aligned(self._ft_clock, frame)
         x = self._joints_at(t)
@@ -162,27 +192,38 @@ class LiveMonitor:
             self.counters["no_joint_state"] += 1
             return None
         n = self.scene.n_joints
-        q, qd, current = x[:n], x[n:2 * n], x[2 * n:]
-        if not self.tared:
-            self._tare(t, frame, q)
+        inp = PipelineInput(t, frame.t_device_ns, frame.seq, frame.source, frame.wrench, x[:n], x[n:2 * n],
+                            x[2 * n:], bool(frame.flags & WrenchFlag.SATURATED), tare=not self.tared)
+        if self.publish_inputs:
+            self.bus.publish(MONITOR_INPUT, inp)
+        return self.consume(inp)
+
+    def consume(self, inp: PipelineInput) -> MonitoredFrame | None:
+        """One pipeline input (live, or from a recording): the tare or the pipeline; events go on the bus."""
+        if inp.tare:
+            self._tare(inp.t_host_ns, inp.wrench, inp.q)
             return None
-        result = self.pipeline.process(t, frame.wrench, q, qd, current,
-                                       saturated=bool(frame.flags & WrenchFlag.SATURATED),
-                                       t_device_ns=frame.t_device_ns)
+        try:
+            result = self.pipeline.process(inp.t_host_ns, inp.wrench, inp.q, inp.qd, inp.current,
+                                           saturated=inp.saturated, t_device_ns=inp.t_device_ns)
+        except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor (nor a replay)
+            self.counters["errors"] += 1
+            self.counters[f"error:{type(exc).__name__}"] += 1
+            return None
         self.counters["frames"] += 1
         for event in result.events:
             self.counters[f"event_{event.kind}"] += 1
             self.bus.publish(EVENTS_CONTACT, event)
-        mf = MonitoredFrame(frame.t_host_ns, frame.t_device_ns, result)
+        mf = MonitoredFrame(inp.t_host_ns, inp.t_device_ns, result)
         self.latest = mf
         if self.keep_frames:
             self.frames.append(mf)
         return mf
 
-    def _tare(self, t: int, frame, q) -> None:
+    def _tare(self, t: int, wrench, q) -> None:
         if self._tare_until_ns is None:
             self._tare_until_ns = t + int(self.tare_s * 1e9)
-        self._tare_buf.append((np.asarray(frame.wrench), np.asarray(q)))
+        self._tare_buf.append((np.asarray(wrench), np.asarray(q)))
         if t >= self._tare_until_ns:
             w = np.mean([b[0] for b in self._tare_buf], axis=0)
             q = np.mean([b[1] for b in self._tare_buf], axis=0)
@@ -190,3 +231,4 @@ class LiveMonitor:
             self.pipeline.compensator.tare(w, q, zero, zero)
             self.tared = True
             self._tare_buf.clear()
+

@@ -1,0 +1,82 @@
+"""``ftc replay``: a recording's pipeline inputs through the same pipeline; the events against the recorded ones."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.live import Live
+
+
+def run_replay(path: Path, speed: float, events_path: Path | None, calibration: Path | None, check: bool,
+               view: bool) -> int:
+    from ..bus import Bus, joints_topic, wrench_topic
+    from ..live.events import event_line
+    from ..live.session import MonitorSetupError, load_pipeline_calibration
+    from ..live.view import LiveView, make_console
+    from ..monitor import MONITOR_INPUT
+    from ..record.reader import RecordingError, read_recording
+    from ..record.replay import ReplayError, recorded_scene, replay
+
+    console = make_console()
+    try:
+        rec = read_recording(path)
+        scene = recorded_scene(rec)
+        kwargs = load_pipeline_calibration(calibration, scene)[0] if calibration else None
+    except (RecordingError, ReplayError, MonitorSetupError, OSError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        return 1
+    counts = rec.counts()
+    console.print(f"{path}: {sum(counts.values())} messages on {len(counts)} topics "
+                  f"({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))}), scene {scene.name}"
+                  + ("" if rec.complete else f" [yellow](cut short: {rec.error}; read up to its last chunk)[/]"))
+    meta = rec.metadata.get("monitor", {})
+    bus = Bus()
+    topics = [wrench_topic(meta.get("ft_source", "ft")), joints_topic(meta.get("arm_source", "arm")), MONITOR_INPUT]
+    show = view and speed > 0
+    state: dict = {}
+    last_ns = [rec.messages[0].log_time if rec.messages else 0]
+
+    def ready(monitor) -> None:
+        state["view"] = LiveView(bus, monitor, topics, ft_topic=topics[0], title=f"ftc replay {path.name}",
+                                 now_ns=lambda: last_ns[0])
+        state["view"].t0_ns = last_ns[0]
+
+    sub = bus.subscribe("events/", maxsize=None)
+    live = Live(console=console, refresh_per_second=4, auto_refresh=False) if show else None
+    step = {"n": 0}
+
+    def on_message(monitor) -> None:
+        step["n"] += 1
+        if live is None or step["n"] % 200:
+            return
+        v = state["view"]
+        last_ns[0] = max(last_ns[0], (bus.latest(topics[0]).t_host_ns if bus.latest(topics[0]) else last_ns[0]))
+        for ev in sub.drain():
+            v.add(ev)
+        live.update(v.render(), refresh=True)
+
+    try:
+        if live is not None:
+            live.start()
+        result = replay(rec, scene=scene, pipeline_kwargs=kwargs, speed=speed, bus=bus, on_message=on_message,
+                        monitor_ready=ready)
+    except ReplayError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        return 1
+    finally:
+        if live is not None:
+            live.stop()
+    if events_path is not None:
+        with open(events_path, "w", encoding="utf-8") as f:
+            for e in result.events:
+                f.write(event_line(e) + "\n")
+    kinds = {k: sum(e.kind == k for e in result.events) for k in ("onset", "update", "offset")}
+    console.print(f"replayed {result.inputs} pipeline inputs: {len(result.events)} contact events {kinds}"
+                  + (f" -> {events_path}" if events_path else ""))
+    if result.identical:
+        console.print(f"[green]identical[/] to the {len(result.recorded)} recorded events")
+        return 0
+    diff = result.first_difference()
+    console.print(f"[yellow]differs[/] from the {len(result.recorded)} recorded events; first difference at #{diff[0]}:"
+                  f"\n  replayed: {diff[1]}\n  recorded: {diff[2]}")
+    return 1 if check else 0

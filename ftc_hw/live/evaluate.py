@@ -1,0 +1,172 @@
+"""Contact events against the simulated world's ground truth (``ftc monitor --sim``, ``ftc demo``, tests).
+
+Both sides are on the host's monotonic clock: events by their ``t_host_ns`` (the F/T sample's aligned
+time), truth by the ``t_host_ns`` at which the world published each sample to its emulators.
+
+* A true contact is a run of truth samples in contact (runs less than ``merge_gap_s`` apart are one).
+* It is detected when an onset event falls within ``[due - early_s, end + late_s]``, ``due`` being
+  the host time at which the contact's first sample was due (``t_due_ns``; the world publishes it
+  then, or later when it runs behind on a loaded machine). Its delay is the onset's time minus the
+  host time at which that sample was published (``t_host_ns``: from then on the devices can know
+  it); in time when at most ``delay_samples`` sensor periods plus ``delay_extra_s``. A device with
+  its own clock has its frames placed on the host clock as if delivered with the least delay seen
+  (the world's least lateness included), so on a late world the delay from publication can be
+  slightly negative; ``onset_delay_due_ms`` (from the due time) bounds it from above.
+* An onset that belongs to no true contact is a false alarm; a second onset within one contact is
+  counted as a split. Events after the truth's last sample are not judged.
+* Localization: every onset/update event with an estimate, at a time when the truth is in contact,
+  against the truth's strongest contact at the newest sample published before the event (the sample
+  the device sent): distance of the points (mm), of the forces (N), and whether the link is right.
+  As in the solver's benchmark, the accuracy figures are over the estimates the solver gives without
+  a flag (``ambiguous``, ``grazing``, ``off_surface``, ... are the solver saying it cannot be sure);
+  ``err_rms_all_mm`` includes the flagged ones.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class ContactResult:
+    index: int
+    start_s: float  # simulated time of the first sample in contact
+    end_s: float
+    link: str  # the true link (most samples)
+    onset_delay_ms: float | None  # from the first contact sample's publication; None: not detected
+    onset_delay_due_ms: float | None  # from its due time
+    delay_ok: bool
+    onsets: int
+    estimates: int  # onset/update events with an estimate while the truth is in contact
+    trusted: int  # of which without a flag
+    est_link: str
+    link_right: float  # fraction of the unflagged estimates on the true link
+    err_median_mm: float | None  # point error of the unflagged estimates
+    err_rms_mm: float | None
+    err_max_mm: float | None
+    err_rms_all_mm: float | None  # every estimate, flagged or not
+    force_err_median_n: float | None
+
+    @property
+    def detected(self) -> bool:
+        return self.onset_delay_ms is not None
+
+
+@dataclass
+class Evaluation:
+    contacts: list[ContactResult]
+    false_alarms: list[float]  # simulated times of onsets outside every true contact
+    splits: int
+    sample_period_s: float
+    delay_limit_ms: float
+    events: int
+    truth_samples: int
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def detected(self) -> int:
+        return sum(c.detected for c in self.contacts)
+
+    @property
+    def all_in_time(self) -> bool:
+        return all(c.detected and c.delay_ok for c in self.contacts)
+
+    def worst_rms_mm(self) -> float | None:
+        errs = [c.err_rms_mm for c in self.contacts if c.err_rms_mm is not None]
+        return max(errs) if errs else None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"contacts": [asdict(c) for c in self.contacts], "detected": self.detected,
+                "false_alarms": self.false_alarms, "splits": self.splits, "sample_period_s": self.sample_period_s,
+                "delay_limit_ms": self.delay_limit_ms, "events": self.events, "truth_samples": self.truth_samples}
+
+
+def _episodes(t: np.ndarray, contact: np.ndarray, merge_gap_s: float) -> list[tuple[int, int]]:
+    """(first, last) truth indices of each contact."""
+    out: list[list[int]] = []
+    for i in np.flatnonzero(contact):
+        if out and t[i] - t[out[-1][1]] <= merge_gap_s:
+            out[-1][1] = int(i)
+        else:
+            out.append([int(i), int(i)])
+    return [(a, b) for a, b in out]
+
+
+def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_period_s: float, *,
+             delay_samples: int = 2, delay_extra_s: float = 0.001, merge_gap_s: float = 0.05,
+             early_s: float = 0.001, late_s: float = 0.05) -> Evaluation:
+    """``events``: event records (:func:`ftc_hw.live.events.event_record`); ``truth``: truth records
+    with ``t_host_ns``."""
+    if truth and "t_host_ns" not in truth[0]:
+        raise ValueError("the truth records carry no t_host_ns: write them with ftc monitor --sim --truth")
+    th = np.array([r["t_host_ns"] for r in truth], dtype=np.int64)
+    due = np.array([r.get("t_due_ns", r["t_host_ns"]) for r in truth], dtype=np.int64)
+    ts = np.array([r["t"] for r in truth], dtype=float)
+    contact = np.array([bool(r["contact"]) for r in truth])
+    episodes = _episodes(ts, contact, merge_gap_s)
+    ep_of = np.full(len(truth), -1)
+    for k, (a, b) in enumerate(episodes):
+        ep_of[a:b + 1] = k
+    limit_ns = int(round((delay_samples * sample_period_s + delay_extra_s) * 1e9))
+    early, late = int(early_s * 1e9), int(late_s * 1e9)
+
+    def sim_time(t_ns: int) -> float:
+        return float(np.interp(t_ns, th, ts)) if len(th) else float("nan")
+
+    first_onset: dict[int, int] = {}
+    onsets_in: dict[int, int] = {}
+    false_alarms: list[float] = []
+    errs: dict[int, list[tuple[float, float, str, bool]]] = {}  # (point err mm, force err N, link, flagged)
+    evs = sorted(events, key=lambda e: e["t_host_ns"])
+    t_last = int(th[-1]) if len(th) else 0
+    for ev in evs:
+        t = int(ev["t_host_ns"])
+        if t > t_last:
+            continue  # after the truth ends (the world's post-roll): nothing to judge it against
+        if ev["kind"] == "onset":
+            k = next((k for k, (a, b) in enumerate(episodes) if due[a] - early <= t <= th[b] + late), None)
+            if k is None:
+                false_alarms.append(round(sim_time(t), 4))
+            else:
+                onsets_in[k] = onsets_in.get(k, 0) + 1
+                first_onset.setdefault(k, t)
+        if ev["kind"] == "offset" or not ev["link"] or "no_estimate" in ev["flags"]:
+            continue
+        i = int(np.searchsorted(th, t, side="right")) - 1
+        if i < 0 or not contact[i]:
+            continue
+        k = int(ep_of[i])
+        rec = truth[i]
+        errs.setdefault(k, []).append((float(np.linalg.norm(np.subtract(ev["point"], rec["point"]))) * 1e3,
+                                       float(np.linalg.norm(np.subtract(ev["force"], rec["force"]))), ev["link"],
+                                       bool(ev["flags"])))
+
+    results = []
+    for k, (a, b) in enumerate(episodes):
+        true_links = [truth[i]["link"] for i in range(a, b + 1) if truth[i]["contact"]]
+        link = max(set(true_links), key=true_links.count)
+        delay = float(first_onset[k] - th[a]) / 1e6 if k in first_onset else None
+        delay_due = float(first_onset[k] - due[a]) / 1e6 if k in first_onset else None
+        rows = errs.get(k, [])
+        good = [r for r in rows if not r[3]]
+        e = np.array([r[0] for r in good])
+        est = [r[2] for r in good]
+
+        def stat(x: np.ndarray, f) -> float | None:
+            return round(float(f(x)), 2) if len(x) else None
+
+        results.append(ContactResult(
+            index=k + 1, start_s=round(float(ts[a]), 4), end_s=round(float(ts[b]), 4), link=link,
+            onset_delay_ms=None if delay is None else round(delay, 3),
+            onset_delay_due_ms=None if delay_due is None else round(delay_due, 3),
+            delay_ok=bool(delay is not None and delay * 1e6 <= limit_ns), onsets=onsets_in.get(k, 0),
+            estimates=len(rows), trusted=len(good), est_link=max(set(est), key=est.count) if est else "-",
+            link_right=round(sum(x == link for x in est) / len(est), 3) if est else 0.0,
+            err_median_mm=stat(e, np.median), err_rms_mm=stat(e, lambda x: np.sqrt(np.mean(x ** 2))),
+            err_max_mm=stat(e, np.max),
+            err_rms_all_mm=stat(np.array([r[0] for r in rows]), lambda x: np.sqrt(np.mean(x ** 2))),
+            force_err_median_n=stat(np.array([r[1] for r in good]), np.median)))
+    splits = sum(max(0, n - 1) for n in onsets_in.values())
+    return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))

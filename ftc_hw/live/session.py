@@ -1,0 +1,333 @@
+"""One monitor run: the scene's device adapters on a bus (with ``sim``, connected to the emulated
+devices of :class:`~ftc_hw.live.simworld.SimWorld`), the live contact monitor, optionally the MCAP
+recorder, the events file and the stop reflex; the live view while it runs; the summary (with the
+ground truth when simulated) at the end. ``ftc monitor`` and ``ftc demo`` run this.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.live import Live
+
+from ftc_hw import __version__
+from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, joints_topic, wrench_topic
+from ftc_hw.scene import Scene, SceneError, load_scene
+
+from .evaluate import Evaluation, evaluate
+from .events import EventWriter, event_record, read_truth
+from .view import LiveView, evaluation_table, stream_table
+
+SETTLE_S = 0.5
+
+
+class MonitorSetupError(Exception):
+    """The run could not start: scene, devices, calibration or emulators (the message says which)."""
+
+
+@dataclass
+class MonitorConfig:
+    scene: str
+    sim: bool = False
+    scenario: str = "sweep-with-collision"
+    seed: int = 0
+    duration: float | None = None  # simulated seconds with sim, else wall-clock seconds (None: until Ctrl-C)
+    calibration: Path | None = None
+    record: Path | None = None
+    reflex: str | None = None  # "stop"
+    events: Path | None = None
+    truth: Path | None = None
+    noise: bool = True
+    view: bool = True
+    level: str | None = "dynamics"  # compensation level; None: the scene's
+    title: str = "ftc monitor"
+    connect_timeout_s: float = 20.0
+
+
+@dataclass
+class MonitorOutcome:
+    exit_code: int
+    events: list[dict[str, Any]] = field(default_factory=list)
+    evaluation: Evaluation | None = None
+    counters: dict[str, int] = field(default_factory=dict)
+    reflex: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    t_closed_ns: int = 0  # when the adapters were closed
+
+
+def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any], dict[str, str]]:
+    """``(pipeline kwargs, MCAP metadata)`` of a calibration file (issue 7's ``load_calibration``)."""
+    try:
+        from calibration.file import load_calibration
+    except ImportError as exc:
+        raise MonitorSetupError(f"--calibration: the calibration package cannot load files ({exc})") from None
+    try:
+        cal = load_calibration(path, scene=scene, sensor_serial=None)
+    except Exception as exc:  # noqa: BLE001 - its typed error (or an OS error): shown to the user
+        raise MonitorSetupError(f"--calibration {path}: {exc}") from None
+    from ftc_hw.record.replay import pipeline_kwargs_to_json
+
+    kwargs = {k: v for k, v in cal.pipeline_kwargs().items() if v is not None}
+    text = Path(path).read_text(encoding="utf-8", errors="replace")
+    return kwargs, {"file": str(path), "content": text, "pipeline": pipeline_kwargs_to_json(kwargs)}
+
+
+class StopReflex:
+    """On every contact onset, ``arm.stop()`` from its own thread (never in the pipeline's)."""
+
+    def __init__(self, bus: Bus, arm: Any) -> None:
+        self.arm = arm
+        self.stops: list[dict[str, Any]] = []
+        self.errors: list[str] = []
+        self._pending: list[ContactEvent] = []
+        self._wake = threading.Event()
+        self._quit = False
+        self._sub = bus.subscribe(EVENTS_CONTACT, callback=self._on_event)
+        self._thread = threading.Thread(target=self._run, name="stop-reflex", daemon=True)
+        self._thread.start()
+
+    def _on_event(self, ev: ContactEvent) -> None:
+        if ev.kind == "onset":
+            self._pending.append(ev)
+            self._wake.set()
+
+    def _run(self) -> None:
+        while not self._quit:
+            self._wake.wait(0.5)
+            self._wake.clear()
+            while self._pending:
+                ev = self._pending.pop(0)
+                t0 = time.monotonic_ns()
+                try:
+                    self.arm.stop()
+                    self.stops.append({"onset_t_host_ns": ev.t_host_ns,
+                                       "sent_after_onset_ms": (t0 - ev.t_host_ns) / 1e6,
+                                       "stop_call_ms": (time.monotonic_ns() - t0) / 1e6})
+                except Exception as exc:  # noqa: BLE001 - reported, the monitor goes on
+                    self.errors.append(f"{type(exc).__name__}: {exc}")
+
+    def close(self) -> None:
+        self._sub.close()
+        self._quit = True
+        self._wake.set()
+        self._thread.join(5.0)
+
+
+def _devices(scene: Scene, sim: bool):
+    from devices.arm_registry import ARM_ADAPTERS
+    from devices.registry import ADAPTERS
+
+    ft = next((d for d in scene.devices if d.kind in ADAPTERS), None)
+    arm = next((d for d in scene.devices if d.kind in ARM_ADAPTERS), None)
+    if ft is None:
+        raise MonitorSetupError(f"scene {scene.name!r} declares no F/T sensor device (kinds: {', '.join(ADAPTERS)})")
+    if arm is None and not sim:
+        raise MonitorSetupError(f"scene {scene.name!r} declares no arm device (kinds: {', '.join(ARM_ADAPTERS)}): "
+                                "with --sim the world's joint state is used")
+    return ft, arm
+
+
+def _wait_idle(monitor, timeout: float = 5.0) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and monitor._sub is not None and monitor._sub.pending:
+        time.sleep(0.01)
+    time.sleep(0.05)
+
+
+def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOutcome:
+    console = console or Console()
+    try:
+        scene = load_scene(cfg.scene)
+    except SceneError as exc:
+        raise MonitorSetupError(str(exc)) from None
+    ft_dev, arm_dev = _devices(scene, cfg.sim)
+    cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
+    out = MonitorOutcome(0)
+    # Device readers poll (ur_rtde keeps only its newest packet) while the pipeline computes: with
+    # Python's default 5 ms switch interval a reader that wakes waits up to 5 ms for the interpreter
+    # and misses 500 Hz packets. 0.5 ms keeps their latency below a packet period.
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(min(switch, 0.0005))
+    try:
+        return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out)
+    finally:
+        sys.setswitchinterval(switch)
+
+
+def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, cal_kwargs: dict[str, Any],
+         cal_meta: dict[str, str] | None, out: MonitorOutcome) -> MonitorOutcome:
+    from devices.arm_registry import make_arm_adapter
+    from devices.registry import make_adapter
+    from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
+
+    with contextlib.ExitStack() as stack:
+        # SIGTERM stops like Ctrl-C: adapters, recorder and emulators are closed, never orphaned
+        with contextlib.suppress(ValueError):  # not the main thread
+            previous = signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+            stack.callback(signal.signal, signal.SIGTERM, previous)
+        world = None
+        truth_path = cfg.truth
+        if cfg.sim:
+            from .simworld import SimJointSource, SimWorld
+
+            if truth_path is None:
+                tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))
+                truth_path = Path(tmp) / "truth.jsonl"
+            world = SimWorld(scene, cfg.scenario, duration=cfg.duration if cfg.duration else 1e9, seed=cfg.seed,
+                             noise=cfg.noise, truth=truth_path)
+            console.print(f"starting the emulated devices of [cyan]{scene.name}[/] "
+                          f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)})...")
+            try:
+                world.start()
+            except Exception as exc:  # noqa: BLE001 - emulator start failures carry their reason
+                raise MonitorSetupError(str(exc)) from None
+            stack.callback(world.close)
+        bus = Bus()
+        ft_name, arm_name = ft_dev.name, arm_dev.name if arm_dev is not None else "arm"
+        topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]
+        ev_sub = bus.subscribe("events/", maxsize=None)
+        tare_s = None if cal_kwargs else 0.1
+        pipeline_kwargs = {**cal_kwargs, **({"level": cfg.level} if cfg.level else {})}
+        monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
+        recorder = None
+        if cfg.record:
+            from ftc_hw.record.replay import pipeline_kwargs_to_json
+            from ftc_hw.record.writer import McapRecorder
+
+            meta = {"scene": {"name": scene.name, "path": str(scene.path),
+                              "toml": Path(scene.path).read_text(encoding="utf-8")},
+                    "monitor": {"ft_source": ft_name, "arm_source": arm_name, "tare_s": str(tare_s),
+                                "pipeline": pipeline_kwargs_to_json(pipeline_kwargs), "ftc_hw": __version__,
+                                "sim": str(cfg.sim), "scenario": cfg.scenario if cfg.sim else "",
+                                "seed": str(cfg.seed), "started_host_ns": str(time.monotonic_ns())}}
+            if cal_meta is not None:
+                meta["calibration"] = cal_meta
+            recorder = McapRecorder(bus, cfg.record, metadata=meta).start()
+            stack.callback(recorder.stop)  # on a failed start; a no-op after the final stop below
+        events_file = stack.enter_context(open(cfg.events, "w", encoding="utf-8")) if cfg.events else None
+        writer = EventWriter(events_file) if events_file is not None else None
+        if world is None:
+            monitor.start()  # on hardware the arm must be still now: the tare takes the first 0.1 s
+        ft = make_adapter(ft_dev, bus, world.endpoints.get(ft_dev.name) if world else None, scene=scene)
+        if arm_dev is not None:
+            arm = make_arm_adapter(arm_dev, bus, world.endpoints.get(arm_dev.name) if world else None, scene=scene)
+        else:
+            arm = SimJointSource(arm_name, bus, world)
+        adapters = [ft, arm]
+        reflex = None
+
+        def pump() -> None:
+            for ev in ev_sub.drain():
+                view.add(ev)
+                if isinstance(ev, ContactEvent):
+                    out.events.append(event_record(ev))
+                    if writer is not None:
+                        writer.write(ev)
+
+        view = LiveView(bus, monitor, topics, ft_topic=topics[0], title=cfg.title)
+        try:
+            for a in adapters:
+                a.open()
+            for a in adapters:
+                if not a.wait_connected(cfg.connect_timeout_s):
+                    raise MonitorSetupError(f"{a.name} ({a.kind}) did not connect within {cfg.connect_timeout_s:g} s: "
+                                            f"{dict(a.counters)}")
+            if cfg.reflex == "stop":
+                reflex = StopReflex(bus, arm)
+            if world is not None:
+                # the world's pre-roll starts from a posed state: let the arm settle before the tare
+                time.sleep(SETTLE_S)
+                monitor.start()
+                end = time.monotonic() + cfg.connect_timeout_s
+                while not monitor.tared and time.monotonic() < end:  # the tare, in the pre-roll (at rest)
+                    time.sleep(0.02)
+                if not monitor.tared:
+                    raise MonitorSetupError(f"no tare within {cfg.connect_timeout_s:g} s: {dict(monitor.counters)}")
+                world.go()
+            t_end = None if (cfg.sim or not cfg.duration) else time.monotonic() + cfg.duration
+            view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
+                           + (f", scenario {cfg.scenario} (emulated devices)" if cfg.sim else ""))
+            live = Live(console=console, refresh_per_second=4, transient=False, auto_refresh=False) \
+                if cfg.view else contextlib.nullcontext()
+            try:
+                with live:
+                    while True:
+                        pump()
+                        if cfg.view:
+                            live.update(view.render(), refresh=True)
+                        if world is not None and world.done:
+                            break
+                        if t_end is not None and time.monotonic() >= t_end:
+                            break
+                        time.sleep(0.25 if cfg.view else 0.05)
+                    _wait_idle(monitor)
+                    pump()
+                    if cfg.view:
+                        live.update(view.render(), refresh=True)
+            except KeyboardInterrupt:
+                out.problems.append("interrupted")
+        finally:
+            out.t_closed_ns = time.monotonic_ns()
+            for a in adapters:
+                a.close()
+            monitor.stop()
+            if reflex is not None:
+                reflex.close()
+        pump()
+        out.counters = dict(monitor.counters)
+        if reflex is not None:
+            out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
+        if world is not None and world.done and "error" not in (world.result or {}):
+            out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s)
+        elif world is not None:
+            out.problems.append(f"the simulated world did not finish: {world.result}")
+        if recorder is not None:
+            final = {"events": {"count": str(len(out.events)),
+                                "jsonl": "\n".join(json.dumps(e, separators=(",", ":")) for e in out.events)}}
+            if out.evaluation is not None:
+                final["evaluation"] = {"json": json.dumps(out.evaluation.to_dict())}
+            recorder.stop(final)
+            if recorder.drops:
+                out.problems.append(f"recorder dropped {recorder.drops} frames")
+        if monitor.counters.get("errors"):
+            out.problems.append(f"pipeline errors: {monitor.counters['errors']}")
+        if out.counters.get("frames", 0) == 0:
+            out.problems.append("no F/T frame reached the pipeline")
+            out.exit_code = 1
+        _summary(console, cfg, bus, topics, out, adapters, recorder, world)
+    return out
+
+
+def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], out: MonitorOutcome, adapters,
+             recorder, world) -> None:
+    console.print(stream_table(bus, topics, out.t_closed_ns or time.monotonic_ns(),
+                               title="streams (stale: at the end of the run)"))
+    kinds = {k: sum(e["kind"] == k for e in out.events) for k in ("onset", "update", "offset")}
+    console.print(f"contact events: {kinds}" + (f" -> {cfg.events}" if cfg.events else ""))
+    console.print(f"monitor: {out.counters}")
+    for a in adapters:
+        console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
+    if out.reflex:
+        stops = out.reflex["stops"]
+        sent = [s["sent_after_onset_ms"] for s in stops]
+        console.print(f"reflex stop: {len(stops)} sent" + (f", {min(sent):.2f}-{max(sent):.2f} ms after the onset "
+                                                          "sample" if sent else "")
+                      + (f"; errors: {out.reflex['errors']}" if out.reflex["errors"] else ""))
+    if recorder is not None:
+        console.print(f"recorded {sum(recorder.counts.values())} messages -> {recorder.path} "
+                      f"(drops {recorder.drops})")
+    if out.evaluation is not None:
+        console.print(evaluation_table(out.evaluation))
+        if cfg.truth:
+            console.print(f"ground truth -> {cfg.truth}")
+    for p in out.problems:
+        console.print(f"[yellow]{p}[/]")

@@ -1,0 +1,143 @@
+"""The monitor's live view (rich): streams, wrenches, contact status, event log; and the summary tables."""
+from __future__ import annotations
+
+import sys
+import time
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+from rich.console import Console, Group
+from rich.table import Table
+from rich.text import Text
+
+from ftc_hw.bus import Bus, ContactEvent, DeviceEvent
+
+from .evaluate import Evaluation
+
+
+def make_console() -> Console:
+    """The terminal's console; 150 columns when the output is a file or pipe (the tables stay readable)."""
+    return Console() if sys.stdout.isatty() else Console(width=150)
+
+
+def stream_table(bus: Bus, topics: list[str], now_ns: int, title: str = "streams") -> Table:
+    t = Table(title=title, title_justify="left", expand=False)
+    for col in ("topic", "frames", "rate Hz", "jitter ms", "stale ms", "max gap ms", "seq missing"):
+        t.add_column(col, justify="left" if col == "topic" else "right")
+    for topic in topics:
+        try:
+            s = bus.stats(topic)
+        except KeyError:
+            t.add_row(topic, "0", "-", "-", "[red]no data[/]", "-", "-")
+            continue
+        last = bus.latest(topic)
+        stale = (now_ns - last.t_host_ns) / 1e6 if last is not None else float("nan")
+        style = "red" if stale > 100 else ""
+        t.add_row(topic, str(s.count), f"{s.rate_hz:.1f}", f"{s.jitter_s * 1e3:.3f}",
+                  Text(f"{stale:.1f}", style=style), f"{s.max_gap_s * 1e3:.2f}", str(s.seq_missing))
+    return t
+
+
+def _fmt(v, scale: float = 1.0, width: int = 8, prec: int = 2) -> list[str]:
+    return [f"{x * scale:{width}.{prec}f}" for x in v]
+
+
+def wrench_table(raw, external, d2: float | None, threshold: float | None) -> Table:
+    t = Table(title="wrench (sensor frame)", title_justify="left", expand=False)
+    t.add_column("")
+    for c in ("fx N", "fy N", "fz N", "tx Nm", "ty Nm", "tz Nm"):
+        t.add_column(c, justify="right")
+    t.add_row("raw", *(_fmt(raw) if raw is not None else ["-"] * 6))
+    t.add_row("external", *(_fmt(external) if external is not None else ["-"] * 6))
+    if d2 is not None:
+        t.caption = f"detection d2 {d2:.1f} (onset above {threshold:.1f})" if threshold else f"d2 {d2:.1f}"
+    return t
+
+
+def contact_table(result) -> Table:
+    t = Table(title="contact (base frame)", title_justify="left", expand=False)
+    for c in ("status", "link", "x mm", "y mm", "z mm", "|F| N", "force N", "+- mm (1 sigma)", "flags"):
+        t.add_column(c, justify="left" if c in ("status", "link", "flags", "force N") else "right")
+    e = None if result is None else result.estimate
+    if result is None:
+        t.add_row("waiting", "", "", "", "", "", "", "", "")
+    elif result.detection.active and e is not None and e.contact:
+        t.add_row("[bold red]CONTACT[/]", e.link, *_fmt(e.point, 1e3, 7, 1), f"{np.linalg.norm(e.force):6.1f}",
+                  " ".join(_fmt(e.force, 1.0, 6, 1)), " ".join(_fmt(e.point_std, 1e3, 4, 1)), ",".join(e.flags))
+    elif result.detection.active:
+        t.add_row("[bold red]CONTACT[/]", "?", "", "", "", "", "", "", ",".join(e.flags) if e else "no estimate")
+    else:
+        t.add_row("[green]free[/]", "", "", "", "", "", "", "", "")
+    return t
+
+
+def event_text(ev, t0_ns: int) -> str:
+    t = (ev.t_host_ns - t0_ns) / 1e9
+    if isinstance(ev, ContactEvent):
+        return (f"{t:8.3f} s  {ev.kind:6s} {ev.link or '-':14s} point {np.round(np.asarray(ev.point) * 1e3, 1)} mm  "
+                f"|F| {np.linalg.norm(ev.force):5.1f} N  +-{np.linalg.norm(ev.point_std) * 1e3:.1f} mm  "
+                f"{','.join(ev.flags)}")
+    if isinstance(ev, DeviceEvent):
+        return f"{t:8.3f} s  device {ev.source}: {ev.kind} {ev.message}"
+    return f"{t:8.3f} s  {ev!r}"
+
+
+class LiveView:
+    """Renders the monitor's state; ``add`` events as they come, ``render()`` at the refresh rate."""
+
+    def __init__(self, bus: Bus, monitor, topics: list[str], *, ft_topic: str, title: str,
+                 now_ns: Callable[[], int] = time.monotonic_ns, log_lines: int = 8) -> None:
+        self.bus = bus
+        self.monitor = monitor
+        self.topics = topics
+        self.ft_topic = ft_topic
+        self.title = title
+        self.now_ns = now_ns
+        self.t0_ns = now_ns()
+        self.log: deque[str] = deque(maxlen=log_lines)
+        self.status = ""
+
+    def add(self, ev) -> None:
+        self.log.append(event_text(ev, self.t0_ns))
+
+    def render(self) -> Group:
+        mf = self.monitor.latest
+        result = mf.result if mf is not None else None
+        raw = self.bus.latest(self.ft_topic)
+        threshold = float(self.monitor.pipeline.detector.on)
+        header = Text.assemble((self.title, "bold"), "  ", self.status)
+        counters = ", ".join(f"{k} {v}" for k, v in sorted(self.monitor.counters.items()))
+        return Group(header, stream_table(self.bus, self.topics, self.now_ns()),
+                     wrench_table(raw.wrench if raw is not None else None,
+                                  result.external if result is not None else None,
+                                  float(result.detection.d2) if result is not None else None,
+                                  threshold),
+                     contact_table(result), Text("events", style="bold"),
+                     Text("\n".join(self.log) or "(no events yet)"), Text(f"monitor: {counters}\n", style="dim"))
+
+
+def evaluation_table(ev: Evaluation, title: str = "contacts: detected against ground truth") -> Table:
+    t = Table(title=title, title_justify="left")
+    for c in ("#", "start s", "true link", "detected", "delay ms", "from due", "est. link", "link ok", "err mm med",
+              "rms", "max", "rms all", "|dF| N", "estimates"):
+        t.add_column(c, justify="left" if c in ("true link", "detected", "est. link") else "right")
+    for c in ev.contacts:
+        late = f"[yellow]late (> {ev.delay_limit_ms:g} ms)[/]"
+        det = ("yes" if c.delay_ok else late) if c.detected else "[red]no[/]"
+
+        def f(x, fmt="{:.1f}"):
+            return "-" if x is None else fmt.format(x)
+
+        t.add_row(str(c.index), f"{c.start_s:.3f}", c.link, det, f(c.onset_delay_ms, "{:.2f}"),
+                  f(c.onset_delay_due_ms, "{:.2f}"), c.est_link,
+                  f"{c.link_right * 100:.0f} %", f(c.err_median_mm), f(c.err_rms_mm), f(c.err_max_mm),
+                  f(c.err_rms_all_mm), f(c.force_err_median_n, "{:.2f}"), f"{c.trusted}/{c.estimates}")
+    t.caption = (f"{len(ev.contacts)} true contacts, {ev.detected} detected, "
+                 f"{sum(c.detected and c.delay_ok for c in ev.contacts)} within {ev.delay_limit_ms:g} ms, "
+                 f"false alarms {len(ev.false_alarms)}"
+                 + (f" at {ev.false_alarms} s" if ev.false_alarms else "") + f", split detections {ev.splits}. "
+                 "Delay: from the first contact sample's publication (from due: from when it was due). "
+                 "Point errors (mm) over the estimates without a solver flag (rms all: with the flagged ones); "
+                 "estimates: unflagged/all")
+    return t

@@ -1,0 +1,127 @@
+"""Replay: a recording's pipeline inputs (``monitor/input``) through a fresh :class:`~ftc_hw.monitor.LiveMonitor`
+with the recorded scene, calibration and monitor settings. With nothing changed the events are the
+recorded ones, bit for bit; the recorded device streams are published on the replay's bus too (for
+the live view's stream statistics, on their recorded host times).
+"""
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent
+from ftc_hw.live.events import event_record
+from ftc_hw.model import Payload
+from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
+from ftc_hw.scene import Scene, SceneError, load_scene
+
+from .reader import Recording
+
+
+class ReplayError(Exception):
+    pass
+
+
+def pipeline_kwargs_to_json(kwargs: dict[str, Any]) -> str:
+    out: dict[str, Any] = {}
+    for k, v in kwargs.items():
+        if isinstance(v, Payload):
+            out[k] = {"mass": v.mass, "com": list(v.com)}
+        elif hasattr(v, "tolist"):
+            out[k] = v.tolist()
+        else:
+            out[k] = v
+    return json.dumps(out)
+
+
+def pipeline_kwargs_from_json(text: str) -> dict[str, Any]:
+    out = json.loads(text)
+    if isinstance(out.get("payload"), dict):
+        p = out["payload"]
+        out["payload"] = Payload(float(p["mass"]), tuple(float(x) for x in p["com"]))
+    return out
+
+
+def recorded_scene(rec: Recording) -> Scene:
+    meta = rec.metadata.get("scene")
+    if meta is None:
+        raise ReplayError(f"{rec.path}: no scene metadata; give --scene")
+    for ref in (meta.get("path"), meta.get("name")):
+        if not ref:
+            continue
+        try:
+            return load_scene(ref)
+        except (SceneError, OSError):
+            continue
+    raise ReplayError(f"{rec.path}: scene {meta.get('name')!r} ({meta.get('path')}) not found; give --scene")
+
+
+@dataclass
+class ReplayResult:
+    inputs: int
+    events: list[ContactEvent]
+    recorded: list[ContactEvent]
+    monitor: LiveMonitor
+
+    def records(self) -> tuple[list[dict], list[dict]]:
+        return [event_record(e) for e in self.events], [event_record(e) for e in self.recorded]
+
+    @property
+    def identical(self) -> bool:
+        a, b = self.records()
+        return a == b
+
+    def first_difference(self) -> tuple[int, dict | None, dict | None] | None:
+        a, b = self.records()
+        for i in range(max(len(a), len(b))):
+            x = a[i] if i < len(a) else None
+            y = b[i] if i < len(b) else None
+            if x != y:
+                return i, x, y
+        return None
+
+
+def replay(rec: Recording, *, scene: Scene | None = None, pipeline_kwargs: dict[str, Any] | None = None,
+           speed: float = 0.0, bus: Bus | None = None, on_message: Callable[[LiveMonitor], None] | None = None,
+           monitor_ready: Callable[[LiveMonitor], None] | None = None) -> ReplayResult:
+    """``speed``: 0 as fast as possible, else the recording's pace times ``speed``. ``pipeline_kwargs``:
+    instead of the recorded ones (e.g. another calibration). ``on_message``: called after each message."""
+    scene = scene or recorded_scene(rec)
+    meta = rec.metadata.get("monitor", {})
+    kwargs = pipeline_kwargs_from_json(meta.get("pipeline", "{}")) if pipeline_kwargs is None else pipeline_kwargs
+    tare = meta.get("tare_s", "0.1")
+    inputs = [m for m in rec.messages if m.topic == MONITOR_INPUT]
+    if not inputs:
+        raise ReplayError(f"{rec.path}: no {MONITOR_INPUT} messages (not recorded by ftc monitor)")
+    bus = bus or Bus()
+    monitor = LiveMonitor(bus, scene, ft_source=meta.get("ft_source", "ft"), arm_source=meta.get("arm_source", "arm"),
+                          tare_s=None if tare in ("", "None") else float(tare), publish_inputs=False, **kwargs)
+    if monitor_ready is not None:
+        monitor_ready(monitor)
+    sub = bus.subscribe(EVENTS_CONTACT, maxsize=None)
+    recorded: list[ContactEvent] = []
+    t0 = rec.messages[0].log_time
+    wall0 = time.monotonic()
+    for m in rec.messages:
+        if speed > 0:
+            ahead = (m.log_time - t0) / 1e9 / speed - (time.monotonic() - wall0)
+            if ahead > 0.001:
+                time.sleep(ahead)
+        if m.topic == MONITOR_INPUT:
+            monitor.consume(m.frame)
+        elif m.topic == EVENTS_CONTACT:
+            recorded.append(m.frame)
+        else:
+            bus.publish(m.topic, m.frame)
+        if on_message is not None:
+            on_message(monitor)
+    events = sub.drain()
+    sub.close()
+    if not rec.complete:
+        # a cut recording: its last chunk may have lost the events of inputs it kept
+        last = inputs[-1].frame.t_host_ns
+        events = [e for e in events if e.t_host_ns <= last]
+        recorded = [e for e in recorded if e.t_host_ns <= last]
+    return ReplayResult(len(inputs), events, recorded, monitor)

@@ -1,0 +1,139 @@
+"""Bus frames as JSON messages with JSON Schemas (MCAP ``jsonschema`` schema / ``json`` message encoding).
+
+Floats are written with Python's shortest round-trip repr: a decoded frame is bit-for-bit the one
+that was recorded (what makes a replay reproduce the events).
+"""
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from ftc_hw.bus import ContactEvent, DeviceEvent, JointFrame, WrenchFrame, joints_topic, wrench_topic
+from ftc_hw.bus.bus import EVENTS_CONTACT, EVENTS_DEVICE
+
+_INT = {"type": "integer"}
+_STR = {"type": "string"}
+_NUM = {"type": "number"}
+_DEVICE_TIME = {"type": ["integer", "null"], "description": "device clock, ns (null: the device sends none)"}
+
+
+def _vec(n: int | None, unit: str) -> dict[str, Any]:
+    s: dict[str, Any] = {"type": "array", "items": _NUM, "description": unit}
+    if n is not None:
+        s.update(minItems=n, maxItems=n)
+    return s
+
+
+def _schema(title: str, description: str, props: dict[str, Any], optional: tuple[str, ...] = ()) -> dict:
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title, "description": description,
+            "type": "object", "properties": props, "required": [k for k in props if k not in optional]}
+
+
+_HOST = {"type": "integer", "description": "host time.monotonic_ns()"}
+SCHEMAS: dict[str, dict[str, Any]] = {
+    "ftc_hw.WrenchFrame": _schema("ftc_hw.WrenchFrame", "one F/T sample, sensor frame, scene sign convention", {
+        "t_host_ns": _HOST, "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR,
+        "wrench": _vec(6, "[fx, fy, fz] N, [tx, ty, tz] N m"), "flags": _INT}),
+    "ftc_hw.JointFrame": _schema("ftc_hw.JointFrame", "joint state in the scene's joint order", {
+        "t_host_ns": _HOST, "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR, "q": _vec(None, "rad"),
+        "qd": _vec(None, "rad/s"), "current": _vec(None, "A"), "tau": {"type": ["array", "null"], "items": _NUM},
+        "flags": _INT}),
+    "ftc_hw.ContactEvent": _schema("ftc_hw.ContactEvent", "contact onset/update/offset, base frame", {
+        "t_host_ns": _HOST, "kind": {"enum": ["onset", "update", "offset"]}, "link": _STR,
+        "point": _vec(3, "m"), "force": _vec(3, "N applied to the arm"), "point_std": _vec(3, "m, 1 sigma"),
+        "flags": {"type": "array", "items": _STR}, "probability": _NUM}),
+    "ftc_hw.DeviceEvent": _schema("ftc_hw.DeviceEvent", "device or stream event", {
+        "t_host_ns": _HOST, "source": _STR, "kind": _STR, "message": _STR,
+        "counters": {"type": "object", "additionalProperties": _NUM}}),
+    "ftc_hw.PipelineInput": _schema("ftc_hw.PipelineInput", "one F/T sample as the contact pipeline consumed it: "
+                                    "aligned time, raw wrench, joint state interpolated at that time", {
+        "t_host_ns": {"type": "integer", "description": "the sample's aligned host time, ns"},
+        "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR, "wrench": _vec(6, "N, N m"),
+        "q": _vec(None, "rad"), "qd": _vec(None, "rad/s"), "current": _vec(None, "A"),
+        "saturated": {"type": "boolean"}, "tare": {"type": "boolean"}}),
+}
+
+
+def _list(a) -> list[float]:
+    return [float(x) for x in a]
+
+
+def topic_of(frame: Any) -> str | None:
+    """The bus topic a frame is published on (the bus conventions), None for an unknown type."""
+    from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
+
+    if isinstance(frame, WrenchFrame):
+        return wrench_topic(frame.source)
+    if isinstance(frame, JointFrame):
+        return joints_topic(frame.source)
+    if isinstance(frame, ContactEvent):
+        return EVENTS_CONTACT
+    if isinstance(frame, DeviceEvent):
+        return EVENTS_DEVICE
+    if isinstance(frame, PipelineInput):
+        return MONITOR_INPUT
+    return None
+
+
+def encode(frame: Any) -> tuple[str, bytes]:
+    """(schema name, JSON bytes)."""
+    from ftc_hw.monitor import PipelineInput
+
+    if isinstance(frame, WrenchFrame):
+        name, d = "ftc_hw.WrenchFrame", {"t_host_ns": frame.t_host_ns, "t_device_ns": frame.t_device_ns,
+                                         "seq": frame.seq, "source": frame.source, "wrench": _list(frame.wrench),
+                                         "flags": int(frame.flags)}
+    elif isinstance(frame, JointFrame):
+        name, d = "ftc_hw.JointFrame", {"t_host_ns": frame.t_host_ns, "t_device_ns": frame.t_device_ns,
+                                        "seq": frame.seq, "source": frame.source, "q": _list(frame.q),
+                                        "qd": _list(frame.qd), "current": _list(frame.current),
+                                        "tau": None if frame.tau is None else _list(frame.tau),
+                                        "flags": int(frame.flags)}
+    elif isinstance(frame, ContactEvent):
+        name, d = "ftc_hw.ContactEvent", {"t_host_ns": frame.t_host_ns, "kind": frame.kind, "link": frame.link,
+                                          "point": _list(frame.point), "force": _list(frame.force),
+                                          "point_std": _list(frame.point_std), "flags": list(frame.flags),
+                                          "probability": float(frame.probability)}
+    elif isinstance(frame, DeviceEvent):
+        name, d = "ftc_hw.DeviceEvent", {"t_host_ns": frame.t_host_ns, "source": frame.source, "kind": frame.kind,
+                                         "message": frame.message,
+                                         "counters": {k: float(v) for k, v in frame.counters.items()}}
+    elif isinstance(frame, PipelineInput):
+        name, d = "ftc_hw.PipelineInput", {"t_host_ns": frame.t_host_ns, "t_device_ns": frame.t_device_ns,
+                                           "seq": frame.seq, "source": frame.source, "wrench": _list(frame.wrench),
+                                           "q": _list(frame.q), "qd": _list(frame.qd),
+                                           "current": _list(frame.current), "saturated": bool(frame.saturated),
+                                           "tare": bool(frame.tare)}
+    else:
+        raise TypeError(f"no schema for {type(frame).__name__}")
+    return name, json.dumps(d, separators=(",", ":")).encode()
+
+
+def decode(schema: str, data: bytes) -> Any:
+    """The frame a message holds (validated by the frames' ``make``); ValueError on a bad message."""
+    d = json.loads(data)
+    if schema == "ftc_hw.WrenchFrame":
+        return WrenchFrame.make(d["t_host_ns"], d["wrench"], source=d["source"], seq=d["seq"],
+                                t_device_ns=d["t_device_ns"], flags=d["flags"])
+    if schema == "ftc_hw.JointFrame":
+        return JointFrame.make(d["t_host_ns"], d["q"], d["qd"], d["current"], d["tau"], source=d["source"],
+                               seq=d["seq"], t_device_ns=d["t_device_ns"], flags=d["flags"])
+    if schema == "ftc_hw.ContactEvent":
+        return ContactEvent.make(d["t_host_ns"], d["kind"], d["link"], d["point"], d["force"], d["point_std"],
+                                 flags=d["flags"], probability=d["probability"])
+    if schema == "ftc_hw.DeviceEvent":
+        return DeviceEvent.make(d["t_host_ns"], d["source"], d["kind"], d["message"], d["counters"])
+    if schema == "ftc_hw.PipelineInput":
+        from ftc_hw.monitor import PipelineInput
+
+        def arr(k: str) -> np.ndarray:
+            a = np.array(d[k], dtype=np.float64)
+            if a.ndim != 1 or not np.isfinite(a).all():
+                raise ValueError(f"PipelineInput.{k}: expected a finite vector")
+            return a
+
+        return PipelineInput(int(d["t_host_ns"]), d["t_device_ns"], int(d["seq"]), str(d["source"]), arr("wrench"),
+                             arr("q"), arr("qd"), arr("current"), bool(d["saturated"]), bool(d["tare"]))
+    raise ValueError(f"unknown schema {schema!r}")

@@ -1,0 +1,148 @@
+"""Records a bus to MCAP: one channel per bus topic (JSON messages with a JSON Schema), ``log_time`` =
+the frame's host ``time.monotonic_ns()``, ``publish_time`` = its device time (the host time when the
+device sends none), metadata for the scene, calibration and monitor settings (at the start) and the
+contact events (at the end).
+
+Crash-safe: the chunk in progress is closed and flushed to the OS every ``flush_s`` seconds (and
+whenever it reaches ``chunk_size``), so a recorder that is killed leaves a file that reads up to its
+last complete chunk (:func:`ftc_hw.record.reader.read_recording` reads such a file).
+
+A queue subscription decouples the publishers (device reader threads) from the encoding; a full
+queue drops the oldest frames, counted in ``drops`` and written to the final metadata.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from mcap.writer import CompressionType, Writer
+
+from ftc_hw import __version__
+from ftc_hw.bus import Bus, SubscriptionClosed
+
+from .schemas import SCHEMAS, encode, topic_of
+
+PROFILE = ""  # no well-known MCAP profile (not ROS); the schemas say what the messages are
+LIBRARY = f"ftc-hw/{__version__}"
+
+
+class McapRecorder:
+    """``with McapRecorder(bus, "run.mcap", metadata={...}):`` records every topic under ``prefix``."""
+
+    def __init__(self, bus: Bus, path: Path | str, *, metadata: dict[str, dict[str, str]] | None = None,
+                 prefix: str = "", chunk_size: int = 256 * 1024, flush_s: float = 0.2,
+                 maxsize: int = 200_000) -> None:
+        self.bus = bus
+        self.path = Path(path)
+        self.metadata = dict(metadata or {})
+        self.prefix = prefix
+        self.chunk_size = chunk_size
+        self.flush_s = flush_s
+        self.maxsize = maxsize
+        self.counts: Counter[str] = Counter()
+        self.skipped = 0  # frames of a type with no schema
+        self.drops = 0
+        self._lock = threading.Lock()
+        self._file: Any = None
+        self._writer: Writer | None = None
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sub = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    def start(self) -> McapRecorder:
+        if self._writer is not None:
+            return self
+        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in stop()
+        self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library=LIBRARY)
+        for name, data in self.metadata.items():
+            self._writer.add_metadata(name, data)
+        self._writer.flush()
+        self._sub = self.bus.subscribe(self.prefix, maxsize=self.maxsize, prefix=True)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="mcap-recorder", daemon=True)
+        self._thread.start()
+        return self
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        with self._lock:
+            if self._writer is not None:
+                self._writer.add_metadata(name, {k: str(v) for k, v in data.items()})
+                self._file.flush()
+
+    def _channel(self, topic: str, schema: str) -> int:
+        cid = self._channels.get(topic)
+        if cid is None:
+            sid = self._schemas.get(schema)
+            if sid is None:
+                import json
+
+                sid = self._writer.register_schema(schema, "jsonschema", json.dumps(SCHEMAS[schema]).encode())
+                self._schemas[schema] = sid
+            cid = self._writer.register_channel(topic, "json", sid)
+            self._channels[topic] = cid
+        return cid
+
+    def write(self, frame: Any) -> None:
+        """Write one frame (the recorder's thread does this for every frame on the bus)."""
+        topic = topic_of(frame)
+        if topic is None:
+            self.skipped += 1
+            return
+        schema, data = encode(frame)
+        t_dev = getattr(frame, "t_device_ns", None)
+        with self._lock:
+            cid = self._channel(topic, schema)
+            self._writer.add_message(cid, log_time=frame.t_host_ns, data=data,
+                                     publish_time=frame.t_host_ns if t_dev is None else t_dev,
+                                     sequence=int(getattr(frame, "seq", self.counts[topic])) & 0xFFFFFFFF)
+        self.counts[topic] += 1
+
+    def _run(self) -> None:
+        last_flush = time.monotonic()
+        while True:
+            try:
+                frame = self._sub.get(timeout=0.05)
+            except SubscriptionClosed:
+                break
+            except Exception:  # noqa: BLE001 - queue.Empty: time to flush
+                frame = None
+            if frame is not None:
+                self.write(frame)
+                for f in self._sub.drain():
+                    self.write(f)
+            if time.monotonic() - last_flush >= self.flush_s:
+                with self._lock:
+                    self._writer.flush()  # closes the chunk and flushes the file
+                last_flush = time.monotonic()
+
+    def stop(self, final_metadata: dict[str, dict[str, str]] | None = None) -> None:
+        """Write what is queued, then ``final_metadata`` and the summary; close the file."""
+        if self._writer is None:
+            return
+        self._sub.close()
+        if self._thread is not None:
+            self._thread.join(timeout=30.0)
+            self._thread = None
+        for f in self._sub.drain():
+            self.write(f)
+        self.drops = self._sub.drops
+        with self._lock:
+            meta = {"recorder": {"drops": str(self.drops), "skipped": str(self.skipped),
+                                 **{f"messages:{k}": str(v) for k, v in sorted(self.counts.items())}}}
+            for name, data in {**meta, **(final_metadata or {})}.items():
+                self._writer.add_metadata(name, {k: str(v) for k, v in data.items()})
+            self._writer.finish()
+            self._file.close()
+            self._writer = None
+
+    def __enter__(self) -> McapRecorder:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

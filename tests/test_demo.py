@@ -1,0 +1,51 @@
+"""``ftc demo`` in a terminal (a pty): the live view renders without errors, the run ends by itself
+with the summary against ground truth and exit status 0."""
+from __future__ import annotations
+
+import os
+import pty
+import re
+import select
+import subprocess
+import sys
+import time
+
+
+def run_in_pty(args: list[str], timeout: float = 180) -> tuple[int, str]:
+    master, slave = pty.openpty()
+    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "140", "LINES": "50"}
+    proc = subprocess.Popen(args, stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True)
+    os.close(slave)
+    chunks = []
+    end = time.monotonic() + timeout
+    try:
+        while time.monotonic() < end:
+            if select.select([master], [], [], 0.5)[0]:
+                try:
+                    data = os.read(master, 65536)
+                except OSError:  # EIO: the child closed the terminal
+                    break
+                if not data:
+                    break
+                chunks.append(data)
+            elif proc.poll() is not None:
+                break
+        rc = proc.wait(timeout=max(1.0, end - time.monotonic()))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(master)
+    return rc, b"".join(chunks).decode("utf-8", errors="replace")
+
+
+def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary():
+    rc, out = run_in_pty([sys.executable, "-m", "ftc_hw", "demo", "--duration", "5"])
+    assert rc == 0, out[-4000:]
+    assert "Traceback" not in out and "Error" not in out, out[-4000:]
+    assert "\x1b[" in out  # a terminal: rich drew (and redrew) the live view with escape sequences
+    plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out)
+    assert plain.count("ftc demo") >= 3  # the live view was refreshed, not printed once
+    for part in ("wrench (sensor frame)", "contact (base frame)", "CONTACT", "wrist_3", "monitor/input",
+                 "contacts: detected against ground truth"):
+        assert part in plain, part
+    assert re.search(r"summary: \d/1 contacts detected", plain), plain[-3000:]

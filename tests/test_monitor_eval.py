@@ -1,0 +1,83 @@
+"""The evaluation of contact events against ground truth (used by ftc monitor --sim, ftc demo and the
+end-to-end tests): detection, delay, false alarms, splits and localization on hand-made timelines."""
+from __future__ import annotations
+
+import pytest
+
+from ftc_hw.live.evaluate import evaluate
+
+MS = 1_000_000
+T0 = 5_000_000_000  # host ns of the first truth sample
+
+
+def truth(n: int, contact: set[int], point=(0.1, 0.0, 0.5), link="link3"):
+    """One sample per ms; in contact at the given indices."""
+    return [{"t": i * 0.001, "t_host_ns": T0 + i * MS, "contact": i in contact,
+             "link": link if i in contact else None, "point": list(point) if i in contact else None,
+             "force": [0.0, 0.0, -10.0] if i in contact else None} for i in range(n)]
+
+
+def event(kind: str, t_ns: int, point=(0.1, 0.0, 0.5), link="link3", flags=()):
+    return {"t": t_ns / 1e9, "t_host_ns": t_ns, "kind": kind, "link": link, "point": list(point),
+            "force": [0.0, 0.0, -10.0], "point_std": [0.001] * 3, "flags": list(flags)}
+
+
+def test_a_timely_onset_detects_the_contact_and_localization_is_measured():
+    tr = truth(400, set(range(100, 200)) | set(range(300, 350)))
+    evs = [event("onset", T0 + 101 * MS, point=(0.1, 0.003, 0.5)), event("update", T0 + 150 * MS),
+           event("update", T0 + 160 * MS, point=(0.2, 0.0, 0.5), flags=("ambiguous",)),
+           event("offset", T0 + 205 * MS),
+           event("onset", T0 + 302 * MS + MS // 2), event("offset", T0 + 360 * MS)]
+    ev = evaluate(evs, tr, 0.001)
+    assert ev.delay_limit_ms == pytest.approx(3.0)
+    assert [c.detected for c in ev.contacts] == [True, True]
+    assert ev.contacts[0].onset_delay_ms == pytest.approx(1.0)
+    assert ev.contacts[1].onset_delay_ms == pytest.approx(2.5) and ev.contacts[1].delay_ok
+    assert ev.all_in_time and not ev.false_alarms and ev.splits == 0
+    c = ev.contacts[0]
+    # the flagged estimate is left out of the accuracy figures, counted in "rms all"
+    assert (c.estimates, c.trusted) == (3, 2)
+    assert c.err_max_mm == pytest.approx(3.0) and c.err_median_mm == pytest.approx(1.5)
+    assert c.err_rms_all_mm == pytest.approx(((9 + 0 + 100**2) / 3) ** 0.5, rel=1e-3)
+    assert c.link_right == 1.0
+
+
+def test_late_missing_false_and_split_onsets_are_reported():
+    tr = truth(1000, set(range(100, 200)) | set(range(500, 600)) | set(range(800, 900)))
+    evs = [event("onset", T0 + 104 * MS),  # 4 ms: detected, late
+           event("onset", T0 + 150 * MS),  # a second onset within the same contact: a split
+           event("onset", T0 + 400 * MS),  # no contact there: a false alarm
+           event("onset", T0 + 501 * MS)]
+    ev = evaluate(evs, tr, 0.001)
+    assert [c.detected for c in ev.contacts] == [True, True, False]
+    assert not ev.contacts[0].delay_ok and ev.contacts[1].delay_ok
+    assert ev.false_alarms == [pytest.approx(0.4)]
+    assert ev.splits == 1
+    assert not ev.all_in_time
+    assert ev.contacts[2].err_rms_mm is None
+
+
+def test_an_onset_before_the_contact_is_a_false_alarm():
+    tr = truth(300, set(range(100, 200)))
+    ev = evaluate([event("onset", T0 + 95 * MS)], tr, 0.001)
+    assert ev.false_alarms and not ev.contacts[0].detected
+
+
+def test_truth_without_host_times_is_refused():
+    tr = truth(10, set())
+    for r in tr:
+        del r["t_host_ns"]
+    with pytest.raises(ValueError, match="t_host_ns"):
+        evaluate([], tr, 0.001)
+
+
+def test_delay_counts_from_when_the_sample_was_due_when_the_world_ran_late():
+    tr = truth(300, set(range(100, 200)))
+    for r in tr:
+        r["t_due_ns"] = r["t_host_ns"] - 4 * MS  # published 4 ms late
+    ev = evaluate([event("onset", T0 + 97 * MS)], tr, 0.001)  # 1 ms after the first sample was due
+    c = ev.contacts[0]
+    assert c.onset_delay_due_ms == pytest.approx(1.0) and c.onset_delay_ms == pytest.approx(-3.0)
+    assert ev.all_in_time and not ev.false_alarms
+    # before it was due: a false alarm
+    assert evaluate([event("onset", T0 + 94 * MS)], tr, 0.001).false_alarms

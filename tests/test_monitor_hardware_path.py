@@ -1,0 +1,52 @@
+"""``ftc monitor`` without ``--sim``, as next to a real arm: the devices at the scene's addresses. Here
+the "hardware" is ``ftc sim`` started separately (its emulators on ptys) and a copy of the dxl-arm
+scene whose ``[[devices]]`` carry those addresses."""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from importlib import resources
+
+from ftc_hw.live.events import read_events
+from ftc_hw.record.reader import read_recording
+
+
+def test_monitor_connects_to_the_devices_at_the_scene_addresses(tmp_path):
+    builtin = resources.files("ftc_hw") / "scene" / "builtin"
+    sim = subprocess.Popen([sys.executable, "-m", "ftc_hw", "sim", "dxl-arm", "--scenario", "hold", "--duration", "60"],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        endpoints = {d["name"]: d["endpoint"] for d in json.loads(sim.stdout.readline())["devices"]}
+        text = (builtin / "dxl-arm.toml").read_text()
+        for name, where in endpoints.items():
+            text = text.replace(f'name = "{name}"\n', f'name = "{name}"\naddress = "{where}"\n', 1)
+        scene = tmp_path / "bench-arm.toml"
+        scene.write_text(text)
+        shutil.copy(builtin / "dxl-arm.xml", tmp_path / "dxl-arm.xml")
+        proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", str(scene), "--duration", "3",
+                               "--events", str(tmp_path / "e.jsonl"), "--record", str(tmp_path / "r.mcap"),
+                               "--no-view"], capture_output=True, text=True, timeout=120)
+    finally:
+        sim.terminate()
+        sim.wait(30)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "ft (ft300): {" in proc.stdout and "arm (dynamixel): {" in proc.stdout
+    rec = read_recording(tmp_path / "r.mcap")
+    counts = rec.counts()
+    assert counts["wrench/ft"] >= 200 and counts["joints/arm"] >= 500, counts  # 100 Hz and ~500 Hz for 3 s
+    inputs = rec.topic("monitor/input")
+    assert sum(not i.tare for i in inputs) >= 150
+    assert rec.metadata["monitor"]["sim"] == "False"
+    # the arm holds still and nothing touches it: no contact
+    assert read_events(tmp_path / "e.jsonl") == []
+
+
+def test_a_scene_without_an_arm_device_needs_sim():
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "leng2016", "--duration", "1",
+                           "--no-view"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1 and "declares no arm device" in proc.stderr, proc.stderr
+    truth = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--truth", "t.jsonl"],
+                           capture_output=True, text=True, timeout=60)
+    assert truth.returncode == 2 and "--truth needs --sim" in truth.stderr
