@@ -292,8 +292,9 @@ def run(json_path: Path | str | None = None, duration: float = 60.0, *, trials: 
 
 
 def _print(res: dict[str, Any]) -> None:
-    from rich.console import Console
     from rich.table import Table
+
+    from ftc_hw.report import table_console
 
     ok = "[green]yes[/]"
     no = "[red]NO[/]"
@@ -334,4 +335,4 @@ def _print(res: dict[str, Any]) -> None:
                   ok if r["reconnect_ms_max"] <= 1000 else no)
         t.add_row(f"kill/restart {label}: frames from the dead period", str(r["dead_period_frames"]), "0",
                   ok if r["dead_period_frames"] == 0 else no)
-    Console().print(t)
+    table_console().print(t)

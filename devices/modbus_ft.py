@@ -8,6 +8,7 @@ clock: ``seq`` is the adapter's own count). A failed poll is counted as ``timeou
 """
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -22,6 +23,10 @@ from .codecs.checksums import crc16_modbus
 from .codecs.errors import FrameFormatError
 from .codecs.registers import RegisterMap, register_map
 from .ft_base import FTAdapter
+
+# pymodbus logs every failed connect on stderr ("Connection ... refused", "Repeating...."): the
+# adapter already turns each into a counted bus event, and the stray lines would tear the live view
+logging.getLogger("pymodbus.logging").setLevel(logging.CRITICAL)
 
 
 class PollFailed(Exception):

@@ -92,13 +92,56 @@ def bench_bus(
 def demo(
     scene: Annotated[str, typer.Option(help="Built-in scene or scene file.")] = "ur5e",
     scenario: Annotated[str, typer.Option(help="Scenario name.")] = "sweep-with-collision",
-    duration: Annotated[float, typer.Option(min=1.0, help="Seconds of live view.")] = 20.0,
+    duration: Annotated[float, typer.Option(min=1.0, help="Simulated seconds (real time) of live view.")] = 30.0,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    record: Annotated[Optional[Path], typer.Option(help="Also record the run to this MCAP file.")] = None,  # noqa: UP045
 ) -> None:
-    """The live monitor on emulated devices, then a summary. Ends by itself."""
+    """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
     from .commands.demo import run_demo
 
-    raise typer.Exit(run_demo(scene, scenario, duration, seed))
+    raise typer.Exit(run_demo(scene, scenario, duration, seed, record))
+
+
+@app.command()
+def monitor(
+    scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
+    sim: Annotated[bool, typer.Option("--sim", help="Start the scene's emulated devices (what ftc sim starts) "
+                                      "and connect to them.")] = False,
+    scenario: Annotated[str, typer.Option(help="With --sim: the scenario (ftc sim --list).")] = "sweep-with-collision",
+    seed: Annotated[int, typer.Option(help="With --sim: random seed.")] = 0,
+    duration: Annotated[Optional[float], typer.Option(min=0.1, help="Seconds to run (simulated seconds with --sim); "  # noqa: UP045
+                                                      "default: until Ctrl-C.")] = None,
+    calibration: Annotated[Optional[Path], typer.Option(help="Calibration file (ftc calibrate): bias and payload; "  # noqa: UP045
+                                                        "without one the sensor is tared on the first 0.1 s.")] = None,
+    record: Annotated[Optional[Path], typer.Option(help="Record every bus topic to this MCAP file.")] = None,  # noqa: UP045
+    reflex: Annotated[Optional[str], typer.Option(help="'stop': a contact onset commands the arm to stop.")] = None,  # noqa: UP045
+    events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
+    truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
+    noise: Annotated[bool, typer.Option("--noise/--no-noise", help="With --sim: sensor noise.")] = True,
+    view: Annotated[bool, typer.Option("--view/--no-view", help="The live view.")] = True,
+    level: Annotated[str, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
+                                       "scene (the level the scene file declares).")] = "dynamics",
+) -> None:
+    """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
+    from .commands.monitor import run_monitor_command
+
+    raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record, reflex, events,
+                                         truth, noise, view, level))
+
+
+@app.command()
+def replay(
+    path: Annotated[Path, typer.Argument(help="An MCAP file recorded by ftc monitor --record.")],
+    speed: Annotated[float, typer.Option(min=0.0, help="Pace: 1 = as recorded, 0 = as fast as possible.")] = 1.0,
+    events: Annotated[Optional[Path], typer.Option(help="Write the replayed events, one JSON line each.")] = None,  # noqa: UP045
+    calibration: Annotated[Optional[Path], typer.Option(help="Replay with this calibration instead.")] = None,  # noqa: UP045
+    check: Annotated[bool, typer.Option("--check", help="Exit 1 when the events differ from the recorded.")] = False,
+    view: Annotated[bool, typer.Option("--view/--no-view", help="The live view (with --speed > 0).")] = True,
+) -> None:
+    """Feed a recording through the same pipeline; compare the events with the recorded ones."""
+    from .commands.replay import run_replay
+
+    raise typer.Exit(run_replay(path, speed, events, calibration, check, view))
 
 
 @bench_app.command("solver")
@@ -108,11 +151,16 @@ def bench_solver(
     cases: Annotated[int, typer.Option(min=100, help="Sampled contacts per scene.")] = 2000,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
+    method: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        help="Method(s) to run (default: ours and leng2016; leng2016 takes ms to 100s of ms a frame).")] = None,
 ) -> None:
     """Solver accuracy (noise-free and with the scene's noise) against latency, ours vs leng2016."""
     from .solver.bench import run
 
-    run(json_path=json_path, plot_path=plot, n=cases, seed=seed, scenes=scene)
+    methods = tuple(method or ("ours", "leng2016"))
+    if not set(methods) <= {"ours", "leng2016"}:
+        raise typer.BadParameter("ours or leng2016", param_hint="--method")
+    run(json_path=json_path, plot_path=plot, n=cases, seed=seed, scenes=scene, methods=methods)
 
 
 @bench_app.command("compensation")
@@ -127,6 +175,19 @@ def bench_compensation(
     from .compensation.bench import run
 
     run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene)
+
+
+@bench_app.command("isolation")
+def bench_isolation(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    cases: Annotated[int, typer.Option(min=50, help="Sampled contacts per scene (two-link ones are kept).")] = 400,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: ur5e, dxl-arm).")] = None,  # noqa: UP045
+) -> None:
+    """Link isolation by motor currents when the force line crosses two links: right, flagged, wrong."""
+    from .compensation.isolation_bench import run
+
+    run(json_path=json_path, cases=cases, seed=seed, scenes=scene)
 
 
 @bench_app.command("devices")
@@ -144,11 +205,40 @@ def bench_devices(
 def bench_arms(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
     duration: Annotated[float, typer.Option(min=1.0, help="Seconds per streaming run.")] = 60.0,
+    stops: Annotated[int, typer.Option(min=1, help="stop() calls per arm.")] = 200,
 ) -> None:
     """Arm adapters against their emulators: RTDE rate and accuracy, Dynamixel reads, stop, reconnects."""
     from devices.arm_bench import run
 
-    run(json_path=json_path, duration=duration)
+    run(json_path=json_path, duration=duration, stops=stops)
+
+
+@app.command()
+def calibrate(
+    scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
+    sim: Annotated[bool, typer.Option("--sim", help="Run against emulated devices (a hidden payload).")] = False,
+    sim_payload: Annotated[Optional[str], typer.Option(help="The hidden payload with --sim: mass=KG,com=X,Y,Z "  # noqa: UP045
+                                                            "(m, flange frame).")] = None,
+    non_interactive: Annotated[bool, typer.Option("--non-interactive", help="No prompts: the same steps.")] = False,
+    poses: Annotated[int, typer.Option(min=1, max=200, help="Number of planned poses.")] = 12,
+    out: Annotated[Optional[Path], typer.Option(help="Calibration file to write (TOML).")] = None,  # noqa: UP045
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the results as JSON.")] = None,  # noqa: UP045
+    sample_s: Annotated[float, typer.Option(min=0.05, help="Seconds of F/T samples per pose.")] = 1.0,
+    seed: Annotated[int, typer.Option(help="Random seed (planning candidates, simulated noise).")] = 0,
+    yaw: Annotated[bool, typer.Option("--yaw", help="Also estimate the sensor's mount rotation about z.")] = False,
+    tilt: Annotated[bool, typer.Option("--tilt", help="Also estimate a gravity tilt.")] = False,
+    arm_gravity: Annotated[bool, typer.Option("--arm-gravity", help="Also estimate the identifiable corrections "
+                                                                  "to the arm's link masses.")] = False,
+    expected_mass: Annotated[float, typer.Option(min=0.0, help="Payload mass (kg) the plan's expected "
+                                                               "accuracy assumes.")] = 0.5,
+    speed: Annotated[float, typer.Option(min=0.05, max=3.0, help="Peak joint speed of the moves, rad/s.")] = 1.0,
+) -> None:
+    """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
+    from .commands.calibrate import run_calibrate
+
+    raise typer.Exit(run_calibrate(scene, sim=sim, sim_payload=sim_payload, interactive=not non_interactive,
+                                   poses=poses, out=out, json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw,
+                                   tilt=tilt, arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
 
 
 def run() -> None:  # pragma: no cover - console entry point

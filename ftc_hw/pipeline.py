@@ -3,6 +3,7 @@ estimate and contact events out. The live monitor, replay and the benchmarks all
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -81,8 +82,7 @@ class ContactPipeline:
             if self._g_cache is None or t_clock - self._g_time >= G_REFRESH_NS:
                 self._g_cache = self.compensator.model.wrench_qdd_jacobian()
                 self._g_time = t_clock
-            joints = np.flatnonzero(np.abs(lag_error) >= self.lag_floor)
-            model_error = (self._g_cache[:, joints] * lag_error[joints]).T
+            model_error = (self._g_cache * np.where(np.abs(lag_error) >= self.lag_floor, lag_error, 0.0)).T
         det = self.detector.update(t_ns, external, model_error)
         tau_ext = tau_std = None
         if want_tau and det.active:  # only the solver needs them
@@ -122,10 +122,14 @@ class ContactPipeline:
 
     @staticmethod
     def _event(t_ns: int, kind: str, e: ContactEstimate | None, det: Detection) -> ContactEvent:
-        if e is None or not e.contact:
-            z = np.zeros(3)
-            flags = e.flags if e is not None else ("no_estimate",)
-            return ContactEvent.make(t_ns, kind, e.link if e and e.link else "", z, z, z, flags=flags,
-                                     probability=det.probability)
-        return ContactEvent.make(t_ns, kind, e.link, e.point, e.force, e.point_std, flags=e.flags,
-                                 probability=det.probability)
+        """The event always goes out (an onset above all): an estimate it cannot carry (none, no
+        contact, no link or a non-finite value) gives zeros and the ``no_estimate`` flag."""
+        if e is not None and e.contact and e.link:
+            std = e.point_std
+            if math.isfinite(float(e.point.sum() + e.force.sum() + std.sum())):
+                return ContactEvent.make(t_ns, kind, e.link, e.point, e.force, std, flags=e.flags,
+                                         probability=det.probability)
+        z = np.zeros(3)
+        flags = (*e.flags, "no_estimate") if e is not None else ("no_estimate",)
+        link = e.link if e is not None and e.link else "unknown"
+        return ContactEvent.make(t_ns, kind, link, z, z, z, flags=flags, probability=det.probability)

@@ -92,6 +92,27 @@ def test_bench_bus_writes_json(tmp_path):
     assert figures["publish_deliver_fps"]["1_sub_callback"] > 0
 
 
+def test_bench_solver_scores_both_methods_on_the_same_cases(tmp_path):
+    out = tmp_path / "solver.json"
+    r = runner.invoke(app, ["bench", "solver", "--cases", "100", "--scene", "leng2016", "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    figures = json.loads(out.read_text())
+    keys = {"pos_err_mm_median", "pos_err_mm_p95", "pos_err_mm_max", "dir_err_deg_median", "mag_err_pct_median",
+            "crlb_pos_mm_rms", "pos_err_mm_rms", "coverage95", "latency_us_median", "latency_us_p99",
+            "batch_frames_per_s"}
+    for label in ("noise_free", "noisy"):
+        ours, leng = figures[label]["leng2016"]["ours"], figures[label]["leng2016"]["leng2016"]
+        assert keys <= ours.keys() and keys <= leng.keys()
+        assert ours["cases"] == leng["cases"] > 50
+        assert ours["own_cases"]["cases"] >= ours["cases"]
+    noisy = figures["noisy"]["leng2016"]
+    for col, d in noisy["leng2016"]["ours_minus_this"].items():
+        assert d["ci95"][0] <= d["diff"] <= d["ci95"][1], col
+        assert d["diff"] == pytest.approx(noisy["ours"][col] - noisy["leng2016"][col])
+    assert noisy["ours"]["coverage95"] > 0.8 and noisy["leng2016"]["coverage95"] == 0.0  # the paper gives no covariance
+    assert noisy["ours"]["pos_err_mm_median"] > 0 and figures["noise_free"]["leng2016"]["ours"]["pos_err_mm_max"] < 1e-6
+
+
 def test_demo_ends_by_itself_with_a_summary():
     r = runner.invoke(app, ["demo", "--duration", "3"])
     assert r.exit_code == 0, r.output

@@ -255,3 +255,19 @@ def test_points_far_from_the_origin(tmp_path):
         if not e.flags:
             # the moment is ~2000 m x force: relative rounding ~1e-16 of that
             assert np.linalg.norm(e.point - sp.point) < 1e-9
+
+
+def test_a_fit_without_a_covariance_reports_it_unbounded_not_nan():
+    """A wrench at the noise floor (leng2016 moving, recorded by the world) whose fit does not
+    converge: the information matrix is singular, so the variances are infinite, never NaN."""
+    scene = load_scene("leng2016")
+    w = [-0.0324992568942859, -0.0535156713121836, 0.14389945623012357, 0.06789793417013712,
+         -0.022826336623266635, -0.010874950040109077]
+    q = [0.961067417830331, -0.34150750990290396, -0.7855338333201762]
+    solver = ContactSolver(scene)
+    e = solver.solve(w, q)
+    assert not e.contact and "low_force" in e.flags
+    assert not np.isnan(e.cov).any() and np.isinf(np.diag(e.cov)).any()
+    assert np.all(np.isfinite(e.point)) and np.all(np.isfinite(e.force))
+    b = solver.solve_batch(np.array([w, w]), np.array([q, q]))
+    assert not np.isnan(b.cov).any()

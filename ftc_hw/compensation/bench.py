@@ -146,10 +146,11 @@ def _episodes(t: np.ndarray, contact: np.ndarray, merge_s: float) -> list[tuple[
 
 def run(json_path: Path | None = None, plot_path: Path | None = None, minutes: float = 1.0, seed: int = 0,
         scenes: list[str] | None = None, speeds: tuple[float, ...] = SPEEDS) -> dict:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    from ..report import table_console
+
+    console = table_console()
     results: dict = {}
     for name in scenes or builtin_names():
         scene = load_scene(name)

@@ -28,6 +28,7 @@ class JointResiduals:
         # friction models are rough (a quarter of the Coulomb level) and the rigid-body model a little
         self.friction_rel_std = friction_rel_std
         self.model_rel_std = model_rel_std
+        self._var_fixed = (self.kt * self.current_std) ** 2 + floor**2 + (friction_rel_std * self.coulomb) ** 2
 
     def friction(self, qd) -> np.ndarray:
         qd = np.asarray(qd, dtype=float)
@@ -36,12 +37,11 @@ class JointResiduals:
     def external_torques(self, model_tau, current, qd) -> tuple[np.ndarray, np.ndarray]:
         """(tau_ext, its standard deviation), N m per joint."""
         qd = np.asarray(qd, dtype=float)
-        motor = self.kt * np.asarray(current, dtype=float)
-        tau_ext = np.asarray(model_tau, dtype=float) + self.friction(qd) - motor
-        stuck = self.coulomb * (1.0 - np.abs(np.tanh(qd / self.v_eps)))  # static friction: unknown within +-f_c
         model = np.asarray(model_tau, dtype=float)
-        std = np.sqrt((self.kt * self.current_std) ** 2 + stuck**2 + self.floor**2
-                      + (self.friction_rel_std * self.coulomb) ** 2 + (self.model_rel_std * model) ** 2)
+        slip = np.tanh(qd / self.v_eps)
+        tau_ext = model + self.viscous * qd + self.coulomb * slip - self.kt * np.asarray(current, dtype=float)
+        stuck = self.coulomb * (1.0 - np.abs(slip))  # static friction: unknown within +-f_c
+        std = np.sqrt(self._var_fixed + stuck**2 + (self.model_rel_std * model) ** 2)
         return tau_ext, std
 
     def most_distal_significant(self, tau_ext, std, k: float = 3.0) -> int:

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import mahalanobis2
+
 
 def chi2_sf6(x: float) -> float:
     """Survival function of the chi-square law with 6 degrees of freedom."""
@@ -74,14 +76,10 @@ class ContactDetector:
         """``model_error``: optional wrench-sized vectors u_k (rows) of the compensation's own
         uncertainty for this sample: covariance sum u_k u_k^T added to the noise's."""
         w = np.asarray(wrench, dtype=float)
-        iw = self.inv @ w
-        d2 = float(w @ iw)
         if model_error is not None and len(model_error):
-            # Woodbury: (C + U^T U)^-1 = C^-1 - C^-1 U^T (I + U C^-1 U^T)^-1 U C^-1, a k x k solve
-            u = np.atleast_2d(model_error)
-            ui = u @ self.inv
-            a = ui @ w
-            d2 -= float(a @ np.linalg.solve(np.eye(len(u)) + ui @ u.T, a))
+            d2 = mahalanobis2(w, self.cov, np.atleast_2d(np.asarray(model_error, dtype=float)))
+        else:
+            d2 = float(w @ self.inv @ w)
         if not math.isfinite(d2):
             raise ValueError("wrench holds NaN or Inf")
         change = None

@@ -6,10 +6,11 @@ from .build import (
     Payload,
     add_ft_sensors,
     attach_payload,
+    descends,
     load_spec,
 )
 
 __all__ = [
     "FORCE_SENSOR", "TORQUE_SENSOR", "ArmModel", "Contact", "Payload", "PosedSurface", "Surface",
-    "add_ft_sensors", "apply_point_force", "attach_payload", "load_spec", "pose",
+    "add_ft_sensors", "apply_point_force", "attach_payload", "descends", "load_spec", "pose",
 ]

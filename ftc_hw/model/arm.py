@@ -5,6 +5,7 @@ Frames (docs/conventions.md): ``base`` is the model's world frame; ``sensor`` is
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -107,6 +108,7 @@ class ArmModel:
                              f"the model has {m.nq} position coordinates but the scene lists {self.n_joints} joints")
         self._qadr = np.array(qadr)
         self._dadr = np.array(dadr)
+        self._forces_applied = False
         self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
         self.surfaces = self._collect_surfaces()
         self.sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
@@ -146,17 +148,22 @@ class ArmModel:
         if q.shape != (self.n_joints,):
             raise ValueError(f"q must have {self.n_joints} entries (joints {', '.join(self.joint_names)}), "
                              f"got shape {q.shape}")
-        if not np.all(np.isfinite(q)):
+        if not math.isfinite(q.sum()):  # NaN or Inf anywhere
             raise ValueError("q holds NaN or Inf")
         d = self.data
         d.qpos[self._qadr] = q
-        d.qvel[:] = 0.0
-        d.qacc[:] = 0.0
-        if qd is not None:
+        # every dof is an arm joint (checked in __init__): no other entries to clear
+        if qd is None:
+            d.qvel[:] = 0.0
+        else:
             d.qvel[self._dadr] = qd
-        if qdd is not None:
+        if qdd is None:
+            d.qacc[:] = 0.0
+        else:
             d.qacc[self._dadr] = qdd
-        d.xfrc_applied[:] = 0.0
+        if self._forces_applied:
+            d.xfrc_applied[:] = 0.0
+            self._forces_applied = False
 
     def kinematics(self, q) -> dict[str, np.ndarray]:
         """``base_T_<link>`` for every body at joint angles q (rad)."""
@@ -293,6 +300,7 @@ class ArmModel:
             mujoco.mj_comPos(m, d)
             for c in contacts:
                 apply_point_force(m, d, c.link, c.point, c.force)
+            self._forces_applied = True
         mujoco.mj_inverse(m, d)
 
     # -- frames ---------------------------------------------------------------------------------------

@@ -68,3 +68,13 @@ def attach_payload(spec: mujoco.MjSpec, scene: Scene, payload: Payload) -> None:
     body.mass = payload.mass
     body.ipos = list(payload.com)
     body.inertia = [i, i, i]
+
+
+def descends(m: mujoco.MjModel, body: int, ancestor: int) -> bool:
+    """True when ``body`` is ``ancestor`` or in its subtree (the bodies whose loads it carries)."""
+    while True:
+        if body == ancestor:
+            return True
+        if body == 0:
+            return False
+        body = int(m.body_parentid[body])

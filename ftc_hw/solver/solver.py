@@ -285,9 +285,12 @@ class ContactSolver:
         links, prims = self.links, self.prim_link
         cand_links = tuple([links[prims[g]] for g in self._cand_prim[:n].tolist()])
         out = out.copy()
+        cov = out[K.O_COV:K.O_COV + 36].reshape(6, 6)
+        if not math.isfinite(cov.sum()):
+            cov = _unbounded(cov)
         # below the noise floor the fit is reported but not called a contact
         return ContactEstimate(not bits & K.F_LOW_FORCE, cand_links[0], out[0:3], out[3:6], out[6:9],
-                               sc[K.S_RESIDUAL], sc[K.S_CHI2], out[K.O_COV:K.O_COV + 36].reshape(6, 6), sc[K.S_COND],
+                               sc[K.S_RESIDUAL], sc[K.S_CHI2], cov, sc[K.S_COND],
                                flag_names(bits), cand_links, self._cand_f[:n].copy())
 
     # -- batch ----------------------------------------------------------------------------------------
@@ -333,7 +336,8 @@ class ContactSolver:
         cand_link = np.where(np.arange(BATCH_CANDIDATES)[None] < n_cand[:, None], self.prim_link[cand_prim], -1)
         return BatchEstimate(contact=contact, link=link, point=out[:, 0:3], force=out[:, 3:6], normal=out[:, 6:9],
                              residual=sc[:, K.S_RESIDUAL], chi2=sc[:, K.S_CHI2],
-                             cov=out[:, K.O_COV:K.O_COV + 36].reshape(n, 6, 6), conditioning=sc[:, K.S_COND],
+                             cov=_unbounded_where_broken(out[:, K.O_COV:K.O_COV + 36].reshape(n, 6, 6)),
+                             conditioning=sc[:, K.S_COND],
                              flags=flags, n_candidates=n_cand, candidate_link=cand_link, candidate_data=cand_f,
                              links=self.links)
 
@@ -382,3 +386,22 @@ def _bounding_radius(kind: int, size: np.ndarray) -> float:
 
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+
+def _unbounded(cov: np.ndarray) -> np.ndarray:
+    """A covariance the fit could not give in full (a singular information matrix: a fit that did
+    not converge, a force below the noise floor): the broken rows get an infinite variance and no
+    correlations, instead of NaN."""
+    ok = np.isfinite(cov).all(axis=1)
+    out = np.where(np.outer(ok, ok), cov, 0.0)
+    bad = np.flatnonzero(~ok)
+    out[bad, bad] = np.inf
+    return out
+
+
+def _unbounded_where_broken(covs: np.ndarray) -> np.ndarray:
+    broken = ~np.isfinite(covs).all(axis=(1, 2))
+    for i in np.flatnonzero(broken):
+        covs[i] = _unbounded(covs[i])
+    return covs

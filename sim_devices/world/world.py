@@ -12,7 +12,15 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from ftc_hw.model import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, load_spec
+from ftc_hw.model import (
+    FORCE_SENSOR,
+    TORQUE_SENSOR,
+    Payload,
+    add_ft_sensors,
+    attach_payload,
+    descends,
+    load_spec,
+)
 from ftc_hw.scene import Scene
 
 from .sensor_model import FTSensorModel, SensorReading
@@ -109,11 +117,15 @@ class World:
         # MuJoCo's friction loss is a soft constraint: its default softness lets joints creep at a
         # fraction of the friction torque. The stiffest stable setting makes it Coulomb-like.
         m.dof_solref[self._dadr, 0] = 2.0 * m.opt.timestep
+        # The impedance matters too: at the default (0.9) a light joint (a bare wrist) slips under a
+        # fraction of its friction torque, so the motor current falls short of friction by up to half.
+        m.dof_solimp[self._dadr, 0] = 0.999
+        m.dof_solimp[self._dadr, 1] = 0.9999
         self._fadr = m.sensor(FORCE_SENSOR).adr[0]
         self._tadr = m.sensor(TORQUE_SENSOR).adr[0]
         self._sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
         sensor_body = m.site_bodyid[m.site(scene.sensor.site).id]
-        self._arm_bodies = {b for b in range(m.nbody) if _descends(m, b, sensor_body)}
+        self._arm_bodies = {b for b in range(m.nbody) if descends(m, b, sensor_body)}
         self.sensor = FTSensorModel(scene.sensor, self.rng, noise=noise)
         self.dt = float(m.opt.timestep)
         ratio = 1.0 / (scene.sensor.rate_hz * self.dt)
@@ -258,12 +270,3 @@ class World:
             for _ in range(self.steps_per_sample):
                 state = self.step()
             yield state, self.read_sensor(state)
-
-
-def _descends(m: mujoco.MjModel, body: int, ancestor: int) -> bool:
-    while True:
-        if body == ancestor:
-            return True
-        if body == 0:
-            return False
-        body = int(m.body_parentid[body])
