@@ -81,3 +81,37 @@ def test_delay_counts_from_when_the_sample_was_due_when_the_world_ran_late():
     assert ev.all_in_time and not ev.false_alarms
     # before it was due: a false alarm
     assert evaluate([event("onset", T0 + 94 * MS)], tr, 0.001).false_alarms
+
+
+def test_each_contact_error_is_set_against_its_cramer_rao_bound():
+    tr = truth(300, set(range(100, 200)))
+    evs = [event("onset", T0 + 101 * MS, point=(0.1, 0.003, 0.5)), event("update", T0 + 150 * MS),
+           event("update", T0 + 160 * MS, point=(0.2, 0.0, 0.5), flags=("ambiguous",))]
+    ev = evaluate(evs, tr, 0.001, crlb=lambda rec: 2.0 if rec["contact"] else None)
+    c = ev.contacts[0]
+    assert c.crlb_rms_mm == pytest.approx(2.0)  # over the two unflagged estimates
+    assert ev.worst_rms_to_crlb() == pytest.approx(c.err_rms_mm / 2.0)
+
+
+def test_the_cramer_rao_bound_of_a_truth_record():
+    """A 50 N push on leng2016: a bound of a fraction of a millimetre to a few (the solver bench's
+    scale for this scene); no contact, no bound."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from ftc_hw.live.evaluate import crlb_of_truth
+    from ftc_hw.model import ArmModel
+    from ftc_hw.scene import load_scene
+    from sim_devices.world.truth import truth_record
+
+    from solver_cases import contacts
+
+    scene = load_scene("leng2016")
+    q = np.array(scene.robot.home)
+    bound = crlb_of_truth(scene)
+    assert bound({"t": 0.0, "contact": False, "contacts": [], "q": list(q)}) is None
+    sp, force = contacts(ArmModel(scene), q, 1, seed=3, max_angle_deg=20, f_range=(50.0, 50.0))[0]
+    contact = SimpleNamespace(link=sp.link, point=sp.point, force=force, source="probe")
+    b = bound(truth_record(SimpleNamespace(t=0.0, q=q, contacts=(contact,))))
+    assert b is not None and 0.01 < b < 5.0, b

@@ -23,6 +23,7 @@ time), truth by the ``t_host_ns`` at which the world published each sample to it
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -48,6 +49,7 @@ class ContactResult:
     err_max_mm: float | None
     err_rms_all_mm: float | None  # every estimate, flagged or not
     force_err_median_n: float | None
+    crlb_rms_mm: float | None = None  # Cramer-Rao bound of the same samples' truth (the floor for err_rms_mm)
 
     @property
     def detected(self) -> bool:
@@ -77,6 +79,11 @@ class Evaluation:
         errs = [c.err_rms_mm for c in self.contacts if c.err_rms_mm is not None]
         return max(errs) if errs else None
 
+    def worst_rms_to_crlb(self) -> float | None:
+        """The largest per-contact ratio of the RMS point error to its Cramer-Rao bound."""
+        r = [c.err_rms_mm / c.crlb_rms_mm for c in self.contacts if c.err_rms_mm is not None and c.crlb_rms_mm]
+        return max(r) if r else None
+
     def to_dict(self) -> dict[str, Any]:
         return {"contacts": [asdict(c) for c in self.contacts], "detected": self.detected,
                 "false_alarms": self.false_alarms, "splits": self.splits, "sample_period_s": self.sample_period_s,
@@ -96,9 +103,11 @@ def _episodes(t: np.ndarray, contact: np.ndarray, merge_gap_s: float) -> list[tu
 
 def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_period_s: float, *,
              delay_samples: int = 2, delay_extra_s: float = 0.001, merge_gap_s: float = 0.05,
-             early_s: float = 0.001, late_s: float = 0.05) -> Evaluation:
+             early_s: float = 0.001, late_s: float = 0.05,
+             crlb: Callable[[dict[str, Any]], float | None] | None = None) -> Evaluation:
     """``events``: event records (:func:`ftc_hw.live.events.event_record`); ``truth``: truth records
-    with ``t_host_ns``."""
+    with ``t_host_ns``; ``crlb``: the Cramer-Rao bound (mm) of a truth record's contact
+    (:func:`crlb_of_truth`), to set each contact's error against what the sensor noise allows."""
     if truth and "t_host_ns" not in truth[0]:
         raise ValueError("the truth records carry no t_host_ns: write them with ftc monitor --sim --truth")
     th = np.array([r["t_host_ns"] for r in truth], dtype=np.int64)
@@ -118,7 +127,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
     first_onset: dict[int, int] = {}
     onsets_in: dict[int, int] = {}
     false_alarms: list[float] = []
-    errs: dict[int, list[tuple[float, float, str, bool]]] = {}  # (point err mm, force err N, link, flagged)
+    # (point err mm, force err N, link, flagged, bound mm or None)
+    errs: dict[int, list[tuple[float, float, str, bool, float | None]]] = {}
     evs = sorted(events, key=lambda e: e["t_host_ns"])
     t_last = int(th[-1]) if len(th) else 0
     for ev in evs:
@@ -141,7 +151,7 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
         rec = truth[i]
         errs.setdefault(k, []).append((float(np.linalg.norm(np.subtract(ev["point"], rec["point"]))) * 1e3,
                                        float(np.linalg.norm(np.subtract(ev["force"], rec["force"]))), ev["link"],
-                                       bool(ev["flags"])))
+                                       bool(ev["flags"]), crlb(rec) if crlb is not None and not ev["flags"] else None))
 
     results = []
     for k, (a, b) in enumerate(episodes):
@@ -167,6 +177,33 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             err_median_mm=stat(e, np.median), err_rms_mm=stat(e, lambda x: np.sqrt(np.mean(x ** 2))),
             err_max_mm=stat(e, np.max),
             err_rms_all_mm=stat(np.array([r[0] for r in rows]), lambda x: np.sqrt(np.mean(x ** 2))),
-            force_err_median_n=stat(np.array([r[1] for r in good]), np.median)))
+            force_err_median_n=stat(np.array([r[1] for r in good]), np.median),
+            crlb_rms_mm=stat(np.array([r[4] for r in good if r[4] is not None]),
+                             lambda x: np.sqrt(np.mean(x ** 2)))))
     splits = sum(max(0, n - 1) for n in onsets_in.values())
     return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))
+
+
+def crlb_of_truth(scene) -> Callable[[dict[str, Any]], float | None]:
+    """The Cramer-Rao bound (mm, RMS over the surface's two directions) of a truth record's contacts:
+    the 6-D wrench measurement under the scene's sensor noise, the point constrained to the surface
+    (as ``ftc bench solver`` computes it). None when the noise-free reading is not well posed."""
+    import math
+
+    from ..model import ArmModel, Contact
+    from ..solver import ContactSolver
+    from ..solver.bench import crlb_point_cov
+
+    model = ArmModel(scene)
+    solver = ContactSolver(model)
+
+    def bound(rec: dict[str, Any]) -> float | None:
+        if not rec.get("contact") or rec.get("q") is None:
+            return None
+        contacts = [Contact(c["link"], c["point"], c["force"]) for c in rec["contacts"]]
+        e = solver.solve(model.predicted_wrench(rec["q"], level="bias", contacts=contacts), rec["q"])
+        if e.flags or not e.contact:
+            return None
+        return math.sqrt(np.trace(crlb_point_cov(solver, np.asarray(rec["point"]), e.normal, e.force))) * 1e3
+
+    return bound

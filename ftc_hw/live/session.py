@@ -23,7 +23,7 @@ from ftc_hw import __version__
 from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.scene import Scene, SceneError, load_scene
 
-from .evaluate import Evaluation, evaluate
+from .evaluate import Evaluation, crlb_of_truth, evaluate
 from .events import EventWriter, event_record, read_truth
 from .view import LiveView, evaluation_table, stream_table
 
@@ -287,7 +287,8 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, ca
         if reflex is not None:
             out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
         if world is not None and world.done and "error" not in (world.result or {}):
-            out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s)
+            out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s,
+                                      crlb=crlb_of_truth(scene))
         elif world is not None:
             out.problems.append(f"the simulated world did not finish: {world.result}")
         if recorder is not None:
