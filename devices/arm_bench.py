@@ -316,15 +316,19 @@ def run(json_path: str | Path | None = None, duration: float = 60.0, stops: int 
     """Measure, print a table, optionally write JSON; returns the numbers and the acceptance rows."""
     import os
 
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    from ftc_hw.report import table_console
+
+    console = table_console()
     load = os.getloadavg()
     console.print(f"[bold]arm adapters[/bold]: UR receive for {duration:g} s, {stops} stops per arm, then the rest; "
                   f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs")
-    ur = bench_ur(duration, stops)
-    dxl = bench_dxl(duration, stops)
+    from .base import responsive_readers
+
+    with responsive_readers():  # as the monitor runs the adapters and their reflex
+        ur = bench_ur(duration, stops)
+        dxl = bench_dxl(duration, stops)
     rows = acceptance(ur, dxl)
     table = Table(title="ftc bench arms")
     table.add_column("acceptance")

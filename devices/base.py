@@ -7,10 +7,13 @@ the link is broken) and ``_disconnect()`` (close, never raise). Everything else 
 """
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from abc import ABC, abstractmethod
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
@@ -128,3 +131,19 @@ class Adapter(ABC):
 
     def status(self) -> dict[str, Any]:
         return {"name": self.name, "kind": self.kind, "connected": self.connected.is_set(), **self.counters}
+
+
+READER_SWITCH_INTERVAL_S = 0.0005
+
+
+@contextmanager
+def responsive_readers(interval_s: float = READER_SWITCH_INTERVAL_S) -> Iterator[None]:
+    """Run with a short interpreter switch interval: device readers poll (ur_rtde keeps only its
+    newest packet) and a reflex must go out while the pipeline computes; at Python's default 5 ms a
+    thread that wakes can wait that long for the interpreter, longer than a 2 ms control period."""
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(min(switch, interval_s))
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(switch)

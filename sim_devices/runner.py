@@ -5,6 +5,7 @@ import dataclasses
 import importlib
 import multiprocessing as mp
 import queue
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,8 +32,15 @@ def _entry(kind: str):
     return getattr(importlib.import_module(module), func)
 
 
+EMULATOR_SWITCH_INTERVAL_S = 0.0002
+
+
 def _serve(kind: str, device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:
     """Entry point of an emulator process."""
+    # A device answers from its own threads (a dashboard reader beside the RTDE stream, a serial
+    # reader beside the pacing loop): at Python's default 5 ms switch interval a thread ready to
+    # answer can wait that long for the GIL, longer than a control period.
+    sys.setswitchinterval(EMULATOR_SWITCH_INTERVAL_S)
     try:
         serve = _entry(kind)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises

@@ -8,7 +8,6 @@ from __future__ import annotations
 import contextlib
 import json
 import signal
-import sys
 import tempfile
 import threading
 import time
@@ -152,15 +151,10 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
     ft_dev, arm_dev = _devices(scene, cfg.sim)
     cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
     out = MonitorOutcome(0)
-    # Device readers poll (ur_rtde keeps only its newest packet) while the pipeline computes: with
-    # Python's default 5 ms switch interval a reader that wakes waits up to 5 ms for the interpreter
-    # and misses 500 Hz packets. 0.5 ms keeps their latency below a packet period.
-    switch = sys.getswitchinterval()
-    sys.setswitchinterval(min(switch, 0.0005))
-    try:
+    from devices.base import responsive_readers
+
+    with responsive_readers():  # readers that poll, and the reflex, while the pipeline computes
         return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out)
-    finally:
-        sys.setswitchinterval(switch)
 
 
 def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, cal_kwargs: dict[str, Any],
