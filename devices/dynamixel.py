@@ -43,7 +43,8 @@ import serial
 
 from ftc_hw.bus import Bus, JointFrame, joints_topic
 
-from .base import Adapter, DeviceError, DeviceIOError
+from .arm_base import ArmAdapter
+from .base import DeviceError, DeviceIOError
 from .dxl_table import MODELS, PRESENT_LENGTH, PRESENT_START
 
 try:
@@ -60,7 +61,7 @@ def _signed(value: int, bits: int) -> int:
     return value - (1 << bits) if value & (1 << (bits - 1)) else value
 
 
-class DynamixelArm(Adapter):
+class DynamixelArm(ArmAdapter):
     kind = "dynamixel"
 
     def __init__(self, name: str, bus: Bus, port: str, ids: Sequence[int], *, model: str = "XM430-W350",
@@ -97,7 +98,6 @@ class DynamixelArm(Adapter):
         self._seq = 0
         self._next = 0.0
         self._last_ok = 0.0
-        self._stale = False
         self._next_error_poll = 0.0
 
     @classmethod
@@ -171,14 +171,7 @@ class DynamixelArm(Adapter):
         if now < self._next and self._stop.wait(self._next - now):
             return
         self._next = max(self._next + self.period, time.monotonic())
-        try:
-            self._cycle()
-        except DeviceIOError as exc:
-            self._mark_stale(f"link lost: {exc}")
-            raise
-        except Exception as exc:  # the base reports it and reconnects: either way no sample comes
-            self._mark_stale(f"reader failed: {type(exc).__name__}: {exc}")
-            raise
+        self._stale_on_failure(self._cycle)
 
     def _sync_read(self, address: int, size: int) -> tuple[int, dict[int, bytes], int]:
         """One Sync Read (or Fast Sync Read) of ``size`` bytes at ``address`` from every servo: (result,
@@ -264,22 +257,10 @@ class DynamixelArm(Adapter):
         self._seq += 1
         self.counters["frames"] += 1
         self.bus.publish(self.topic, frame)
-        if self._stale:
-            self._stale = False
-            self.event("recovered", "Sync Read answers again")
+        self._mark_fresh("Sync Read answers again")
         if now >= self._next_error_poll or (errors & 0x80 and not self.hardware_errors):
             self._next_error_poll = now + self.error_poll_s
             self._poll_hardware_errors()
-
-    @property
-    def stale(self) -> bool:
-        """True between a ``stale`` event and the next good sample."""
-        return self._stale
-
-    def _mark_stale(self, why: str) -> None:
-        if not self._stale:
-            self._stale = True
-            self.event("stale", why)
 
     def _poll_hardware_errors(self) -> None:
         errors = self.read_item(70, 1)

@@ -37,7 +37,8 @@ import numpy as np
 
 from ftc_hw.bus import Bus, JointFlag, JointFrame, joints_topic
 
-from .base import Adapter, DeviceError, DeviceIOError
+from .arm_base import ArmAdapter
+from .base import DeviceError, DeviceIOError
 
 RTDE_PORT = 30004
 VARIABLES = ["timestamp", "actual_q", "actual_qd", "actual_current", "robot_mode", "safety_mode", "runtime_state"]
@@ -123,7 +124,7 @@ def _retire(rtde: Any) -> None:
     threading.Thread(target=run, name="ur-rtde-retire", daemon=True).start()
 
 
-class URArm(Adapter):
+class URArm(ArmAdapter):
     kind = "ur-rtde"
 
     def __init__(self, name: str, bus: Bus, host: str, *, frequency: float = 500.0,
@@ -147,7 +148,6 @@ class URArm(Adapter):
         self._last_ts: float | None = None
         self._last_seq: int | None = None
         self._last_new = 0.0
-        self._stale = False
 
     @classmethod
     def from_spec(cls, spec: Any, bus: Bus, endpoint: dict | str | None = None, *, scene: Any = None,
@@ -210,14 +210,7 @@ class URArm(Adapter):
 
     # -- the reader loop ----------------------------------------------------------------------------------
     def _read_once(self) -> None:
-        try:
-            self._poll()
-        except DeviceIOError as exc:
-            self._mark_stale(f"link lost: {exc}")
-            raise
-        except Exception as exc:  # the base reports it and reconnects: either way no packet comes
-            self._mark_stale(f"reader failed: {type(exc).__name__}: {exc}")
-            raise
+        self._stale_on_failure(self._poll)
 
     def _poll(self) -> None:
         rtde = self._rtde
@@ -266,19 +259,7 @@ class URArm(Adapter):
         self._last_ts, self._last_seq, self._last_new = ts, seq, time.monotonic()
         self.counters["frames"] += 1
         self.bus.publish(self.topic, frame)
-        if self._stale:
-            self._stale = False
-            self.event("recovered", "RTDE packets again")
-
-    @property
-    def stale(self) -> bool:
-        """True between a ``stale`` event and the next good sample."""
-        return self._stale
-
-    def _mark_stale(self, why: str) -> None:
-        if not self._stale:
-            self._stale = True
-            self.event("stale", why)
+        self._mark_fresh("RTDE packets again")
 
     # -- commands ----------------------------------------------------------------------------------------
     def _dashboard(self, command: str, ok: str, already: int) -> None:

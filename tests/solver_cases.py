@@ -1,26 +1,19 @@
 """Shared helpers for solver tests: sampled contacts and small custom scenes."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
 from ftc_hw.model import ArmModel, Contact
-from ftc_hw.model.sampling import SurfacePoint, sample_surface_points
+from ftc_hw.model.sampling import SurfacePoint
 from ftc_hw.scene import load_scene
-from sim_devices.world.scenarios import _cone, visible_filter
+from sim_devices.world.scenarios import sample_contacts
 
 
 def contacts(model: ArmModel, q, n: int, seed: int, max_angle_deg: float = 80.0, f_range=(5.0, 200.0)):
     """(surface point, force applied to the arm) pairs: uniform on the touchable surfaces, pushing in."""
-    rng = np.random.default_rng(seed)
-    pts = sample_surface_points(model, q, n, rng, hidden=visible_filter(model, q))
-    out = []
-    for sp in pts:
-        d = _cone(-sp.normal, math.radians(max_angle_deg), rng)
-        out.append((sp, d * rng.uniform(*f_range)))
-    return out
+    return sample_contacts(model, q, n, np.random.default_rng(seed), max_angle_deg, f_range)
 
 
 def reading(model: ArmModel, q, sp: SurfacePoint, force) -> np.ndarray:

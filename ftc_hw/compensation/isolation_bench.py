@@ -31,19 +31,11 @@ DISCRIMINABLE_SIGMA = 4.0
 EXACT_CHI2 = 1e-6  # a noise-free crossing fits the wrench exactly
 
 
-def _cases(model: ArmModel, q, n: int, rng: np.random.Generator, f_range: tuple[float, float]):
-    from sim_devices.world.scenarios import _cone, visible_filter
-
-    from ..model.sampling import sample_surface_points
-
-    pts = sample_surface_points(model, q, n, rng, hidden=visible_filter(model, q))
-    return [(sp, _cone(-sp.normal, math.radians(40.0), rng) * rng.uniform(*f_range)) for sp in pts]
-
-
 def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | None = None) -> dict:
     """Counts and shares over the two-link cases among ``n_cases`` sampled contacts (stopping early
     once ``max_discriminable`` discriminable ones were seen)."""
     from sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
+    from sim_devices.world.scenarios import sample_contacts
 
     scene = load_scene(scene_name)
     model = ArmModel(scene)
@@ -57,7 +49,7 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
     rng = np.random.default_rng(seed)
     counts = dict.fromkeys(("two_link", "ambiguous_without", "right_without", "right", "flagged", "wrong",
                             "discriminable", "discriminable_right", "other_right", "other_flagged", "other_wrong"), 0)
-    for sp, force in _cases(model, q, n_cases, rng, (0.5 * f_max, f_max)):
+    for sp, force in sample_contacts(model, q, n_cases, rng, 40.0, (0.5 * f_max, f_max)):
         w = model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, force)])
         e = solver.solve(w, q)
         if len({c.link for c in e.candidates if c.chi2 < EXACT_CHI2}) < 2:

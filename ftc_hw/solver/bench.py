@@ -34,12 +34,9 @@ FRICTION_CONE_DEG = 45.0  # forces within a friction cone of coefficient 1: what
 
 
 def _contacts(model: ArmModel, q, n: int, rng: np.random.Generator):
-    from sim_devices.world.scenarios import _cone, visible_filter
+    from sim_devices.world.scenarios import sample_contacts
 
-    from ..model.sampling import sample_surface_points
-
-    pts = sample_surface_points(model, q, n, rng, hidden=visible_filter(model, q))
-    return [(sp, _cone(-sp.normal, math.radians(FRICTION_CONE_DEG), rng) * rng.uniform(5.0, 200.0)) for sp in pts]
+    return sample_contacts(model, q, n, rng, FRICTION_CONE_DEG, (5.0, 200.0))
 
 
 def crlb_point_cov(solver, point, normal, force) -> np.ndarray:
@@ -148,10 +145,10 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
         noise_std = np.sqrt(np.diag(scene.sensor.noise_cov))
         noisy = [w + rng.normal(size=6) * noise_std for w in clean]
         ours = make_solver(scene, "ours")
-        well_posed = np.array([not ours.solve(w, q).flags for w in clean])
-        crlb = [math.sqrt(np.trace(crlb_point_cov(ours, sp.point, ours.solve(w, q).normal, f))) * 1e3 if ok
-                else math.nan for (sp, f), w, ok in zip(cases, clean, well_posed, strict=True)]
-        crlb = np.array(crlb)
+        clean_est = [ours.solve(w, q) for w in clean]
+        well_posed = np.array([not e.flags for e in clean_est])
+        crlb = np.array([math.sqrt(np.trace(crlb_point_cov(ours, sp.point, e.normal, f))) * 1e3 if ok else math.nan
+                         for (sp, f), e, ok in zip(cases, clean_est, well_posed, strict=True)])
         solvers = {m: ours if m == "ours" else make_solver(scene, m) for m in methods}
         for label, readings in (("noise_free", clean), ("noisy", noisy)):
             runs = {m: _solve_all(s, readings, q) for m, s in solvers.items()}

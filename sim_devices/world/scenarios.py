@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 
 from ftc_hw.model import ArmModel, Payload
-from ftc_hw.model.sampling import sample_surface_points
+from ftc_hw.model.sampling import SurfacePoint, sample_surface_points
 from ftc_hw.scene import Scene
 
 from .trajectory import Hold, PointToPoint, Sinusoid
@@ -42,6 +42,14 @@ def random_pokes(model: ArmModel, q, rng: np.random.Generator, count: int, t0: f
         point_link = base_T_link[:3, :3].T @ (sp.point - base_T_link[:3, 3])
         probes.append(Probe(sp.link, point_link, direction, float(rng.uniform(f_min, f_max)), t0 + i * period))
     return tuple(probes)
+
+
+def sample_contacts(model: ArmModel, q, n: int, rng: np.random.Generator, max_angle_deg: float,
+                    f_range: tuple[float, float]) -> list[tuple[SurfacePoint, np.ndarray]]:
+    """(surface point, force applied to the arm) pairs: points uniform on the visible touchable
+    surfaces, forces pushing in within a cone about the inward normal, magnitudes uniform in f_range."""
+    points = sample_surface_points(model, q, n, rng, hidden=visible_filter(model, q))
+    return [(sp, _cone(-sp.normal, math.radians(max_angle_deg), rng) * rng.uniform(*f_range)) for sp in points]
 
 
 def visible_filter(model: ArmModel, q, eps: float = 1e-8):
