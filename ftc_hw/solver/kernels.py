@@ -343,6 +343,85 @@ def _hidden(x, n, skip, kinds, sizes, gpos, gmat, eps):
     return False
 
 
+@njit(inline="always", **JIT)
+def _line_sigma(S, x, u, fn, t1, t2):
+    """The largest standard deviation (m) of the force line's position across it near the point x,
+    from the covariance S of the wrench: the line moves by u x dm_x / |f|, where dm_x = dm - x x df
+    is the moment about x, and dm_x . e = (x x e, e) . (df, dm)."""
+    _tangent_basis(u, t1, t2)
+    k11 = k12 = k22 = 0.0
+    g1 = (x[1] * t1[2] - x[2] * t1[1], x[2] * t1[0] - x[0] * t1[2], x[0] * t1[1] - x[1] * t1[0], t1[0], t1[1], t1[2])
+    g2 = (x[1] * t2[2] - x[2] * t2[1], x[2] * t2[0] - x[0] * t2[2], x[0] * t2[1] - x[1] * t2[0], t2[0], t2[1], t2[2])
+    for i in range(6):
+        s1 = 0.0
+        s2 = 0.0
+        for j in range(6):
+            s1 += S[i, j] * g1[j]
+            s2 += S[i, j] * g2[j]
+        k11 += g1[i] * s1
+        k12 += g1[i] * s2
+        k22 += g2[i] * s2
+    half = 0.5 * (k11 + k22)
+    lam = half + math.sqrt(max(0.25 * (k11 - k22) ** 2 + k12 * k12, 0.0))
+    return math.sqrt(max(lam, 0.0)) / fn
+
+
+@njit(inline="always", **JIT)
+def _depth_s(kind, size, x0, x1, x2):
+    """How far (m) the local point lies inside the solid (negative outside; ellipsoids approximately)."""
+    r = size[0]
+    if kind == SPHERE:
+        return r - math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    if kind == CAPSULE:
+        z = min(max(x2, -size[1]), size[1])
+        return r - math.sqrt(x0 * x0 + x1 * x1 + (x2 - z) ** 2)
+    if kind == CYLINDER:
+        return min(r - math.sqrt(x0 * x0 + x1 * x1), size[1] - abs(x2))
+    if kind == ELLIPSOID:
+        q = math.sqrt((x0 / size[0]) ** 2 + (x1 / size[1]) ** 2 + (x2 / size[2]) ** 2)
+        return (1.0 - q) * min(size[0], min(size[1], size[2]))
+    if kind == BOX:
+        return min(size[0] - abs(x0), min(size[1] - abs(x1), size[2] - abs(x2)))
+    return -x2
+
+
+@njit(**JIT)
+def _buried(x, skip, kinds, sizes, gpos, gmat, depth):
+    """x lies more than ``depth`` (m) inside a primitive other than ``skip``."""
+    for g in range(kinds.shape[0]):
+        if g == skip:
+            continue
+        b = sizes[g, 3]
+        dx, dy, dz = x[0] - gpos[g, 0], x[1] - gpos[g, 1], x[2] - gpos[g, 2]
+        if dx * dx + dy * dy + dz * dz > b * b:
+            continue
+        l0, l1, l2 = _local_s(gpos[g], gmat[g], x[0], x[1], x[2])
+        if _depth_s(kinds[g], sizes[g], l0, l1, l2) > depth:
+            return True
+    return False
+
+
+@njit(**JIT)
+def _glued(x, n, skip, kinds, sizes, gpos, gmat, eps):
+    """x lies on another primitive's surface (within eps) with its normal n pointing into it: a face
+    glued to another part (a joint's coincident caps), not on the outline."""
+    y0, y1, y2 = x[0] + eps * n[0], x[1] + eps * n[1], x[2] + eps * n[2]
+    for g in range(kinds.shape[0]):
+        if g == skip:
+            continue
+        b = sizes[g, 3]
+        dx, dy, dz = x[0] - gpos[g, 0], x[1] - gpos[g, 1], x[2] - gpos[g, 2]
+        if dx * dx + dy * dy + dz * dz > b * b:
+            continue
+        l0, l1, l2 = _local_s(gpos[g], gmat[g], x[0], x[1], x[2])
+        if abs(_depth_s(kinds[g], sizes[g], l0, l1, l2)) > eps:
+            continue
+        l0, l1, l2 = _local_s(gpos[g], gmat[g], y0, y1, y2)
+        if _depth_s(kinds[g], sizes[g], l0, l1, l2) > 0.0:
+            return True
+    return False
+
+
 # -- small dense linear algebra (numba's np.linalg would need scipy's BLAS) ------------------------------
 @njit(**JIT)
 def _cholesky(A, L):
@@ -399,12 +478,59 @@ def _surface_near_line(kind, size, pos, mat, r0, u, point, normal):
     return _line_dist2(point, r0, u)
 
 
+@njit(**JIT)
+def _near_start(kind, size, pos, mat, r0, u, grow, pulls, grown, s, o, d, xl, point, normal):
+    """Where the line would touch the primitive if it passed ``grow`` (m) closer: its entry into the
+    primitive grown by ``grow`` (or, where pulls are allowed, its exit, whichever lies nearer the
+    line) brought back onto the surface, with the normal of the face it enters there. A line just
+    outside a box face and nearly along it thus starts on the face it would enter, not on the face
+    it grazes; a line past a sphere starts where it would dip in, not where it runs tangent.
+    Returns the point's squared distance from the line, or -1 when the line passes farther away."""
+    if kind == PLANE:
+        return -1.0  # an infinite plane is crossed or parallel: nothing to grow into
+    _to_local(pos, mat, r0, o)
+    _dir_local(mat, u, d)
+    for i in range(4):
+        grown[i] = size[i]
+    grown[0] += grow
+    if kind != CAPSULE:  # a capsule grows by its radius only; the others along every semi-axis
+        grown[1] += grow
+        grown[2] += grow
+    if crossings_local(kind, grown, o, d, s) < 2:
+        return -1.0
+    best = -1.0
+    for j in range(2 if pulls else 1):
+        x0, x1, x2 = o[0] + s[j] * d[0], o[1] + s[j] * d[1], o[2] + s[j] * d[2]
+        p0, p1, p2 = project_s(kind, size, x0, x1, x2)
+        if kind == BOX or kind == CYLINDER:  # noqa: SIM109 (numba): the grown face, unambiguous at an edge
+            n0, n1, n2 = normal_local(kind, grown, x0, x1, x2)
+        else:
+            n0, n1, n2 = normal_local(kind, size, p0, p1, p2)
+        xl[0], xl[1], xl[2] = _base_s(pos, mat, p0, p1, p2)
+        dist2 = _line_dist2(xl, r0, u)
+        if best < 0.0 or dist2 < best:
+            best = dist2
+            point[0], point[1], point[2] = xl[0], xl[1], xl[2]
+            for i in range(3):
+                normal[i] = mat[3 * i] * n0 + mat[3 * i + 1] * n1 + mat[3 * i + 2] * n2
+    return best
+
+
 # -- Gauss-Newton on one primitive's surface --------------------------------------------------------------
 @njit(inline="always", **JIT)
 def _project_base(kind, size, pos, mat, x, out_point, out_normal):
+    """x brought onto the surface, with the normal there. For a point outside a box or a cylinder the
+    normal points from the surface point to x: a point past an edge takes the face it overhangs, so
+    Gauss-Newton can walk around an edge instead of sticking to the first face."""
     l0, l1, l2 = _local_s(pos, mat, x[0], x[1], x[2])
     p0, p1, p2 = project_s(kind, size, l0, l1, l2)
     n0, n1, n2 = normal_local(kind, size, p0, p1, p2)
+    if kind == BOX or kind == CYLINDER:  # noqa: SIM109 (numba); the others' normals are radial already
+        e0, e1, e2 = l0 - p0, l1 - p1, l2 - p2
+        out2 = e0 * e0 + e1 * e1 + e2 * e2
+        if out2 > 1e-24 and not inside_s(kind, size, l0, l1, l2, 0.0):  # outside by more than rounding
+            k = math.sqrt(out2)
+            n0, n1, n2 = e0 / k, e1 / k, e2 / k
     out_point[0], out_point[1], out_point[2] = _base_s(pos, mat, p0, p1, p2)
     for i in range(3):
         out_normal[i] = mat[3 * i] * n0 + mat[3 * i + 1] * n1 + mat[3 * i + 2] * n2
@@ -473,7 +599,89 @@ def _normal_matrix(J, W, r, H, g, WJ):
         g[a] = acc
 
 
-REFINE_WS = 160  # workspace (float64 entries) refine needs
+@njit(inline="always", **JIT)
+def _best_force(w, W, c, p, r, fac):
+    """The force that best explains w for a contact at c (weighted least squares, closed form):
+    h = (p, c x p) = A p with A = [I; [c]x], so p = (A^T W A)^-1 A^T W w. Fills p, the residual
+    r = w - A p and ``fac`` (the moment columns of A^T W, 3x3 row-major, then the Cholesky factor
+    of A^T W A, 6 entries: what Kaufman's Jacobian needs); returns chi2 (inf if singular).
+    Unrolled: it runs at every trial point of every fit."""
+    c0, c1, c2 = c[0], c[1], c[2]
+    # AW = A^T W, row a = W[a] + sum_i [c]x[i, a] W[3 + i]
+    a00 = W[0, 0] + c2 * W[4, 0] - c1 * W[5, 0]
+    a01 = W[0, 1] + c2 * W[4, 1] - c1 * W[5, 1]
+    a02 = W[0, 2] + c2 * W[4, 2] - c1 * W[5, 2]
+    a03 = W[0, 3] + c2 * W[4, 3] - c1 * W[5, 3]
+    a04 = W[0, 4] + c2 * W[4, 4] - c1 * W[5, 4]
+    a05 = W[0, 5] + c2 * W[4, 5] - c1 * W[5, 5]
+    a10 = W[1, 0] - c2 * W[3, 0] + c0 * W[5, 0]
+    a11 = W[1, 1] - c2 * W[3, 1] + c0 * W[5, 1]
+    a12 = W[1, 2] - c2 * W[3, 2] + c0 * W[5, 2]
+    a13 = W[1, 3] - c2 * W[3, 3] + c0 * W[5, 3]
+    a14 = W[1, 4] - c2 * W[3, 4] + c0 * W[5, 4]
+    a15 = W[1, 5] - c2 * W[3, 5] + c0 * W[5, 5]
+    a20 = W[2, 0] + c1 * W[3, 0] - c0 * W[4, 0]
+    a21 = W[2, 1] + c1 * W[3, 1] - c0 * W[4, 1]
+    a22 = W[2, 2] + c1 * W[3, 2] - c0 * W[4, 2]
+    a23 = W[2, 3] + c1 * W[3, 3] - c0 * W[4, 3]
+    a24 = W[2, 4] + c1 * W[3, 4] - c0 * W[4, 4]
+    a25 = W[2, 5] + c1 * W[3, 5] - c0 * W[4, 5]
+    # M = AW A (symmetric): column b of A is e_b over column b of [c]x
+    m00 = a00 + c2 * a04 - c1 * a05
+    m10 = a10 + c2 * a14 - c1 * a15
+    m20 = a20 + c2 * a24 - c1 * a25
+    m11 = a11 - c2 * a13 + c0 * a15
+    m21 = a21 - c2 * a23 + c0 * a25
+    m22 = a22 + c1 * a23 - c0 * a24
+    b0 = a00 * w[0] + a01 * w[1] + a02 * w[2] + a03 * w[3] + a04 * w[4] + a05 * w[5]
+    b1 = a10 * w[0] + a11 * w[1] + a12 * w[2] + a13 * w[3] + a14 * w[4] + a15 * w[5]
+    b2 = a20 * w[0] + a21 * w[1] + a22 * w[2] + a23 * w[3] + a24 * w[4] + a25 * w[5]
+    if not m00 > 1e-300:
+        return math.inf
+    l00 = math.sqrt(m00)
+    l10 = m10 / l00
+    l20 = m20 / l00
+    d = m11 - l10 * l10
+    if not d > 1e-300:
+        return math.inf
+    l11 = math.sqrt(d)
+    l21 = (m21 - l20 * l10) / l11
+    d = m22 - l20 * l20 - l21 * l21
+    if not d > 1e-300:
+        return math.inf
+    l22 = math.sqrt(d)
+    y0 = b0 / l00
+    y1 = (b1 - l10 * y0) / l11
+    y2 = (b2 - l20 * y0 - l21 * y1) / l22
+    p2 = y2 / l22
+    p1 = (y1 - l21 * p2) / l11
+    p0 = (y0 - l10 * p1 - l20 * p2) / l00
+    p[0], p[1], p[2] = p0, p1, p2
+    fac[0], fac[1], fac[2] = a03, a04, a05
+    fac[3], fac[4], fac[5] = a13, a14, a15
+    fac[6], fac[7], fac[8] = a23, a24, a25
+    fac[9], fac[10], fac[11], fac[12], fac[13], fac[14] = l00, l10, l20, l11, l21, l22
+    _residual(w, c, p, r)
+    return _chi2(r, W)
+
+
+@njit(inline="always", **JIT)
+def _fac_solve(fac, v0, v1, v2):
+    """(A^T W A)^-1 (A^T W)[:, 3:6] v with the factors _best_force left in ``fac``."""
+    b0 = fac[0] * v0 + fac[1] * v1 + fac[2] * v2
+    b1 = fac[3] * v0 + fac[4] * v1 + fac[5] * v2
+    b2 = fac[6] * v0 + fac[7] * v1 + fac[8] * v2
+    l00, l10, l20, l11, l21, l22 = fac[9], fac[10], fac[11], fac[12], fac[13], fac[14]
+    y0 = b0 / l00
+    y1 = (b1 - l10 * y0) / l11
+    y2 = (b2 - l20 * y0 - l21 * y1) / l22
+    x2 = y2 / l22
+    x1 = (y1 - l21 * x2) / l11
+    x0 = (y0 - l10 * x1 - l20 * x2) / l00
+    return x0, x1, x2
+
+
+REFINE_WS = 200  # workspace (float64 entries) refine needs
 WS_RAW = 64 + REFINE_WS
 
 
@@ -484,70 +692,118 @@ def workspace_size(max_cand):
 
 
 @njit(**JIT)
-def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov, ws):
+def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov, ws, want_cov=True):
     """Weighted least squares on one primitive's surface: minimise (w - h)^T W (w - h) with
-    h = (p, c x p), c on the surface. Manifold Gauss-Newton from (c0, p0): tangent-plane steps,
-    retraction by projection onto the surface. Returns (chi2, iterations, converged, condition
-    estimate of J^T W J); fills c, p, the normal n at c, and cov (5x5: tangent coordinates t1, t2 at c,
-    then p) = (J^T W J)^-1."""
+    h = (p, c x p), c on the surface. The force is linear given the point, so it is solved in closed
+    form at every point (variable projection) and Gauss-Newton runs on the point alone: steps in the
+    tangent plane with Kaufman's Jacobian, retraction by projection onto the surface, backtracking.
+    A stale force cannot pull a step astray (onto a box edge, where it would stall).
+    Returns (chi2, iterations, converged, condition estimate of the full J^T W J); fills c, p, the
+    normal n at c, and (``want_cov``) cov (5x5: tangent coordinates t1, t2 at c, then p) =
+    (J^T W J)^-1. ``p0`` is the fallback force should the closed form be singular."""
+    t1 = ws[0:3]
+    t2 = ws[3:6]
+    J = ws[6:18].reshape((6, 2))
+    WJ = ws[18:30].reshape((6, 2))
+    r = ws[30:36]
+    trial_c = ws[36:39]
+    trial_n = ws[39:42]
+    trial_p = ws[42:45]
+    trial_r = ws[45:51]
+    fac = ws[51:66]
+    tfac = ws[66:81]
+    _project_base(kind, size, pos, mat, c0, c, n)
+    chi2 = _best_force(w, W, c, p, r, fac)
+    if chi2 == math.inf:
+        for i in range(3):
+            p[i] = p0[i]
+        _residual(w, c, p, r)
+        return _chi2(r, W), 0, False, math.inf
+    converged = False
+    it = 0
+    while it < max_iter:
+        it += 1
+        _tangent_basis(n, t1, t2)
+        # Kaufman: J_k = -P (0, t_k x p), P = I - A (A^T W A)^-1 A^T W projects out what a change
+        # of force absorbs
+        for k in range(2):
+            tk = t1 if k == 0 else t2
+            v0 = tk[1] * p[2] - tk[2] * p[1]
+            v1 = tk[2] * p[0] - tk[0] * p[2]
+            v2 = tk[0] * p[1] - tk[1] * p[0]
+            x0, x1, x2 = _fac_solve(fac, v0, v1, v2)
+            J[0, k] = x0
+            J[1, k] = x1
+            J[2, k] = x2
+            J[3, k] = c[1] * x2 - c[2] * x1 - v0
+            J[4, k] = c[2] * x0 - c[0] * x2 - v1
+            J[5, k] = c[0] * x1 - c[1] * x0 - v2
+        for i in range(6):
+            WJ[i, 0] = 0.0
+            WJ[i, 1] = 0.0
+            for j in range(6):
+                WJ[i, 0] += W[i, j] * J[j, 0]
+                WJ[i, 1] += W[i, j] * J[j, 1]
+        h00 = h01 = h11 = g0 = g1 = 0.0
+        for i in range(6):
+            h00 += J[i, 0] * WJ[i, 0]
+            h01 += J[i, 0] * WJ[i, 1]
+            h11 += J[i, 1] * WJ[i, 1]
+            g0 += WJ[i, 0] * r[i]
+            g1 += WJ[i, 1] * r[i]
+        det = h00 * h11 - h01 * h01
+        if not det > 1e-14 * (h00 * h11 + 1e-300):  # singular: the force is too small to locate anything
+            break
+        s0 = -(h11 * g0 - h01 * g1) / det
+        s1 = -(h00 * g1 - h01 * g0) / det
+        lam = 1.0
+        improved = False
+        chi2_new = chi2
+        for _ in range(8):  # backtracking keeps every accepted step a descent
+            for i in range(3):
+                trial_c[i] = c[i] + lam * (s0 * t1[i] + s1 * t2[i])
+            _project_base(kind, size, pos, mat, trial_c, trial_c, trial_n)
+            chi2_new = _best_force(w, W, trial_c, trial_p, trial_r, tfac)
+            if chi2_new <= chi2 * (1.0 + 1e-12) + 1e-300:
+                improved = True
+                break
+            lam *= 0.5
+        if not improved:
+            converged = True  # no descent left at rounding level
+            break
+        step_len = lam * math.sqrt(s0 * s0 + s1 * s1)
+        for i in range(3):
+            c[i] = trial_c[i]
+            p[i] = trial_p[i]
+            n[i] = trial_n[i]
+        for i in range(6):
+            r[i] = trial_r[i]
+        for i in range(15):
+            fac[i] = tfac[i]
+        old = chi2
+        chi2 = chi2_new
+        if step_len <= 1e-7 * (1.0 + math.sqrt(_dot3(c, c))) or old - chi2 <= 1e-14 * (1.0 + old):
+            converged = True
+            break
+    cond = _fit_cov(w, W, c, p, n, cov, ws) if want_cov else math.inf
+    return chi2, it, converged, cond
+
+
+@njit(**JIT)
+def _fit_cov(w, W, c, p, n, cov, ws):
+    """cov = (J^T W J)^-1 at the fit (c, p) with normal n (5x5: tangent coordinates, then p); returns a
+    cheap lower bound of the condition number (inf, with infinite variances, when singular)."""
     t1 = ws[0:3]
     t2 = ws[3:6]
     J = ws[6:36].reshape((6, 5))
     H = ws[36:61].reshape((5, 5))
     g = ws[61:66]
     r = ws[66:72]
-    trial_c = ws[72:75]
-    trial_n = ws[75:78]
-    trial_p = ws[78:81]
     Lc = ws[81:106].reshape((5, 5))
-    step = ws[106:111]
     WJ = ws[111:141].reshape((6, 5))
     e = ws[141:146]
     col = ws[146:151]
-    _project_base(kind, size, pos, mat, c0, c, n)
-    for i in range(3):
-        p[i] = p0[i]
     _residual(w, c, p, r)
-    chi2 = _chi2(r, W)
-    converged = False
-    it = 0
-    while it < max_iter:
-        it += 1
-        _tangent_basis(n, t1, t2)
-        _jacobian(c, p, t1, t2, J)
-        _normal_matrix(J, W, r, H, g, WJ)
-        if not _cholesky(H, Lc):  # singular: the force is too small to locate anything
-            break
-        _chol_solve(Lc, g, step)
-        for i in range(5):
-            step[i] = -step[i]
-        lam = 1.0
-        improved = False
-        for _ in range(8):  # backtracking keeps every accepted step a descent
-            for i in range(3):
-                trial_c[i] = c[i] + lam * (step[0] * t1[i] + step[1] * t2[i])
-                trial_p[i] = p[i] + lam * step[2 + i]
-            _project_base(kind, size, pos, mat, trial_c, trial_c, trial_n)
-            _residual(w, trial_c, trial_p, r)
-            chi2_new = _chi2(r, W)
-            if chi2_new <= chi2 * (1.0 + 1e-12) + 1e-300:
-                improved = True
-                break
-            lam *= 0.5
-        if not improved:
-            _residual(w, c, p, r)
-            converged = True  # no descent left at rounding level
-            break
-        step_len = lam * math.sqrt(step[0] ** 2 + step[1] ** 2)
-        for i in range(3):
-            c[i] = trial_c[i]
-            p[i] = trial_p[i]
-            n[i] = trial_n[i]
-        old = chi2
-        chi2 = chi2_new
-        if step_len <= 1e-13 * (1.0 + math.sqrt(_dot3(c, c))) or old - chi2 <= 1e-14 * (1.0 + old):
-            converged = True
-            break
     _tangent_basis(n, t1, t2)
     _jacobian(c, p, t1, t2, J)
     _normal_matrix(J, W, r, H, g, WJ)
@@ -568,20 +824,22 @@ def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov, ws):
         for a in range(5):
             for b in range(5):
                 cov[a, b] = np.inf if a == b else 0.0
-    return chi2, it, converged, cond
+    return cond
 
 
 # -- the whole frame ----------------------------------------------------------------------------------------
 # layout of the packed arguments (one array each: numba's dispatch costs ~0.2 us per argument)
 PI_KIND, PI_LINK, PI_TOUCH, PI_PULLS = 0, 1, 2, 3  # prim_i columns
-CFG_LOW_FORCE, CFG_GRAZING_COS, CFG_OFF_CHI2, CFG_AMBIGUITY, CFG_HIDE_TOL, CFG_MAX_ITER, CFG_MISS_TOL = range(7)
+(CFG_LOW_FORCE, CFG_GRAZING_COS, CFG_OFF_CHI2, CFG_AMBIGUITY, CFG_HIDE_TOL, CFG_MAX_ITER, CFG_MISS_TOL, CFG_MISS_T,
+ CFG_MISS_F, CFG_MISS_SIGMA) = range(10)
+CFG_SIZE = 10
 O_POINT, O_FORCE, O_NORMAL, O_SCALARS, O_COV, O_SIZE = 0, 3, 6, 9, 17, 53  # out vector
 S_FLAGS, S_BEST, S_NCAND, S_CHI2, S_RESIDUAL, S_COS, S_COND, S_ITER = 0, 1, 2, 3, 4, 5, 6, 7  # scalars
 C_POINT, C_FORCE, C_SCORE, C_CHI2, C_SIZE = 0, 3, 6, 7, 8  # cand_f columns
 
 
 @njit(**JIT)
-def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_joint, tau_ext, tau_var, use_tau,
+def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_joint, tau_ext, tau_var, use_tau,
                 cfg, out, cand_prim, cand_f, ws, raw_prim):
     """One frame: external contact wrench w = (p, c x p) about the base origin, base frame.
 
@@ -590,6 +848,8 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     and the 6x6 covariance of (point, force). Candidates are sorted best first, their score is the
     log-likelihood (higher is better). Returns the number of candidates.
     """
+    W = WS[0:6]  # inverse covariance of w
+    S = WS[6:12]  # covariance of w
     kinds = prim_i[:, PI_KIND]
     prim_link = prim_i[:, PI_LINK]
     prim_touch = prim_i[:, PI_TOUCH]
@@ -601,6 +861,9 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     hide_tol = cfg[CFG_HIDE_TOL]
     max_iter = int(cfg[CFG_MAX_ITER])
     miss_num = cfg[CFG_MISS_TOL]  # N m: divided by |f| below, the line position's uncertainty (m)
+    miss_t = cfg[CFG_MISS_T]  # N m, and N: the same near a point at distance d from the origin is
+    miss_f = cfg[CFG_MISS_F]  # (miss_t + miss_f d) / |f|, a bound; near a primitive, more exactly:
+    miss_sigma = cfg[CFG_MISS_SIGMA]  # this many of the line's local standard deviations (_line_sigma)
     out_point = out[O_POINT:O_POINT + 3]
     out_force = out[O_FORCE:O_FORCE + 3]
     out_normal = out[O_NORMAL:O_NORMAL + 3]
@@ -685,6 +948,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
                     raw_point[n_raw, i] = x[i]
                 n_raw += 1
     n_crossed = n_raw
+    near_from = n_crossed  # candidates from here on are near misses
     if miss_tol > 0.0:
         # Near misses within the line's own uncertainty are candidates too: noise can push the line
         # off the touched link. One per link that has no crossing, the closest; the fit decides.
@@ -697,16 +961,25 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
                     crossed = True
             if crossed:
                 continue
-            b = sizes[g, 3] + miss_tol
+            tol = (miss_t + miss_f * (math.sqrt(_dot3(gpos[g], gpos[g])) + sizes[g, 3])) / fn
+            b = sizes[g, 3] + tol
             if _line_dist2(gpos[g], r0, u) > b * b:
                 continue
-            miss2 = _surface_near_line(kinds[g], sizes[g], gpos[g], gmat[g], r0, u, x, nb)
-            cosn = _dot3(u, nb)
-            # a clear push (or pull where allowed): a grazing near miss is no evidence of a touch there
-            if miss2 >= miss_tol * miss_tol or abs(cosn) < grazing_cos or (cosn > 0.0 and not prim_pulls[g]):
+            # the line's own 3 sigma where it passes the primitive (plus how much that can grow across it)
+            along = (gpos[g, 0] - r0[0]) * u[0] + (gpos[g, 1] - r0[1]) * u[1] + (gpos[g, 2] - r0[2]) * u[2]
+            for i in range(3):
+                tmp[i] = r0[i] + along * u[i]
+            tol = min(tol, miss_sigma * _line_sigma(S, tmp, u, fn, ws[35:38], ws[38:41])
+                      + miss_f * sizes[g, 3] / fn)
+            b = sizes[g, 3] + tol
+            if _line_dist2(gpos[g], r0, u) > b * b:
                 continue
-            if _hidden(x, nb, g, kinds, sizes, gpos, gmat, hide_tol):
-                continue
+            miss2 = _near_start(kinds[g], sizes[g], gpos[g], gmat[g], r0, u, tol, prim_pulls[g] != 0,
+                                ws[50:54], s, o_loc, d_loc, x_loc, x, nb)
+            if miss2 < 0.0 or abs(_dot3(u, nb)) < grazing_cos:
+                continue  # too far, or grazing: no evidence of a touch there
+            # no hidden test here: a touch next to a seam moves behind it when noise shifts the line,
+            # so the fit decides, and a fit deep inside another part is dropped after it (_buried)
             slot = -1
             for kk in range(n_crossed, n_raw):  # one per link: keep the closest
                 if prim_link[raw_prim[kk]] == prim_link[g]:
@@ -738,6 +1011,7 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
                     raw_point[0, i] = nb[i]
         if best < 1e300:
             n_raw = 1
+            near_from = 1  # the fallback is kept wherever it lands (flagged off_line)
 
     c = ws[26:29]
     p = ws[29:32]
@@ -758,11 +1032,15 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     cand_cond = ws[base:base + max_cand]
     cov = cand_cov[0]
     n_joints = joint_axis.shape[0]
+    n_keep = 0
     for k in range(n_raw):
         g = raw_prim[k]
-        cov = cand_cov[k]
+        cov = cand_cov[n_keep]
         chi2, iters, conv, cond = refine(kinds[g], sizes[g], gpos[g], gmat[g], w, W, raw_point[k], f, max_iter,
-                                   c, p, nrm, cov, rws)
+                                         c, p, nrm, cov, rws, False)  # the covariance: the best one's only
+        if k >= near_from and (_buried(c, g, kinds, sizes, gpos, gmat, miss_tol)
+                               or _glued(c, nrm, g, kinds, sizes, gpos, gmat, hide_tol)):
+            continue  # a near miss whose best fit lies deep inside another part, or on a face glued to one
         logl = -0.5 * chi2
         if use_tau:
             link = prim_link[g]
@@ -780,23 +1058,30 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
         for i in range(3):
             tmp[i] = c[i] - r0[i]
         logl -= 1e-12 * _dot3(tmp, u)
-        cand_prim[k] = g
-        cand_score[k] = logl
-        cand_chi2[k] = chi2
-        cand_iter[k] = iters
-        cand_conv[k] = 1.0 if conv else 0.0
-        cand_cond[k] = cond
+        cand_prim[n_keep] = g
+        cand_score[n_keep] = logl
+        cand_chi2[n_keep] = chi2
+        cand_iter[n_keep] = iters
+        cand_conv[n_keep] = 1.0 if conv else 0.0
+        cand_cond[n_keep] = cond
         for i in range(3):
-            cand_point[k, i] = c[i]
-            cand_force[k, i] = p[i]
-            cand_normal[k, i] = nrm[i]
+            cand_point[n_keep, i] = c[i]
+            cand_force[n_keep, i] = p[i]
+            cand_normal[n_keep, i] = nrm[i]
+        n_keep += 1
+    n_raw = n_keep
     if n_raw == 0:
         out_scalars[0] = flags | F_NO_CANDIDATE
         return 0
-    # sort candidates by score, best first (insertion sort: a handful of entries)
-    order = np.argsort(-cand_score[:n_raw], kind="mergesort")
-    best = order[0]
-    if n_raw > 1 and cand_score[best] - cand_score[order[1]] < ambiguity_dlogl:
+    # sort candidates by score, best first, in place (stable insertion sort: a handful of entries,
+    # and nothing allocated)
+    for k in range(1, n_raw):
+        j = k
+        while j > 0 and cand_score[j - 1] < cand_score[j]:
+            _swap_candidates(j - 1, j, cand_prim, cand_f, cand_normal, cand_iter, cand_conv)
+            j -= 1
+    best = 0
+    if n_raw > 1 and cand_score[0] - cand_score[1] < ambiguity_dlogl:
         flags |= F_AMBIGUOUS
     chi2 = cand_chi2[best]
     if chi2 > off_chi2:
@@ -814,8 +1099,9 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     if abs(cosi) < grazing_cos:
         flags |= F_GRAZING
     # covariance in the base frame: point (3x3) from the tangent block, force (3x3)
-    _tangent_basis(out_normal, t1, t2)
     cb = cand_cov[best]
+    cand_cond[best] = _fit_cov(w, W, out_point, out_force, out_normal, cb, rws)
+    _tangent_basis(out_normal, t1, t2)
     for i in range(3):
         T[i, 0] = t1[i]
         T[i, 1] = t2[i]
@@ -839,43 +1125,82 @@ def solve_frame(w, W, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_
     out_scalars[3] = chi2
     out_scalars[5] = cosi
     out_scalars[7] = cand_iter[best]
-    # reorder candidates in place, best first
-    identity = True
-    for k in range(n_raw):
-        if order[k] != k:
-            identity = False
-    if identity:
-        out_scalars[1] = 0
-        return n_raw
-    tp = cand_prim[:n_raw].copy()
-    tpt = cand_point[:n_raw].copy()
-    tf = cand_force[:n_raw].copy()
-    ts = cand_score[:n_raw].copy()
-    tc = cand_chi2[:n_raw].copy()
-    for k in range(n_raw):
-        o = order[k]
-        cand_prim[k] = tp[o]
-        cand_score[k] = ts[o]
-        cand_chi2[k] = tc[o]
-        for i in range(3):
-            cand_point[k, i] = tpt[o, i]
-            cand_force[k, i] = tf[o, i]
-    out_scalars[1] = 0
     return n_raw
+
+
+@njit(inline="always", **JIT)
+def _swap_candidates(a, b, cand_prim, cand_f, cand_normal, cand_iter, cand_conv):
+    cand_prim[a], cand_prim[b] = cand_prim[b], cand_prim[a]
+    for i in range(cand_f.shape[1]):
+        cand_f[a, i], cand_f[b, i] = cand_f[b, i], cand_f[a, i]
+    for i in range(3):
+        cand_normal[a, i], cand_normal[b, i] = cand_normal[b, i], cand_normal[a, i]
+    cand_iter[a], cand_iter[b] = cand_iter[b], cand_iter[a]
+    cand_conv[a], cand_conv[b] = cand_conv[b], cand_conv[a]
 
 
 # -- forward kinematics of the geoms (batch path) ---------------------------------------------------------
 @njit(**JIT)
-def _quat_mul(a, b, out):
-    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
-    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
-    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
-    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
+def tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis):
+    """MuJoCo's forward kinematics for trees of hinge/slide joints (one joint per body at most),
+    from the compiled MjModel arrays; checked against mj_kinematics in the tests.
+
+    tree_i columns: parent, joint (-1 none), joint type, joint qpos address;
+    tree_f columns: body pos (3), body quat (4), joint axis (3), joint pos (3) (joint of that body).
+    geom_i: body; geom_f: geom pos (3), geom quat (4).
+    Scalar temporaries only: it runs once per frame of the batch path and allocates nothing.
+    """
+    body_parent = tree_i[:, 0]
+    body_jnt = tree_i[:, 1]
+    geom_body = geom_i[:, 0]
+    nb = body_parent.shape[0]
+    xpos[0, 0], xpos[0, 1], xpos[0, 2] = 0.0, 0.0, 0.0
+    xquat[0, 0], xquat[0, 1], xquat[0, 2], xquat[0, 3] = 1.0, 0.0, 0.0, 0.0
+    for b in range(1, nb):
+        par = body_parent[b]
+        pw, px, py, pz = xquat[par, 0], xquat[par, 1], xquat[par, 2], xquat[par, 3]
+        v0, v1, v2 = _quat_rotate(pw, px, py, pz, tree_f[b, 0], tree_f[b, 1], tree_f[b, 2])
+        x0, x1, x2 = xpos[par, 0] + v0, xpos[par, 1] + v1, xpos[par, 2] + v2
+        qw, qx, qy, qz = _quat_mul_s(pw, px, py, pz, tree_f[b, 3], tree_f[b, 4], tree_f[b, 5], tree_f[b, 6])
+        j = body_jnt[b]
+        if j >= 0:
+            jp0, jp1, jp2 = tree_f[b, 10], tree_f[b, 11], tree_f[b, 12]
+            a0, a1, a2 = tree_f[b, 7], tree_f[b, 8], tree_f[b, 9]
+            v0, v1, v2 = _quat_rotate(qw, qx, qy, qz, jp0, jp1, jp2)
+            an0, an1, an2 = x0 + v0, x1 + v1, x2 + v2
+            ax0, ax1, ax2 = _quat_rotate(qw, qx, qy, qz, a0, a1, a2)
+            janchor[j, 0], janchor[j, 1], janchor[j, 2] = an0, an1, an2
+            jaxis[j, 0], jaxis[j, 1], jaxis[j, 2] = ax0, ax1, ax2
+            angle = q[tree_i[b, 3]]
+            if tree_i[b, 2] == 3:  # hinge: rotate about the axis through the anchor
+                half = 0.5 * angle
+                sh = math.sin(half)
+                qw, qx, qy, qz = _quat_mul_s(qw, qx, qy, qz, math.cos(half), a0 * sh, a1 * sh, a2 * sh)
+                nq = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+                qw, qx, qy, qz = qw / nq, qx / nq, qy / nq, qz / nq
+                v0, v1, v2 = _quat_rotate(qw, qx, qy, qz, jp0, jp1, jp2)
+                x0, x1, x2 = an0 - v0, an1 - v1, an2 - v2
+            else:  # slide
+                x0, x1, x2 = x0 + ax0 * angle, x1 + ax1 * angle, x2 + ax2 * angle
+        xpos[b, 0], xpos[b, 1], xpos[b, 2] = x0, x1, x2
+        xquat[b, 0], xquat[b, 1], xquat[b, 2], xquat[b, 3] = qw, qx, qy, qz
+    for g in range(geom_body.shape[0]):
+        b = geom_body[g]
+        bw, bx, by, bz = xquat[b, 0], xquat[b, 1], xquat[b, 2], xquat[b, 3]
+        v0, v1, v2 = _quat_rotate(bw, bx, by, bz, geom_f[g, 0], geom_f[g, 1], geom_f[g, 2])
+        gpos[g, 0], gpos[g, 1], gpos[g, 2] = xpos[b, 0] + v0, xpos[b, 1] + v1, xpos[b, 2] + v2
+        qw, qx, qy, qz = _quat_mul_s(bw, bx, by, bz, geom_f[g, 3], geom_f[g, 4], geom_f[g, 5], geom_f[g, 6])
+        _quat_mat_s(qw, qx, qy, qz, gmat[g])
 
 
-@njit(**JIT)
-def _quat_mat(q, m):
-    w, x, y, z = q[0], q[1], q[2], q[3]
+@njit(inline="always", **JIT)
+def _quat_mul_s(aw, ax, ay, az, bw, bx, by, bz):
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+@njit(inline="always", **JIT)
+def _quat_mat_s(w, x, y, z, m):
     m[0] = 1 - 2 * (y * y + z * z)
     m[1] = 2 * (x * y - w * z)
     m[2] = 2 * (x * z + w * y)
@@ -887,76 +1212,13 @@ def _quat_mat(q, m):
     m[8] = 1 - 2 * (x * x + y * y)
 
 
-@njit(**JIT)
-def tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis):
-    """MuJoCo's forward kinematics for trees of hinge/slide joints (one joint per body at most),
-    from the compiled MjModel arrays; checked against mj_kinematics in the tests.
-
-    tree_i columns: parent, joint (-1 none), joint type, joint qpos address;
-    tree_f columns: body pos (3), body quat (4), joint axis (3), joint pos (3) (joint of that body).
-    geom_i: body; geom_f: geom pos (3), geom quat (4).
-    """
-    body_parent = tree_i[:, 0]
-    body_pos = tree_f[:, 0:3]
-    body_quat = tree_f[:, 3:7]
-    body_jnt = tree_i[:, 1]
-    geom_body = geom_i[:, 0]
-    geom_pos = geom_f[:, 0:3]
-    geom_quat = geom_f[:, 3:7]
-    nb = body_parent.shape[0]
-    qtmp = np.empty(4)
-    rot = np.empty(9)
-    jq = np.empty(4)
-    v = np.empty(3)
-    xpos[0, :] = 0.0
-    xquat[0, 0], xquat[0, 1], xquat[0, 2], xquat[0, 3] = 1.0, 0.0, 0.0, 0.0
-    for b in range(1, nb):
-        par = body_parent[b]
-        _quat_mat(xquat[par], rot)
-        _dir_base(rot, body_pos[b], v)
-        for i in range(3):
-            xpos[b, i] = xpos[par, i] + v[i]
-        _quat_mul(xquat[par], body_quat[b], qtmp)
-        for i in range(4):
-            xquat[b, i] = qtmp[i]
-        j = body_jnt[b]
-        if j >= 0:
-            _quat_mat(xquat[b], rot)
-            jpos = tree_f[b, 10:13]
-            jax = tree_f[b, 7:10]
-            _dir_base(rot, jpos, v)
-            for i in range(3):
-                janchor[j, i] = xpos[b, i] + v[i]
-            _dir_base(rot, jax, v)
-            for i in range(3):
-                jaxis[j, i] = v[i]
-            angle = q[tree_i[b, 3]]
-            if tree_i[b, 2] == 3:  # hinge: rotate about the axis through the anchor
-                half = 0.5 * angle
-                sh = math.sin(half)
-                jq[0] = math.cos(half)
-                jq[1] = jax[0] * sh
-                jq[2] = jax[1] * sh
-                jq[3] = jax[2] * sh
-                _quat_mul(xquat[b], jq, qtmp)
-                nq = math.sqrt(qtmp[0] ** 2 + qtmp[1] ** 2 + qtmp[2] ** 2 + qtmp[3] ** 2)
-                for i in range(4):
-                    xquat[b, i] = qtmp[i] / nq
-                _quat_mat(xquat[b], rot)
-                _dir_base(rot, jpos, v)
-                for i in range(3):
-                    xpos[b, i] = janchor[j, i] - v[i]
-            else:  # slide
-                for i in range(3):
-                    xpos[b, i] += jaxis[j, i] * angle
-    for g in range(geom_body.shape[0]):
-        b = geom_body[g]
-        _quat_mat(xquat[b], rot)
-        _dir_base(rot, geom_pos[g], v)
-        for i in range(3):
-            gpos[g, i] = xpos[b, i] + v[i]
-        _quat_mul(xquat[b], geom_quat[g], qtmp)
-        _quat_mat(qtmp, gmat[g])
+@njit(inline="always", **JIT)
+def _quat_rotate(w, x, y, z, v0, v1, v2):
+    """The unit quaternion's rotation matrix times v."""
+    m0, m1, m2 = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    m3, m4, m5 = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    m6, m7, m8 = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    return m0 * v0 + m1 * v1 + m2 * v2, m3 * v0 + m4 * v1 + m5 * v2, m6 * v0 + m7 * v1 + m8 * v2
 
 
 @njit(**JIT)

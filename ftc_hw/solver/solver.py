@@ -34,6 +34,8 @@ FLAG_NAMES = {
     K.F_NOT_CONVERGED: "not_converged",
 }
 CHI2_1DOF_999 = 10.827566170662733  # chi-square quantile, 1 degree of freedom, p = 0.999
+# ambiguous: a runner-up whose likelihood is within a factor 100 of the best (posterior >= ~1 %)
+AMBIGUITY_DLOGL = math.log(100.0)
 BATCH_CANDIDATES = 4  # candidates kept per frame by solve_batch (the best first)
 
 
@@ -146,7 +148,7 @@ class ContactSolver:
     """Solver for one scene. Not thread-safe (it owns the model's MjData): one per thread."""
 
     def __init__(self, scene: Scene | ArmModel, *, low_force_sigma: float = 5.0, grazing_deg: float = 5.0,
-                 ambiguity_dlogl: float = 2.0, hide_tol: float = 1e-8, max_iter: int = 20,
+                 ambiguity_dlogl: float = AMBIGUITY_DLOGL, hide_tol: float = 1e-8, max_iter: int = 20,
                  tau_std: np.ndarray | None = None, miss_sigma: float = 3.0) -> None:
         self.model = scene if isinstance(scene, ArmModel) else ArmModel(scene)
         self.scene = self.model.scene
@@ -178,7 +180,8 @@ class ContactSolver:
         self.sigma_sensor = self.scene.sensor.noise_cov
         self.ext_sign = -1.0 if self.scene.sensor.reports == "base_on_arm" else 1.0
         q0 = np.array(self.scene.robot.home)
-        self._A0, self._W0 = self._frame_transform(q0)
+        self._A0, self._WS0 = self._frame_transform(q0)
+        self._W0 = self._WS0[:6]
         force_var = np.trace(np.linalg.inv(self._W0)[:3, :3]) / 3.0
         self.low_force = float(low_force_sigma * np.sqrt(force_var))
         self.grazing_cos = float(np.sin(np.radians(grazing_deg)))
@@ -193,8 +196,9 @@ class ContactSolver:
         self.tau_var[self.tau_var == 0] = 1.0
         self.prim_i = np.ascontiguousarray(np.stack([self.kinds, self.prim_link, self.prim_touch.astype(np.int64),
                                                      self.prim_pulls.astype(np.int64)], axis=1))
-        self.cfg = np.array([self.low_force, self.grazing_cos, self.off_chi2, self.ambiguity_dlogl, self.hide_tol,
-                             self.max_iter, 0.0], dtype=float)
+        self.cfg = np.zeros(K.CFG_SIZE)
+        self.cfg[:6] = (self.low_force, self.grazing_cos, self.off_chi2, self.ambiguity_dlogl, self.hide_tol,
+                        self.max_iter)
         # the line's position uncertainty: moment noise over force, and force noise times the arm's
         # reach; near misses within miss_sigma of it stay candidates
         kin = self.model.kinematics(q0)
@@ -202,6 +206,9 @@ class ContactSolver:
             m.geom_pos[g], 1.0))[:3])) + self.sizes[i, 3] for i, g in enumerate(geoms) if self.kinds[i] != K.PLANE)
         sig = np.sqrt(np.diag(np.linalg.inv(self._W0)))
         self.cfg[K.CFG_MISS_TOL] = miss_sigma * float(np.linalg.norm(sig[3:]) + np.linalg.norm(sig[:3]) * reach)
+        self.cfg[K.CFG_MISS_T] = miss_sigma * float(np.linalg.norm(sig[3:]))
+        self.cfg[K.CFG_MISS_F] = miss_sigma * float(np.linalg.norm(sig[:3]))
+        self.cfg[K.CFG_MISS_SIGMA] = miss_sigma
         self._tree = _TreeArrays(m, self._geom_ids)
         self.max_candidates = 2 * len(geoms)
         self._out = np.zeros(K.O_SIZE)
@@ -218,7 +225,8 @@ class ContactSolver:
     # -- frames ---------------------------------------------------------------------------------------
     def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
         """A maps a sensor-frame wrench about the sensor origin to the base frame about the base
-        origin; W is the inverse covariance of the external wrench in the base frame."""
+        origin; the second array stacks W, the inverse covariance of the external wrench in the base
+        frame, over that covariance (12 x 6: the kernels take both at once)."""
         b_T_s = self.model.base_T_sensor(q)
         r, t = b_T_s[:3, :3], b_T_s[:3, 3]
         a = np.zeros((6, 6))
@@ -226,7 +234,7 @@ class ContactSolver:
         a[3:, 3:] = r
         a[3:, :3] = _skew(t) @ r
         sigma = a @ self.sigma_sensor @ a.T
-        return a, np.linalg.inv(sigma)
+        return a, np.vstack([np.linalg.inv(sigma), sigma])
 
     def external_wrench_base(self, wrench_sensor, q=None) -> np.ndarray:
         """(p, c x p) in the base frame about the base origin from a compensated sensor reading."""
@@ -250,7 +258,7 @@ class ContactSolver:
         if self.sensor_moves:
             a, wmat = self._frame_transform(q)
         else:
-            a, wmat = self._A0, self._W0
+            a, wmat = self._A0, self._WS0
         ext = self.ext_sign * (a @ w)
         use_tau = tau_ext is not None
         tau_var = self.tau_var
@@ -308,7 +316,7 @@ class ContactSolver:
             ws = np.array([p[1] for p in pairs])
         else:
             ext = (w @ self._A0.T) * self.ext_sign
-            ws = self._W0[None]
+            ws = self._WS0[None]
         ext = np.ascontiguousarray(ext)
         use_tau = np.zeros(n, dtype=np.bool_)
         tau = np.zeros((n, m.njnt))
