@@ -16,6 +16,7 @@ from ftc_hw.model import ArmModel, Payload
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .link import Command, LinkInfo, WorldLink
+from .priority import prefer_cpu
 from .registry import EMULATORS
 from .world import World, WorldState, build_scenario
 
@@ -41,6 +42,7 @@ def _serve(kind: str, device: DeviceSpec, scene: Scene, link: LinkInfo, ready, o
     # reader beside the pacing loop): at Python's default 5 ms switch interval a thread ready to
     # answer can wait that long for the GIL, longer than a control period.
     sys.setswitchinterval(EMULATOR_SWITCH_INTERVAL_S)
+    prefer_cpu()
     try:
         serve = _entry(kind)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
@@ -112,6 +114,7 @@ class SimRunner:
         self._clock: tuple[int, float] | None = None  # (host ns, world s) at the start of run()
 
     def start(self) -> list[dict[str, Any]]:
+        prefer_cpu()  # the world's steps stand in for the arm controllers' cycles
         # joint state first, so emulators that answer at once have something to serve
         self._publish(self.world.state, with_ft=True)
         if self.devices:

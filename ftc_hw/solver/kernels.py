@@ -386,25 +386,10 @@ def _depth_s(kind, size, x0, x1, x2):
 
 
 @njit(**JIT)
-def _buried(x, skip, kinds, sizes, gpos, gmat, depth):
-    """x lies more than ``depth`` (m) inside a primitive other than ``skip``."""
-    for g in range(kinds.shape[0]):
-        if g == skip:
-            continue
-        b = sizes[g, 3]
-        dx, dy, dz = x[0] - gpos[g, 0], x[1] - gpos[g, 1], x[2] - gpos[g, 2]
-        if dx * dx + dy * dy + dz * dz > b * b:
-            continue
-        l0, l1, l2 = _local_s(gpos[g], gmat[g], x[0], x[1], x[2])
-        if _depth_s(kinds[g], sizes[g], l0, l1, l2) > depth:
-            return True
-    return False
-
-
-@njit(**JIT)
-def _glued(x, n, skip, kinds, sizes, gpos, gmat, eps):
-    """x lies on another primitive's surface (within eps) with its normal n pointing into it: a face
-    glued to another part (a joint's coincident caps), not on the outline."""
+def _off_outline(x, n, skip, kinds, sizes, gpos, gmat, depth, eps):
+    """A fitted point that is not on the arm's outline: more than ``depth`` (m) inside a primitive
+    other than ``skip``, or on another primitive's surface (within eps) with its normal n pointing
+    into it (a face glued to another part: a joint's coincident caps)."""
     y0, y1, y2 = x[0] + eps * n[0], x[1] + eps * n[1], x[2] + eps * n[2]
     for g in range(kinds.shape[0]):
         if g == skip:
@@ -414,11 +399,13 @@ def _glued(x, n, skip, kinds, sizes, gpos, gmat, eps):
         if dx * dx + dy * dy + dz * dz > b * b:
             continue
         l0, l1, l2 = _local_s(gpos[g], gmat[g], x[0], x[1], x[2])
-        if abs(_depth_s(kinds[g], sizes[g], l0, l1, l2)) > eps:
-            continue
-        l0, l1, l2 = _local_s(gpos[g], gmat[g], y0, y1, y2)
-        if _depth_s(kinds[g], sizes[g], l0, l1, l2) > 0.0:
+        d = _depth_s(kinds[g], sizes[g], l0, l1, l2)
+        if d > depth:
             return True
+        if abs(d) <= eps:
+            l0, l1, l2 = _local_s(gpos[g], gmat[g], y0, y1, y2)
+            if _depth_s(kinds[g], sizes[g], l0, l1, l2) > 0.0:
+                return True
     return False
 
 
@@ -979,7 +966,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
             if miss2 < 0.0 or abs(_dot3(u, nb)) < grazing_cos:
                 continue  # too far, or grazing: no evidence of a touch there
             # no hidden test here: a touch next to a seam moves behind it when noise shifts the line,
-            # so the fit decides, and a fit deep inside another part is dropped after it (_buried)
+            # so the fit decides, and a fit deep inside another part is dropped after it (_off_outline)
             slot = -1
             for kk in range(n_crossed, n_raw):  # one per link: keep the closest
                 if prim_link[raw_prim[kk]] == prim_link[g]:
@@ -1038,8 +1025,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
         cov = cand_cov[n_keep]
         chi2, iters, conv, cond = refine(kinds[g], sizes[g], gpos[g], gmat[g], w, W, raw_point[k], f, max_iter,
                                          c, p, nrm, cov, rws, False)  # the covariance: the best one's only
-        if k >= near_from and (_buried(c, g, kinds, sizes, gpos, gmat, miss_tol)
-                               or _glued(c, nrm, g, kinds, sizes, gpos, gmat, hide_tol)):
+        if k >= near_from and _off_outline(c, nrm, g, kinds, sizes, gpos, gmat, miss_tol, hide_tol):
             continue  # a near miss whose best fit lies deep inside another part, or on a face glued to one
         logl = -0.5 * chi2
         if use_tau:

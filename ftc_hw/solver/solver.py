@@ -3,10 +3,14 @@ and how sure we are.
 
 Method ("ours"): the wrench's line of action crossed with every touchable primitive (analytic,
 stable roots), hidden and inadmissible crossings dropped (inside another primitive; pulls where
-the scene forbids them), then for each candidate the weighted least-squares fit on its surface:
-minimise the Mahalanobis distance of the 6-D wrench over the contact point (on the surface) and the
-force, by manifold Gauss-Newton. Covariances come from the Jacobian at the solution; candidates are
-ranked by log-likelihood, including the per-joint external torques when given (link isolation).
+the scene forbids them); every link the line misses by less than 3 of its own local standard
+deviations is a candidate too (noise moves the line off a touched link, or behind a seam). Then for
+each candidate the weighted least-squares fit on its surface: minimise the Mahalanobis distance of
+the 6-D wrench over the contact point (on the surface) and the force; the force is solved in closed
+form at each point and Gauss-Newton moves the point (variable projection). Covariances come from
+the Jacobian at the solution; candidates are ranked by log-likelihood, including the per-joint
+external torques when given (link isolation), and the answer is ``ambiguous`` when a runner-up
+comes within a factor 100 in likelihood.
 """
 from __future__ import annotations
 
