@@ -1015,15 +1015,13 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
     cand_iter = ws[base:base + max_cand]
     base += max_cand
     cand_conv = ws[base:base + max_cand]  # 1.0 converged, 0.0 not
-    base += max_cand
-    cand_cond = ws[base:base + max_cand]
     cov = cand_cov[0]
     n_joints = joint_axis.shape[0]
     n_keep = 0
     for k in range(n_raw):
         g = raw_prim[k]
         cov = cand_cov[n_keep]
-        chi2, iters, conv, cond = refine(kinds[g], sizes[g], gpos[g], gmat[g], w, W, raw_point[k], f, max_iter,
+        chi2, iters, conv, _ = refine(kinds[g], sizes[g], gpos[g], gmat[g], w, W, raw_point[k], f, max_iter,
                                          c, p, nrm, cov, rws, False)  # the covariance: the best one's only
         if k >= near_from and _off_outline(c, nrm, g, kinds, sizes, gpos, gmat, miss_tol, hide_tol):
             continue  # a near miss whose best fit lies deep inside another part, or on a face glued to one
@@ -1049,7 +1047,6 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
         cand_chi2[n_keep] = chi2
         cand_iter[n_keep] = iters
         cand_conv[n_keep] = 1.0 if conv else 0.0
-        cand_cond[n_keep] = cond
         for i in range(3):
             cand_point[n_keep, i] = c[i]
             cand_force[n_keep, i] = p[i]
@@ -1086,7 +1083,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
         flags |= F_GRAZING
     # covariance in the base frame: point (3x3) from the tangent block, force (3x3)
     cb = cand_cov[best]
-    cand_cond[best] = _fit_cov(w, W, out_point, out_force, out_normal, cb, rws)
+    cond = _fit_cov(w, W, out_point, out_force, out_normal, cb, rws)
     _tangent_basis(out_normal, t1, t2)
     for i in range(3):
         T[i, 0] = t1[i]
@@ -1104,7 +1101,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
                 acc += T[a, i] * cb[i, 2 + b]
             out_cov[a, 3 + b] = acc
             out_cov[3 + b, a] = acc
-    out_scalars[6] = cand_cond[best]
+    out_scalars[6] = cond
     out_scalars[0] = flags
     out_scalars[1] = best
     out_scalars[2] = n_raw

@@ -186,7 +186,7 @@ class ContactSolver:
         q0 = np.array(self.scene.robot.home)
         self._A0, self._WS0 = self._frame_transform(q0)
         self._W0 = self._WS0[:6]
-        force_var = np.trace(np.linalg.inv(self._W0)[:3, :3]) / 3.0
+        force_var = np.trace(self._WS0[6:9, :3]) / 3.0  # the covariance sits under W
         self.low_force = float(low_force_sigma * np.sqrt(force_var))
         self.grazing_cos = float(np.sin(np.radians(grazing_deg)))
         self.off_chi2 = CHI2_1DOF_999
@@ -208,7 +208,7 @@ class ContactSolver:
         kin = self.model.kinematics(q0)
         reach = max(float(np.linalg.norm((kin[self.links[self.prim_link[i]]] @ np.append(
             m.geom_pos[g], 1.0))[:3])) + self.sizes[i, 3] for i, g in enumerate(geoms) if self.kinds[i] != K.PLANE)
-        sig = np.sqrt(np.diag(np.linalg.inv(self._W0)))
+        sig = np.sqrt(np.diag(self._WS0[6:]))
         self.cfg[K.CFG_MISS_TOL] = miss_sigma * float(np.linalg.norm(sig[3:]) + np.linalg.norm(sig[:3]) * reach)
         self.cfg[K.CFG_MISS_T] = miss_sigma * float(np.linalg.norm(sig[3:]))
         self.cfg[K.CFG_MISS_F] = miss_sigma * float(np.linalg.norm(sig[:3]))
