@@ -76,7 +76,8 @@ class ContactPipeline:
         model_error = None
         if lag_error is not None:
             # the estimated acceleration lags the true one by about the recent change: its effect on
-            # the compensated wrench is the model's response to that change (linear in qdd)
+            # the compensated wrench is the model's response to that change (linear in qdd; per joint
+            # its own term, so only the size of the change matters, not its sign)
             # (an uncertainty, not a correction: the Jacobian is refreshed every G_REFRESH_NS, ~1 % of
             # change at 1 rad/s)
             if self._g_cache is None or t_clock - self._g_time >= G_REFRESH_NS:
@@ -109,14 +110,19 @@ class ContactPipeline:
         return FrameResult(t_ns, external, det, estimate, tau_ext, tuple(events))
 
     def _lag_error(self, t_ns: int, qdd: np.ndarray) -> np.ndarray | None:
-        """The change of the acceleration estimate over the last lag window (2 tau): the size of the
-        estimator's lag error right now; None when it is negligible (saves an inverse dynamics)."""
+        """The largest change of the acceleration estimate over the last lag window (2 tau), per
+        joint: the size of the estimator's lag error right now; None when it is negligible (saves an
+        inverse dynamics). The largest change, not the change across the window: after a short pulse
+        the estimate comes back down and its two ends can agree while it still lags by the pulse."""
         hist = self._qdd_hist
         hist.append((t_ns, qdd))
         while len(hist) > 2 and t_ns - hist[1][0] >= self._lag_window_ns:
             hist.popleft()
-        change = self.lag_gain * (qdd - hist[0][1])
-        if float(np.abs(change).max()) < self.lag_floor:
+        change = np.zeros_like(qdd)
+        for _, past in hist:
+            np.maximum(change, np.abs(qdd - past), out=change)
+        change *= self.lag_gain
+        if float(change.max()) < self.lag_floor:
             return None
         return change
 

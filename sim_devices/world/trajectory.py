@@ -36,8 +36,11 @@ class Sinusoid(Trajectory):
     start_s: float = 0.0
 
     def reference(self, t: float):
-        t = max(0.0, t - self.start_s)
         w = 2.0 * np.pi * self.frequency_hz
+        if t < self.start_s:  # at rest: no velocity or acceleration feed-forward
+            z = np.zeros_like(self.centre)
+            return self.centre + self.amplitude * np.sin(self.phase), z, z.copy()
+        t -= self.start_s
         s, c = np.sin(w * t + self.phase), np.cos(w * t + self.phase)
         return self.centre + self.amplitude * s, self.amplitude * w * c, -self.amplitude * w * w * s
 
