@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
+from ftc_hw.priority import READER_NICE, preferred_cpu
 
 
 class DeviceError(Exception):
@@ -138,12 +139,15 @@ READER_SWITCH_INTERVAL_S = 0.0005
 
 @contextmanager
 def responsive_readers(interval_s: float = READER_SWITCH_INTERVAL_S) -> Iterator[None]:
-    """Run with a short interpreter switch interval: device readers poll (ur_rtde keeps only its
-    newest packet) and a reflex must go out while the pipeline computes; at Python's default 5 ms a
-    thread that wakes can wait that long for the interpreter, longer than a 2 ms control period."""
+    """Run with a short interpreter switch interval and, when the OS allows, ahead of ordinary
+    processes (ftc_hw.priority): device readers poll (ur_rtde keeps only its newest packet) and a
+    reflex must go out while the pipeline computes; at Python's default 5 ms a thread that wakes can
+    wait that long for the interpreter, and an ordinary process as long for a core on a busy host,
+    longer than a 2 ms control period."""
     switch = sys.getswitchinterval()
     sys.setswitchinterval(min(switch, interval_s))
     try:
-        yield
+        with preferred_cpu(READER_NICE):
+            yield
     finally:
         sys.setswitchinterval(switch)

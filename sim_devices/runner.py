@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 
 from ftc_hw.model import ArmModel, Payload
+from ftc_hw.priority import DEVICE_NICE, WORLD_NICE, prefer_cpu
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .link import Command, LinkInfo, WorldLink
-from .priority import prefer_cpu
 from .registry import EMULATORS
 from .world import World, WorldState, build_scenario
 
@@ -42,7 +42,7 @@ def _serve(kind: str, device: DeviceSpec, scene: Scene, link: LinkInfo, ready, o
     # reader beside the pacing loop): at Python's default 5 ms switch interval a thread ready to
     # answer can wait that long for the GIL, longer than a control period.
     sys.setswitchinterval(EMULATOR_SWITCH_INTERVAL_S)
-    prefer_cpu()
+    prefer_cpu(DEVICE_NICE, exact=True)  # below the world's tier even when the world started it
     try:
         serve = _entry(kind)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
@@ -114,7 +114,6 @@ class SimRunner:
         self._clock: tuple[int, float] | None = None  # (host ns, world s) at the start of run()
 
     def start(self) -> list[dict[str, Any]]:
-        prefer_cpu()  # the world's steps stand in for the arm controllers' cycles
         # joint state first, so emulators that answer at once have something to serve
         self._publish(self.world.state, with_ft=True)
         if self.devices:
@@ -125,6 +124,9 @@ class SimRunner:
             except Exception:
                 self.stop()
                 raise
+        # after the emulators started (they take their own tier, below the world's): the world's
+        # steps stand in for the arm controllers' cycles
+        prefer_cpu(WORLD_NICE)
         return [e.endpoint for e in self.emulators]
 
     def _publish(self, state: WorldState, with_ft: bool) -> None:

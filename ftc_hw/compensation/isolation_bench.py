@@ -11,6 +11,11 @@ wrong link is *flagged* when the estimate carries any flag (``ambiguous``, ``off
 A case is *discriminable* when the two best candidates' joint-torque signatures differ by more than
 4 standard deviations of tau_ext: only then can any method tell them apart from the currents. The
 others (bodies moved by the same joints, points near a joint) must stay flagged or be right.
+
+A case is *rigid* when no joint separates the two links (parts welded together, e.g. dxl-arm's fingers
+on link5, whose gripper joint the scene does not model): their torque signatures are identical, so
+the currents carry no information on which was touched and only a flag is right. The share the
+acceptance speaks of, right with currents, is also given over the *jointed* cases (the others).
 """
 from __future__ import annotations
 
@@ -48,7 +53,9 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
     f_max = min(60.0, 0.15 * float(scene.sensor.range[:3].min()))
     rng = np.random.default_rng(seed)
     counts = dict.fromkeys(("two_link", "ambiguous_without", "right_without", "right", "flagged", "wrong",
-                            "discriminable", "discriminable_right", "other_right", "other_flagged", "other_wrong"), 0)
+                            "discriminable", "discriminable_right", "other_right", "other_flagged", "other_wrong",
+                            "rigid", "rigid_right", "rigid_flagged", "rigid_wrong"), 0)
+    link_id = {name: i for i, name in enumerate(solver.links)}
     for sp, force in sample_contacts(model, q, n_cases, rng, 40.0, (0.5 * f_max, f_max)):
         w = model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, force)])
         e = solver.solve(w, q)
@@ -76,6 +83,11 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
         counts["wrong"] += not (right or flagged)
         a = e.candidates[0]
         b = next(c for c in e.candidates if c.link != a.link and c.chi2 < EXACT_CHI2)
+        if (solver.link_joint[link_id[a.link]] == solver.link_joint[link_id[b.link]]).all():
+            counts["rigid"] += 1
+            counts["rigid_right"] += right
+            counts["rigid_flagged"] += flagged
+            counts["rigid_wrong"] += not (right or flagged)
         sig = [-model.joint_torques(q, level="bias", contacts=[Contact(c.link, c.point, c.force)]) for c in (a, b)]
         if np.linalg.norm((sig[0] - sig[1]) / tau_std) > DISCRIMINABLE_SIGMA:
             counts["discriminable"] += 1
@@ -95,6 +107,9 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
                 "discriminable_share": share("discriminable", "two_link"),
                 "discriminable_wrong": c["discriminable"] - c["discriminable_right"],
                 "discriminable_right_share": share("discriminable_right", "discriminable"),
+                "rigid_share": share("rigid", "two_link"),
+                "jointed_right_share": ((c["right"] - c["rigid_right"]) / (c["two_link"] - c["rigid"])
+                                        if c["two_link"] > c["rigid"] else math.nan),
                 "ambiguous_without_share": share("ambiguous_without", "two_link")}
 
 
@@ -107,14 +122,17 @@ def run(json_path: Path | None = None, cases: int = 400, seed: int = 0, scenes: 
     table = Table(title=f"link isolation by motor currents, force line crossing two links ({cases} sampled contacts "
                         "per scene)")
     for col in ("scene", "two-link cases", "without currents: flagged", "unflagged wrong", "right with currents",
-                "flagged",
-                "silently wrong", "discriminable (>4 sigma)", "right among discriminable"):
+                "flagged", "silently wrong", "rigid (no joint between)", "right where a joint separates",
+                "discriminable (>4 sigma)", "right among discriminable"):
         table.add_column(col, justify="left" if col == "scene" else "right")
     for name, r in results.items():
         unflagged_wrong = r["two_link"] - r["ambiguous_without"] - r["right_without"]
         table.add_row(name, str(r["two_link"]), f"{r['ambiguous_without_share']:.1%}", str(unflagged_wrong),
                       f"{r['right_share']:.1%}",
                       f"{r['flagged'] / max(1, r['two_link']):.1%}", f"{r['wrong_share']:.1%}",
+                      f"{r['rigid_share']:.1%} ({r['rigid_right']} right, {r['rigid_flagged']} flagged, "
+                      f"{r['rigid_wrong']} wrong)",
+                      f"{r['jointed_right_share']:.1%}",
                       f"{r['discriminable_share']:.1%}", f"{r['discriminable_right_share']:.1%}")
     table_console().print(table)
     if json_path is not None:

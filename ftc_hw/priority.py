@@ -1,0 +1,51 @@
+"""CPU priority of the processes that stand in for, or talk to, real-time controllers.
+
+The simulated world and the protocol emulators stand in for controllers that answer within their
+cycle; the device readers and the stop reflex must get a command out within one. On a small shared
+machine an ordinary process can wait a few milliseconds for a core, longer than a control period, so
+these processes ask the OS to run them ahead of ordinary ones when it allows (root or CAP_SYS_NICE).
+Without the privilege nothing changes; the benches report the tail either way.
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
+
+# Nice values, all well short of the real-time classes; the world first (it stands in for the arm's
+# controllers), then the emulators (device firmware), then the client side (readers and the reflex),
+# so that no tier starves the one it waits on.
+WORLD_NICE = -15
+DEVICE_NICE = -10
+READER_NICE = -5
+
+
+def prefer_cpu(nice: int = DEVICE_NICE, *, exact: bool = False) -> bool:
+    """Raise this process's priority to ``nice`` if allowed and not already higher; True if it is.
+    ``exact``: also lower it to ``nice`` (a tier's own processes started by a higher tier)."""
+    if not hasattr(os, "setpriority"):
+        return False
+    try:
+        now = os.getpriority(os.PRIO_PROCESS, 0)
+        if now > nice or (exact and now != nice):
+            os.setpriority(os.PRIO_PROCESS, 0, nice)
+        return True
+    except OSError:  # no privilege: run as an ordinary process
+        return False
+
+
+@contextmanager
+def preferred_cpu(nice: int = DEVICE_NICE) -> Iterator[bool]:
+    """``prefer_cpu`` for the duration of the block; the previous priority is restored after it
+    (lowering a priority needs no privilege). Yields whether the raise took."""
+    if not hasattr(os, "getpriority"):
+        yield False
+        return
+    before = os.getpriority(os.PRIO_PROCESS, 0)
+    raised = prefer_cpu(nice)
+    try:
+        yield raised
+    finally:
+        if raised and os.getpriority(os.PRIO_PROCESS, 0) != before:
+            with suppress(OSError):
+                os.setpriority(os.PRIO_PROCESS, 0, before)
