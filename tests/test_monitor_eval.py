@@ -115,3 +115,19 @@ def test_the_cramer_rao_bound_of_a_truth_record():
     contact = SimpleNamespace(link=sp.link, point=sp.point, force=force, source="probe")
     b = bound(truth_record(SimpleNamespace(t=0.0, q=q, contacts=(contact,))))
     assert b is not None and 0.01 < b < 5.0, b
+
+
+def test_each_estimate_is_set_against_its_own_bound():
+    """Errors of 3 mm where the bound is 1 mm and of 10 mm where it is 10 mm: the RMS error over the
+    RMS bound (1.04) hides the 3-sigma estimate; the RMS of error over bound (2.24) shows it. An
+    estimate without a bound counts in neither."""
+    tr = truth(300, set(range(100, 200)))
+    evs = [event("onset", T0 + 101 * MS, point=(0.1, 0.003, 0.5)),
+           event("update", T0 + 150 * MS, point=(0.1, 0.01, 0.5)),
+           event("update", T0 + 170 * MS, point=(0.1, 0.05, 0.5))]
+    bounds = {101: 1.0, 150: 10.0}
+    ev = evaluate(evs, tr, 0.001, crlb=lambda rec: bounds.get(round(rec["t"] * 1000)))
+    c = ev.contacts[0]
+    assert c.crlb_rms_mm == pytest.approx(((1 + 100) / 2) ** 0.5, abs=0.01)
+    assert c.err_over_crlb_rms == pytest.approx(((9 + 1) / 2) ** 0.5, abs=0.01)
+    assert ev.worst_err_over_crlb() == c.err_over_crlb_rms

@@ -20,10 +20,11 @@ def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record=
     ev = out.evaluation
     if ev is not None:
         worst = ev.worst_rms_mm()
-        ratio = ev.worst_rms_to_crlb()
+        ratio = ev.worst_err_over_crlb()
         console.print(f"[bold]summary[/]: {ev.detected}/{len(ev.contacts)} contacts detected, "
                       f"{sum(c.delay_ok for c in ev.contacts)} within {ev.delay_limit_ms:g} ms of their first "
                       f"sample, {len(ev.false_alarms)} false alarms"
                       + (f", worst per-contact RMS point error {worst:.1f} mm" if worst is not None else "")
-                      + (f" (worst RMS / Cramer-Rao bound: {ratio:.2f})" if ratio is not None else ""))
+                      + (f" (worst per-contact RMS of error / Cramer-Rao bound: {ratio:.2f})"
+                         if ratio is not None else ""))
     return out.exit_code
