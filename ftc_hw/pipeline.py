@@ -43,7 +43,8 @@ class ContactPipeline:
         self.solver = make_solver(model if method == "ours" else scene, method)
         self.residuals = JointResiduals(scene) if use_currents else None
         self.qdd = QddEstimator(scene.n_joints, qdd_tau)
-        cov = scene.sensor.noise_cov + (np.zeros((6, 6)) if extra_cov is None else np.asarray(extra_cov))
+        self.extra_cov = None if extra_cov is None else np.asarray(extra_cov, dtype=float).reshape(6, 6)
+        cov = scene.sensor.noise_cov + (np.zeros((6, 6)) if self.extra_cov is None else self.extra_cov)
         self.detector = ContactDetector(cov, p_false=p_false, n_on=n_on, n_off=n_off)
         self.update_period_ns = int(update_period_s * 1e9)
         self._last_update_ns = 0
@@ -96,7 +97,12 @@ class ContactPipeline:
         estimate = None
         if det.active or det.change == "offset":
             if det.active:
-                estimate = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std)
+                # the acceleration estimate's lag error weighs on the fit as it does on detection
+                extra = self.extra_cov
+                if model_error is not None:
+                    extra = model_error.T @ model_error if extra is None else extra + model_error.T @ model_error
+                estimate = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
+                                             extra_cov=extra)
                 self._last_estimate = estimate
             if det.change == "onset":
                 events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det))

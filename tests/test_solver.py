@@ -278,3 +278,21 @@ def test_a_fit_without_a_covariance_reports_it_unbounded_not_nan():
     assert not np.isnan(e.cov).any() and np.isinf(np.diag(e.cov)).all()
     b = solver.solve_batch(np.array([tiny]), np.array([q]))
     assert not np.isnan(b.cov).any() and np.isinf(np.diagonal(b.cov, axis1=1, axis2=2)).all()
+
+
+def test_the_compensation_uncertainty_weighs_on_the_fit_and_its_covariance():
+    """An extra covariance equal to the sensor's doubles the wrench covariance: on a noise-free
+    reading the point stays and the reported covariance doubles; a broken one is invalid input."""
+    scene = load_scene("ur5e")
+    model = ArmModel(scene)
+    solver = ContactSolver(model)
+    q = np.array(scene.robot.home)
+    sp, force = contacts(model, q, 1, seed=4, max_angle_deg=20, f_range=(50.0, 50.0))[0]
+    w = reading(model, q, sp, force)
+    plain = solver.solve(w, q)
+    doubled = solver.solve(w, q, extra_cov=scene.sensor.noise_cov)
+    assert plain.contact and doubled.contact and doubled.link == plain.link
+    assert np.allclose(doubled.point, plain.point, atol=1e-9)
+    assert np.allclose(doubled.cov, 2.0 * plain.cov, rtol=1e-6, atol=1e-18)
+    broken = solver.solve(w, q, extra_cov=np.full((6, 6), np.nan))
+    assert not broken.contact and "invalid_input" in broken.flags

@@ -227,17 +227,21 @@ class ContactSolver:
                          np.zeros((len(geoms), 9)), np.zeros((m.njnt, 3)), np.zeros((m.njnt, 3)))
 
     # -- frames ---------------------------------------------------------------------------------------
-    def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
+    def _frame_transform(self, q, sigma_sensor=None) -> tuple[np.ndarray, np.ndarray]:
         """A maps a sensor-frame wrench about the sensor origin to the base frame about the base
         origin; the second array stacks W, the inverse covariance of the external wrench in the base
-        frame, over that covariance (12 x 6: the kernels take both at once)."""
-        b_T_s = self.model.base_T_sensor(q)
-        r, t = b_T_s[:3, :3], b_T_s[:3, 3]
-        a = np.zeros((6, 6))
-        a[:3, :3] = r
-        a[3:, 3:] = r
-        a[3:, :3] = _skew(t) @ r
-        sigma = a @ self.sigma_sensor @ a.T
+        frame, over that covariance (12 x 6: the kernels take both at once). ``sigma_sensor``: the
+        wrench covariance in the sensor frame (default: the sensor's noise)."""
+        if q is None:
+            a = self._A0
+        else:
+            b_T_s = self.model.base_T_sensor(q)
+            r, t = b_T_s[:3, :3], b_T_s[:3, 3]
+            a = np.zeros((6, 6))
+            a[:3, :3] = r
+            a[3:, 3:] = r
+            a[3:, :3] = _skew(t) @ r
+        sigma = a @ (self.sigma_sensor if sigma_sensor is None else sigma_sensor) @ a.T
         return a, np.vstack([np.linalg.inv(sigma), sigma])
 
     def external_wrench_base(self, wrench_sensor, q=None) -> np.ndarray:
@@ -246,20 +250,28 @@ class ContactSolver:
         return self.ext_sign * (a @ np.asarray(wrench_sensor, dtype=float))
 
     # -- single frame ---------------------------------------------------------------------------------
-    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False, tau_std=None) -> ContactEstimate:
+    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False, tau_std=None,
+              extra_cov=None) -> ContactEstimate:
         """Estimate the contact from the compensated wrench (sensor frame, the scene's sign
         convention: the external contact wrench only) at joint angles q (rad).
 
         ``tau_ext``: optional per-joint external torques (N m, the scene's joint order) from the
         joint currents; they score each candidate by J_c^T p and isolate the link. ``tau_std``: their
         standard deviations for this frame (default: the solver's, from the current noise).
+        ``extra_cov``: the compensation's own uncertainty for this frame (6x6, sensor frame), added
+        to the sensor noise: it weights the fit and enters the reported covariance.
         """
         w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
         if not (math.isfinite(w.sum()) and math.isfinite(q.sum())):  # NaN or Inf anywhere
             return self._invalid(saturated)
         self._qfull[self.model._qadr] = q
-        if self.sensor_moves:
+        if extra_cov is not None:
+            extra = np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
+            if not math.isfinite(extra.sum()):
+                return self._invalid(saturated)
+            a, wmat = self._frame_transform(q if self.sensor_moves else None, self.sigma_sensor + extra)
+        elif self.sensor_moves:
             a, wmat = self._frame_transform(q)
         else:
             a, wmat = self._A0, self._WS0
