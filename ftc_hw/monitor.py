@@ -7,7 +7,9 @@ their delivery; frames without device time use their host receive time.
 
 A worker thread owns the pipeline (a bounded queue decouples it from the F/T reader: a slow pipeline
 drops frames, counted, instead of stalling the device). Without a calibration the sensor is tared
-on the first ``tare_s`` of frames, which must be taken with the arm still and untouched.
+on the first ``tare_s`` of frames, which must be taken with the arm still and untouched. A frame
+received more than 50 ms after its aligned time counts as late (``ft_frames_late``: a backlog between
+the device and the monitor; the clock alignment keeps such frames at their true time).
 
 What the pipeline consumes for each F/T frame (its aligned time, the raw wrench, the joint state
 interpolated there, whether it went to the tare) is published on ``monitor/input`` as a
@@ -31,6 +33,7 @@ from .pipeline import ContactPipeline, FrameResult
 from .scene import Scene
 
 MONITOR_INPUT = "monitor/input"
+LATE_NS = 50_000_000  # an F/T frame received this long after its (aligned) time counts as late
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -109,6 +112,9 @@ class LiveMonitor:
         self._thread.join(timeout=5.0)
         self._thread = None
         self.counters["ft_frames_dropped"] = self._sub.drops
+        for name, clock in (("ft", self._ft_clock), ("arm", self._arm_clock)):
+            if clock.capped:
+                self.counters[f"{name}_clock_capped"] = clock.capped
 
     def __enter__(self) -> LiveMonitor:
         return self.start()
@@ -124,7 +130,10 @@ class LiveMonitor:
         while not self._stop.is_set():
             try:
                 frame = self._sub.get(timeout=0.001 if pending else 0.1)
-                pending.append((time.monotonic(), self._aligned(self._ft_clock, frame), frame))
+                t_frame = self._aligned(self._ft_clock, frame)
+                if frame.t_host_ns - t_frame > LATE_NS:  # a backlog between the device and us
+                    self.counters["ft_frames_late"] += 1
+                pending.append((time.monotonic(), t_frame, frame))
             except queue.Empty:
                 pass
             except Exception:  # noqa: BLE001 - the subscription was closed: we are stopping

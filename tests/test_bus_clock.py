@@ -17,17 +17,35 @@ US = 1_000
     st.integers(-(10**12), 10**12),
 )
 def test_without_skew_offset_is_window_minimum_of_delay(steps, offset):
-    """Exact: the offset is the true offset plus the smallest delay of the samples in the window."""
+    """The offset is the true offset plus the smallest delay of the samples in the window, except that
+    it rises no faster than max_skew (a backlog is no clock)."""
     al = ClockAligner(window_s=0.01, estimate_skew=False, min_samples=1)
-    t_dev, seen = DEV0, []
+    t_dev, seen, expected = DEV0, [], None
     for period, delay in steps:
         t_dev += period
         al.update(t_dev, t_dev + offset + delay)
         seen.append((t_dev, delay))
-        in_window = [d for t, d in seen if t >= t_dev - 10_000_000]
-        assert al.offset_ns == offset + min(in_window)
-        assert al.to_host(t_dev) == t_dev + offset + min(in_window)
+        in_window = min(d for t, d in seen if t >= t_dev - 10_000_000)
+        expected = in_window if expected is None else min(in_window, expected + al.max_skew * period)
+        assert al.offset_ns == pytest.approx(offset + expected, abs=2)
+        assert al.to_host(t_dev) == pytest.approx(t_dev + offset + expected, abs=2)
     assert al.resets == 0 and al.skew == 0.0
+
+
+def test_a_reader_falling_behind_keeps_its_frames_true_time():
+    """A reader that falls behind its 1 kHz device: for 5 s every frame arrives 150 ms per second later
+    than the last. Once the window has slid past the prompt frames, its minimum is the backlog; the
+    estimate must not follow it (the frames would take the joint state of another moment)."""
+    al = ClockAligner()
+    offset = H0 - DEV0
+    for i in range(8000):
+        t_dev = DEV0 + i * 1_000_000
+        backlog = 0 if i < 3000 else round(0.15 * (i - 3000) * 1_000_000)
+        al.update(t_dev, t_dev + offset + 200 * US + backlog)
+    elapsed_ns = 5_000_000_000
+    err = al.to_host(t_dev) - (t_dev + offset + 200 * US)
+    assert 0 <= err <= al.max_skew * elapsed_ns + 1_000  # at most the rate a clock may drift, not 750 ms
+    assert al.capped > 0 and al.resets == 0
 
 
 def simulate(seed, skew, floor_ns, mean_ns, p_spike, n=4000, period_ns=1_000_000):

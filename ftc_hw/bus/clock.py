@@ -17,6 +17,12 @@ timestamps alone cannot observe (subtract it if known).
 
 A device clock going backwards, or a sample arriving more than ``jump_ns`` *earlier* than the current
 estimate allows (impossible with positive delays), resets the estimate (``resets`` counts them).
+
+The estimate falls at once (a lower delay floor is seen) but rises no faster than ``max_skew``: a
+reader that falls behind its device builds a backlog whose delay grows for seconds, and once the
+window has slid past the last prompt sample its minimum rises with the backlog. Followed, that would
+shift the stream's time by the backlog against the others (a compensation fed the joint state of
+another moment); capped, late frames keep their true time (``capped`` counts the capped fits).
 """
 
 from __future__ import annotations
@@ -66,6 +72,7 @@ class ClockAligner:
         self.min_skew_span_ns = int(min_skew_span_s * 1e9)
         self.jump_ns = jump_ns
         self.resets = 0
+        self.capped = 0
         self._reset()
 
     def _reset(self) -> None:
@@ -79,6 +86,7 @@ class ClockAligner:
         self._b = 0.0
         self._since_fit = 0
         self._fitted = False
+        self._cap: tuple[int, float] | None = None  # (x, line value there) of the last estimate
 
     # -- feeding --------------------------------------------------------------------------------
     def update(self, t_device_ns: int, t_host_ns: int) -> None:
@@ -108,14 +116,27 @@ class ClockAligner:
             mins.popleft()
         if not self.estimate_skew:
             self._a = float(mins[0][1])
-            return
-        self._since_fit += 1
-        if not self._fitted or self._since_fit >= self.refit_every:
-            self._fit()
-        elif not self._b:
-            self._a = float(mins[0][1])
         else:
-            self._a = min(self._a, y - self._b * x)  # keep the line under the new sample
+            self._since_fit += 1
+            if not self._fitted or self._since_fit >= self.refit_every:
+                self._fit()
+            elif not self._b:
+                self._a = float(mins[0][1])
+            else:
+                self._a = min(self._a, y - self._b * x)  # keep the line under the new sample
+        self._limit_rise(x)
+
+    def _limit_rise(self, x: int) -> None:
+        """Hold the line at x to at most the last estimate plus max_skew times the time since."""
+        line = self._a + self._b * x
+        if self._cap is not None:
+            cx, cy = self._cap
+            limit = cy + self.max_skew * (x - cx)
+            if line > limit + 1.0:  # 1 ns: rounding
+                self._a = limit - self._b * x
+                line = limit
+                self.capped += 1
+        self._cap = (x, line)
 
     def _fit(self) -> None:
         self._since_fit = 0

@@ -216,6 +216,7 @@ class ContactSolver:
         self._tree = _TreeArrays(m, self._geom_ids)
         self.max_candidates = 2 * len(geoms)
         self._out = np.zeros(K.O_SIZE)
+        self._ws_extra = np.zeros((12, 6))
         self._cand_prim = np.zeros(self.max_candidates, dtype=np.int64)
         self._cand_f = np.zeros((self.max_candidates, K.C_SIZE))
         self._tau = np.zeros(m.njnt)
@@ -268,9 +269,10 @@ class ContactSolver:
         self._qfull[self.model._qadr] = q
         if extra_cov is not None:
             extra = np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
-            if not math.isfinite(extra.sum()):
+            a = self._frame_transform(q)[0] if self.sensor_moves else self._A0
+            wmat = self._ws_extra
+            if not (math.isfinite(extra.sum()) and K.weight_stack(a, self.sigma_sensor + extra, wmat)):
                 return self._invalid(saturated)
-            a, wmat = self._frame_transform(q if self.sensor_moves else None, self.sigma_sensor + extra)
         elif self.sensor_moves:
             a, wmat = self._frame_transform(q)
         else:
