@@ -4,7 +4,6 @@ estimate and contact events out. The live monitor, replay and the benchmarks all
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,11 +11,13 @@ import numpy as np
 from .bus import ContactEvent
 from .compensation import Compensator, JointResiduals, QddEstimator
 from .detection import ContactDetector, Detection
+from .detection.kernels import window_change
 from .model import ArmModel, Payload
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, make_solver
 
 G_REFRESH_NS = 10_000_000
+QDD_RING = 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,7 +50,11 @@ class ContactPipeline:
         self.update_period_ns = int(update_period_s * 1e9)
         self._last_update_ns = 0
         self._last_estimate: ContactEstimate | None = None
-        self._qdd_hist: deque[tuple[int, np.ndarray]] = deque()
+        # the recent acceleration estimates (a ring: enough rows for the lag window at 7 kHz)
+        self._qdd_ring = np.zeros((QDD_RING, scene.n_joints))
+        self._qdd_ring_t = np.full(QDD_RING, -1, dtype=np.int64)
+        self._qdd_next = 0
+        self._qdd_change = np.zeros(scene.n_joints)
         self._g_cache: np.ndarray | None = None
         self._g_time = 0
         self._lag_window_ns = int(2 * qdd_tau * 1e9)
@@ -120,17 +125,15 @@ class ContactPipeline:
         joint: the size of the estimator's lag error right now; None when it is negligible (saves an
         inverse dynamics). The largest change, not the change across the window: after a short pulse
         the estimate comes back down and its two ends can agree while it still lags by the pulse."""
-        hist = self._qdd_hist
-        hist.append((t_ns, qdd))
-        while len(hist) > 2 and t_ns - hist[1][0] >= self._lag_window_ns:
-            hist.popleft()
-        change = np.zeros_like(qdd)
-        for _, past in hist:
-            np.maximum(change, np.abs(qdd - past), out=change)
-        change *= self.lag_gain
-        if float(change.max()) < self.lag_floor:
+        i = self._qdd_next
+        change = self._qdd_change
+        biggest = window_change(self._qdd_ring, self._qdd_ring_t, t_ns, self._lag_window_ns, qdd, change)
+        self._qdd_ring[i] = qdd
+        self._qdd_ring_t[i] = t_ns
+        self._qdd_next = (i + 1) % QDD_RING
+        if self.lag_gain * biggest < self.lag_floor:
             return None
-        return change
+        return self.lag_gain * change
 
     @staticmethod
     def _event(t_ns: int, kind: str, e: ContactEstimate | None, det: Detection) -> ContactEvent:

@@ -187,3 +187,22 @@ def test_currents_isolate_the_link_when_the_force_line_crosses_two(scene_name):
     # where a joint separates the two links, the currents pick the right one (ftc bench isolation,
     # 2000 cases: ur5e 96 %, dxl-arm 98.6 %); welded parts (rigid) have nothing to tell them apart
     assert r["jointed_right_share"] >= 0.9, r
+
+
+def test_the_lag_error_sees_a_pulse_whose_ends_agree():
+    """The acceleration estimate rises by 0.2 rad/s^2 and falls back within the 4 ms window: the
+    change across the window is zero, the lag error is not (the estimate still lags by the pulse)."""
+    scene = load_scene("leng2016")
+    pipe = ContactPipeline(scene, level="dynamics")
+    n = scene.n_joints
+    pulse = [0.0, 0.1, 0.2, 0.1, 0.0]
+    out = [pipe._lag_error(i * 1_000_000, np.full(n, a)) for i, a in enumerate(pulse)]
+    assert out[0] is None  # nothing to compare with yet
+    assert out[-1] is not None and np.allclose(out[-1], pipe.lag_gain * 0.2)
+    # a still arm: no lag error, no inverse dynamics spent on it
+    still = ContactPipeline(scene, level="dynamics")
+    assert all(still._lag_error(i * 1_000_000, np.zeros(n)) is None for i in range(10))
+    # a sparse stream (100 Hz, longer than the window) still compares with its previous sample
+    sparse = ContactPipeline(scene, level="dynamics")
+    sparse._lag_error(0, np.zeros(n))
+    assert np.allclose(sparse._lag_error(10_000_000, np.full(n, 0.5)), sparse.lag_gain * 0.5)

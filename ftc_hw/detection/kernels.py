@@ -42,3 +42,35 @@ def mahalanobis2(w: np.ndarray, cov: np.ndarray, u: np.ndarray) -> float:
         y[i] = t / a[i, i]
         d2 += y[i] * y[i]
     return d2
+
+
+@njit(cache=True, nogil=True)
+def window_change(ring, ring_t, t_now, window_ns, x, out) -> float:
+    """out[j] = the largest |x[j] - ring[k, j]| over the ring's rows stamped within ``window_ns`` before
+    ``t_now``, and over the newest row older than that (so a sparse stream still has a past sample);
+    rows stamped -1 are empty. Returns max(out)."""
+    n = x.shape[0]
+    for j in range(n):
+        out[j] = 0.0
+    older = -1
+    for k in range(ring.shape[0]):
+        tk = ring_t[k]
+        if tk < 0:
+            continue
+        if tk >= t_now - window_ns:
+            for j in range(n):
+                d = abs(x[j] - ring[k, j])
+                if d > out[j]:
+                    out[j] = d
+        elif older < 0 or tk > ring_t[older]:
+            older = k
+    if older >= 0:
+        for j in range(n):
+            d = abs(x[j] - ring[older, j])
+            if d > out[j]:
+                out[j] = d
+    best = 0.0
+    for j in range(n):
+        if out[j] > best:
+            best = out[j]
+    return best
