@@ -1251,47 +1251,26 @@ def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, tau_ext, tau_var, u
 
 @njit(**JIT)
 def weight_stack(a, sigma_sensor, out):
-    """out[6:] = a sigma_sensor a^T (the wrench covariance in the base frame), out[:6] its inverse by
-    Cholesky (the per-frame path of the solver's weight; no LAPACK call for a 6x6). Returns False
-    when the covariance is not positive definite."""
-    t = np.empty((6, 6))
+    """out[6:] = a sigma_sensor a^T (the wrench covariance in the base frame), out[:6] its inverse
+    (the solver's weight; no LAPACK call for a 6x6). False when the covariance is not positive
+    definite."""
+    sigma = out[6:]
     for i in range(6):
         for j in range(6):
             acc = 0.0
             for k in range(6):
-                acc += a[i, k] * sigma_sensor[k, j]
-            t[i, j] = acc
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += t[i, k] * a[j, k]
-            out[6 + i, j] = acc
-    low = np.zeros((6, 6))
-    for j in range(6):
-        d = 0.5 * (out[6 + j, j] + out[6 + j, j])
-        for k in range(j):
-            d -= low[j, k] * low[j, k]
-        if not d > 0.0:
-            return False
-        low[j, j] = math.sqrt(d)
-        for i in range(j + 1, 6):
-            s = 0.5 * (out[6 + i, j] + out[6 + j, i])
-            for k in range(j):
-                s -= low[i, k] * low[j, k]
-            low[i, j] = s / low[j, j]
-    inv_low = np.zeros((6, 6))
-    for i in range(6):
-        inv_low[i, i] = 1.0 / low[i, i]
-        for j in range(i):
-            s = 0.0
-            for k in range(j, i):
-                s -= low[i, k] * inv_low[k, j]
-            inv_low[i, j] = s / low[i, i]
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for k in range(max(i, j), 6):
-                acc += inv_low[k, i] * inv_low[k, j]
-            out[i, j] = acc
+                for m in range(6):
+                    acc += a[i, k] * sigma_sensor[k, m] * a[j, m]
+            sigma[i, j] = acc
+    low = np.empty((6, 6))
+    if not _cholesky(sigma, low):
+        return False
+    e = np.empty(6)
+    col = np.empty(6)
+    for b in range(6):
+        e[:] = 0.0
+        e[b] = 1.0
+        _chol_solve(low, e, col)
+        for i in range(6):
+            out[i, b] = col[i]
     return True

@@ -242,8 +242,10 @@ class ContactSolver:
             a[:3, :3] = r
             a[3:, 3:] = r
             a[3:, :3] = _skew(t) @ r
-        sigma = a @ (self.sigma_sensor if sigma_sensor is None else sigma_sensor) @ a.T
-        return a, np.vstack([np.linalg.inv(sigma), sigma])
+        ws = np.empty((12, 6))
+        if not K.weight_stack(a, self.sigma_sensor if sigma_sensor is None else sigma_sensor, ws):
+            raise ValueError("the wrench covariance is not positive definite")
+        return a, ws
 
     def external_wrench_base(self, wrench_sensor, q=None) -> np.ndarray:
         """(p, c x p) in the base frame about the base origin from a compensated sensor reading."""
