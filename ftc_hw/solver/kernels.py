@@ -32,7 +32,11 @@ F_OFF_LINE = 256
 F_NOT_CONVERGED = 512
 
 MAX_CROSS = 6  # crossings collected per primitive before reduction to entry/exit
-JIT = {"cache": True, "nogil": True, "fastmath": False}
+# No reference counting (numba's NRT) in kernels that allocate nothing: every slice would otherwise
+# bump an atomic counter, which was half of a frame's time and, shared between the batch's threads,
+# made them wait on each other. Only kernels that allocate (JIT_ALLOC) keep it.
+JIT = {"cache": True, "nogil": True, "fastmath": False, "_nrt": False}
+JIT_ALLOC = {"cache": True, "nogil": True, "fastmath": False}
 
 
 # -- small vector helpers ------------------------------------------------------------------------------
@@ -1249,7 +1253,7 @@ def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, tau_ext, tau_var, u
                     cand_f[i, j, c] = cf[j, c]
 
 
-@njit(**JIT)
+@njit(**JIT_ALLOC)
 def weight_stack(a, sigma_sensor, out):
     """out[6:] = a sigma_sensor a^T (the wrench covariance in the base frame), out[:6] its inverse
     (the solver's weight; no LAPACK call for a 6x6). False when the covariance is not positive
