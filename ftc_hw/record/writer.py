@@ -7,8 +7,9 @@ Crash-safe: the chunk in progress is closed and flushed to the OS every ``flush_
 whenever it reaches ``chunk_size``), so a recorder that is killed leaves a file that reads up to its
 last complete chunk (:func:`ftc_hw.record.reader.read_recording` reads such a file).
 
-A queue subscription decouples the publishers (device reader threads) from the encoding; a full
-queue drops the oldest frames, counted in ``drops`` and written to the final metadata.
+A queue subscription decouples the publishers (device reader threads) from the encoding: the
+recorder's thread drains it every ``poll_s``; a full queue drops the oldest frames, counted in
+``drops`` and written to the final metadata.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from typing import Any
 from mcap.writer import CompressionType, Writer
 
 from ftc_hw import __version__
-from ftc_hw.bus import Bus, SubscriptionClosed
+from ftc_hw.bus import Bus
 
 from .schemas import SCHEMAS, encode, topic_of
 
@@ -34,7 +35,7 @@ class McapRecorder:
 
     def __init__(self, bus: Bus, path: Path | str, *, metadata: dict[str, dict[str, str]] | None = None,
                  prefix: str = "", chunk_size: int = 256 * 1024, flush_s: float = 0.2,
-                 maxsize: int = 200_000) -> None:
+                 maxsize: int = 200_000, poll_s: float = 0.02) -> None:
         self.bus = bus
         self.path = Path(path)
         self.metadata = dict(metadata or {})
@@ -42,6 +43,7 @@ class McapRecorder:
         self.chunk_size = chunk_size
         self.flush_s = flush_s
         self.maxsize = maxsize
+        self.poll_s = poll_s
         self.counts: Counter[str] = Counter()
         self.skipped = 0  # frames of a type with no schema
         self.drops = 0
@@ -104,28 +106,25 @@ class McapRecorder:
         self.counts[topic] += 1
 
     def _run(self) -> None:
+        # Polls instead of waiting on the subscription: a waiting consumer makes every publish wake
+        # it, and those thousands of wake-ups a second took the interpreter from the device readers
+        # (a 1 kHz CAN reader fell behind and lost frames). A batch every poll_s costs the same encoding.
         last_flush = time.monotonic()
-        while True:
-            try:
-                frame = self._sub.get(timeout=0.05)
-            except SubscriptionClosed:
-                break
-            except Exception:  # noqa: BLE001 - queue.Empty: time to flush
-                frame = None
-            if frame is not None:
-                self.write(frame)
-                for f in self._sub.drain():
-                    self.write(f)
+        while not self._sub.closed:
+            for f in self._sub.drain():
+                self.write(f)
             if time.monotonic() - last_flush >= self.flush_s:
                 with self._lock:
                     self._writer.flush()  # closes the chunk and flushes the file
                 last_flush = time.monotonic()
+            self._stop.wait(self.poll_s)
 
     def stop(self, final_metadata: dict[str, dict[str, str]] | None = None) -> None:
         """Write what is queued, then ``final_metadata`` and the summary; close the file."""
         if self._writer is None:
             return
         self._sub.close()
+        self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=30.0)
             self._thread = None
