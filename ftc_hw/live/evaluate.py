@@ -23,6 +23,11 @@ time), truth by the ``t_host_ns`` at which the world published each sample to it
   error over its own Cramer-Rao bound (about 1 at the statistical limit). It is the fair per-contact
   figure: a contact's few low-force samples (onset, release) have bounds of centimetres, and in the
   ratio of the RMS error to the RMS bound they swamp the rest either way.
+* ``err_over_solver``: the RMS error over the solver's own RMS error at the same truth samples, when
+  it is given the true contact wrench plus the scene's sensor noise and nothing else (``draws``
+  noise draws per sample, its unflagged answers). About 1 when the live chain (devices, clocks,
+  compensation) costs no accuracy. Near an edge (a cylinder's rim) the local Cramer-Rao bound
+  misses the other face's mode, and this is the figure that still says what the solver can do there.
 """
 from __future__ import annotations
 
@@ -54,6 +59,8 @@ class ContactResult:
     force_err_median_n: float | None
     crlb_rms_mm: float | None = None  # Cramer-Rao bound of the same samples' truth (the floor for err_rms_mm)
     err_over_crlb_rms: float | None = None  # RMS of error / bound over the unflagged estimates with a bound
+    solver_rms_mm: float | None = None  # the solver's RMS error on the same samples' true wrench + sensor noise
+    err_over_solver: float | None = None  # RMS error / solver_rms_mm, over the same estimates
 
     @property
     def detected(self) -> bool:
@@ -93,6 +100,11 @@ class Evaluation:
         r = [c.err_over_crlb_rms for c in self.contacts if c.err_over_crlb_rms is not None]
         return max(r) if r else None
 
+    def worst_err_over_solver(self) -> float | None:
+        """The largest per-contact RMS point error over the solver's own on the same samples."""
+        r = [c.err_over_solver for c in self.contacts if c.err_over_solver is not None]
+        return max(r) if r else None
+
     def to_dict(self) -> dict[str, Any]:
         return {"contacts": [asdict(c) for c in self.contacts], "detected": self.detected,
                 "false_alarms": self.false_alarms, "splits": self.splits, "sample_period_s": self.sample_period_s,
@@ -113,10 +125,12 @@ def _episodes(t: np.ndarray, contact: np.ndarray, merge_gap_s: float) -> list[tu
 def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_period_s: float, *,
              delay_samples: int = 2, delay_extra_s: float = 0.001, merge_gap_s: float = 0.05,
              early_s: float = 0.001, late_s: float = 0.05,
-             crlb: Callable[[dict[str, Any]], float | None] | None = None) -> Evaluation:
+             crlb: Callable[[dict[str, Any]], float | None] | None = None,
+             solver_rms: Callable[[dict[str, Any]], float | None] | None = None) -> Evaluation:
     """``events``: event records (:func:`ftc_hw.live.events.event_record`); ``truth``: truth records
     with ``t_host_ns``; ``crlb``: the Cramer-Rao bound (mm) of a truth record's contact
-    (:func:`crlb_of_truth`), to set each contact's error against what the sensor noise allows."""
+    (:func:`crlb_of_truth`), to set each contact's error against what the sensor noise allows;
+    ``solver_rms``: the solver's own RMS error (mm) there under that noise (:func:`solver_rms_of_truth`)."""
     if truth and "t_host_ns" not in truth[0]:
         raise ValueError("the truth records carry no t_host_ns: write them with ftc monitor --sim --truth")
     th = np.array([r["t_host_ns"] for r in truth], dtype=np.int64)
@@ -136,8 +150,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
     first_onset: dict[int, int] = {}
     onsets_in: dict[int, int] = {}
     false_alarms: list[float] = []
-    # (point err mm, force err N, link, flagged, bound mm or None)
-    errs: dict[int, list[tuple[float, float, str, bool, float | None]]] = {}
+    # (point err mm, force err N, link, flagged, bound mm or None, solver's RMS error mm or None)
+    errs: dict[int, list[tuple[float, float, str, bool, float | None, float | None]]] = {}
     evs = sorted(events, key=lambda e: e["t_host_ns"])
     t_last = int(th[-1]) if len(th) else 0
     for ev in evs:
@@ -158,9 +172,11 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             continue
         k = int(ep_of[i])
         rec = truth[i]
+        trusted = not ev["flags"]
         errs.setdefault(k, []).append((float(np.linalg.norm(np.subtract(ev["point"], rec["point"]))) * 1e3,
                                        float(np.linalg.norm(np.subtract(ev["force"], rec["force"]))), ev["link"],
-                                       bool(ev["flags"]), crlb(rec) if crlb is not None and not ev["flags"] else None))
+                                       not trusted, crlb(rec) if crlb is not None and trusted else None,
+                                       solver_rms(rec) if solver_rms is not None and trusted else None))
 
     results = []
     for k, (a, b) in enumerate(episodes):
@@ -176,6 +192,12 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
         def stat(x: np.ndarray, f) -> float | None:
             return round(float(f(x)), 2) if len(x) else None
 
+        def rms(x: np.ndarray) -> float:
+            return np.sqrt(np.mean(x ** 2))
+
+        ref = [r for r in good if r[5] is not None]
+        ref_err, ref_rms = np.array([r[0] for r in ref]), np.array([r[5] for r in ref])
+
         results.append(ContactResult(
             index=k + 1, start_s=round(float(ts[a]), 4), end_s=round(float(ts[b]), 4), link=link,
             onset_delay_ms=None if delay is None else round(delay, 3),
@@ -190,7 +212,10 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             crlb_rms_mm=stat(np.array([r[4] for r in good if r[4] is not None]),
                              lambda x: np.sqrt(np.mean(x ** 2))),
             err_over_crlb_rms=stat(np.array([r[0] / r[4] for r in good if r[4]]),
-                                   lambda x: np.sqrt(np.mean(x ** 2)))))
+                                   lambda x: np.sqrt(np.mean(x ** 2))),
+            solver_rms_mm=stat(ref_rms, rms),
+            err_over_solver=(round(float(rms(ref_err) / rms(ref_rms)), 2) if len(ref) and rms(ref_rms) > 0
+                             else None)))
     splits = sum(max(0, n - 1) for n in onsets_in.values())
     return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))
 
@@ -221,3 +246,36 @@ def crlb_of_truth(scene) -> Callable[[dict[str, Any]], float | None]:
         return math.sqrt(np.trace(crlb_point_cov(solver, np.asarray(rec["point"]), e.normal, e.force))) * 1e3
 
     return bound
+
+
+def solver_rms_of_truth(scene, draws: int = 100, seed: int = 0) -> Callable[[dict[str, Any]], float | None]:
+    """The solver's own RMS point error (mm) at a truth record's contacts: the true contact wrench plus
+    ``draws`` draws of the scene's sensor noise, solved at the true q, over the answers it gives
+    without a flag (as the live figures count them). None where the noise-free reading does not give
+    back the true point (as :func:`crlb_of_truth`) or no draw comes unflagged. Draws are seeded by the
+    record's time, so an evaluation repeats exactly."""
+    from ..model import ArmModel, Contact
+    from ..solver import ContactSolver
+
+    model = ArmModel(scene)
+    solver = ContactSolver(model)
+    std = np.sqrt(np.diag(np.asarray(scene.sensor.noise_cov, dtype=float)))
+
+    def rms_error(rec: dict[str, Any]) -> float | None:
+        if not rec.get("contact") or rec.get("q") is None:
+            return None
+        q = np.asarray(rec["q"], dtype=float)
+        contacts = [Contact(c["link"], c["point"], c["force"]) for c in rec["contacts"]]
+        clean = model.predicted_wrench(q, level="bias", contacts=contacts)
+        e = solver.solve(clean, q)
+        true_point = np.asarray(rec["point"], dtype=float)
+        if not e.contact or float(np.linalg.norm(e.point - true_point)) > 1e-6:
+            return None
+        rng = np.random.default_rng([seed, int(round(float(rec["t"]) * 1e6))])
+        b = solver.solve_batch(clean + rng.normal(size=(draws, 6)) * std, np.repeat(q[None], draws, axis=0))
+        ok = b.contact & (b.flags == 0)
+        if not ok.any():
+            return None
+        return float(np.sqrt(np.mean(np.sum((b.point[ok] - true_point) ** 2, axis=1)))) * 1e3
+
+    return rms_error

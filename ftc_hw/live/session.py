@@ -22,7 +22,7 @@ from ftc_hw import __version__
 from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.scene import Scene, SceneError, load_scene
 
-from .evaluate import Evaluation, crlb_of_truth, evaluate
+from .evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
 from .events import EventWriter, event_record, read_truth
 from .view import LiveView, evaluation_table, stream_table
 
@@ -282,7 +282,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, ca
             out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
         if world is not None and world.done and "error" not in (world.result or {}):
             out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s,
-                                      crlb=crlb_of_truth(scene))
+                                      crlb=crlb_of_truth(scene), solver_rms=solver_rms_of_truth(scene))
         elif world is not None:
             out.problems.append(f"the simulated world did not finish: {world.result}")
         if recorder is not None:
