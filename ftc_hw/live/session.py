@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rich.console import Console
 from rich.live import Live
 
@@ -77,7 +78,22 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any],
 
     kwargs = {k: v for k, v in cal.pipeline_kwargs().items() if v is not None}
     text = Path(path).read_text(encoding="utf-8", errors="replace")
-    return kwargs, {"file": str(path), "content": text, "pipeline": pipeline_kwargs_to_json(kwargs)}
+    meta = {"file": str(path), "content": text, "pipeline": pipeline_kwargs_to_json(kwargs)}
+    unused = unapplied_calibration(cal.extras)
+    if unused:
+        meta["unapplied"] = unused
+    return kwargs, meta
+
+
+def unapplied_calibration(extras: dict[str, Any]) -> str:
+    """The calibration's optional fits (mount yaw, gravity tilt, arm gravity corrections) that the
+    pipeline does not apply (it takes bias and payload), as text; '' when there are none."""
+    parts = []
+    for key, value in extras.items():
+        arr = np.atleast_1d(np.asarray(value, dtype=float)) if not isinstance(value, str) else None
+        if arr is not None and arr.size and np.any(arr != 0.0):
+            parts.append(f"{key} = {', '.join(f'{x:.4g}' for x in arr)}")
+    return "; ".join(parts)
 
 
 class StopReflex:
@@ -151,6 +167,10 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
     ft_dev, arm_dev = _devices(scene, cfg.sim)
     cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
     out = MonitorOutcome(0)
+    if cal_meta and cal_meta.get("unapplied"):
+        console.print(f"[yellow]warning[/]: {cfg.calibration} also fitted {cal_meta['unapplied']}; the pipeline "
+                      "applies its bias and payload only: if these matter, correct the scene (the sensor site's "
+                      "orientation, the gravity vector, the link masses)")
     from devices.base import responsive_readers
 
     with responsive_readers():  # readers that poll, and the reflex, while the pipeline computes
