@@ -35,3 +35,38 @@ def test_an_infinite_uncertainty_gives_a_flagged_event():
 def test_an_estimate_without_a_link_gives_a_flagged_event():
     ev = event(9, "onset", estimate(None, [0.0, 0.0, 0.0], contact=False), DET)
     assert ev.kind == "onset" and ev.link == "unknown" and "no_estimate" in ev.flags
+
+
+def test_a_contact_is_held_while_the_model_error_blinds_the_offset_test():
+    """Braking hard (a reflex stop) makes the compensation's own uncertainty as large as a contact:
+    such samples do not count toward an offset, so the contact does not end and start again; once
+    the model error is back to small, a small wrench ends the contact as before."""
+    from ftc_hw.detection import ContactDetector
+
+    det = ContactDetector(np.eye(6) * 0.01, n_on=2, n_off=5)
+    push = np.array([0.0, 0.0, 20.0, 0.0, 0.0, 0.0])
+    assert det.update(0, push).change is None and det.update(1, push).change == "onset"
+    blinding = np.array([[0.0, 0.0, 50.0, 0.0, 0.0, 0.0]])  # 50 N of possible model error
+    for t in range(2, 40):
+        d = det.update(t, np.zeros(6), blinding)
+        assert d.blind and d.active and d.change is None
+    changes = [det.update(t, np.zeros(6)).change for t in range(40, 45)]
+    assert changes == [None, None, None, None, "offset"]
+
+
+def test_a_new_pipeline_has_its_compiled_kernels_loaded():
+    """numba loads a kernel from its cache on the first call (tens of ms): a fresh pipeline has made
+    that call, so its first contact (and the reflex stop) does not wait for it. In a fresh process."""
+    import subprocess
+    import sys
+
+    code = ("from ftc_hw.scene import load_scene\n"
+            "from ftc_hw.pipeline import ContactPipeline\n"
+            "from ftc_hw.detection import kernels as D\n"
+            "from ftc_hw.solver import kernels as K\n"
+            "ContactPipeline(load_scene('ur5e'))\n"
+            "print(all(len(f.signatures) > 0 for f in (D.mahalanobis2, D.quad_sum, D.window_change,"
+            " K.solve_frame_q, K.weight_stack)))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "True"

@@ -6,6 +6,11 @@ d2 above ``on`` (the chi-square quantile for a per-sample false-alarm probabilit
 ``n_on`` consecutive samples; the onset time is the first of them. Offset: d2 below ``off`` for
 ``n_off`` consecutive samples. ``probability`` = P(chi2_6 < d2): how unlikely this wrench is as noise.
 The compensation can add its own uncertainty per sample (``update(..., model_error=u)``).
+
+A sample whose model error alone is as large as an onset (sum_k u_k^T cov^-1 u_k above ``on``: the
+arm braking hard, say) says nothing about whether a contact has ended: the inflated covariance would
+call any wrench small. Such samples neither count toward an offset nor reset the count (``blind``):
+a contact held through a reflex stop stays one contact instead of ending and starting again.
 """
 from __future__ import annotations
 
@@ -14,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import mahalanobis2
+from .kernels import mahalanobis2, quad_sum
 
 
 def chi2_sf6(x: float) -> float:
@@ -44,7 +49,8 @@ def chi2_isf6(p: float) -> float:
 @dataclass(frozen=True, slots=True)
 class Detection:
     active: bool
-    d2: float
+    d2: float  # under the noise plus this sample's model error
+    blind: bool  # the model error alone is as large as an onset: an offset is not judged
     probability: float
     change: str | None  # "onset", "offset" or None
     onset_t_ns: int | None  # when the current (or just ended) contact began
@@ -76,8 +82,11 @@ class ContactDetector:
         """``model_error``: optional wrench-sized vectors u_k (rows) of the compensation's own
         uncertainty for this sample: covariance sum u_k u_k^T added to the noise's."""
         w = np.asarray(wrench, dtype=float)
+        blind = False
         if model_error is not None and len(model_error):
-            d2 = mahalanobis2(w, self.cov, np.atleast_2d(np.asarray(model_error, dtype=float)))
+            u = np.atleast_2d(np.asarray(model_error, dtype=float))
+            d2 = mahalanobis2(w, self.cov, u)
+            blind = quad_sum(u, self.inv) > self.on
         else:
             d2 = float(w @ self.inv @ w)
         if not math.isfinite(d2):
@@ -95,7 +104,7 @@ class ContactDetector:
                     change = "onset"
             else:
                 self._above = 0
-        else:
+        elif not blind:
             if d2 < self.off:
                 self._below += 1
                 if self._below >= self.n_off:
@@ -104,4 +113,4 @@ class ContactDetector:
                     change = "offset"
             else:
                 self._below = 0
-        return Detection(self.active, d2, 1.0 - chi2_sf6(d2), change, self.onset_t_ns)
+        return Detection(self.active, d2, blind, 1.0 - chi2_sf6(d2), change, self.onset_t_ns)

@@ -74,3 +74,17 @@ def window_change(ring, ring_t, t_now, window_ns, x, out) -> float:
         if out[j] > best:
             best = out[j]
     return best
+
+
+@njit(cache=True, nogil=True)
+def quad_sum(u: np.ndarray, inv: np.ndarray) -> float:
+    """sum_k u_k^T inv u_k over the rows u_k of u (k, 6): how large the rows are against a noise
+    whose inverse covariance is ``inv`` (chi-square scale)."""
+    acc = 0.0
+    for k in range(u.shape[0]):
+        for i in range(6):
+            t = 0.0
+            for j in range(6):
+                t += inv[i, j] * u[k, j]
+            acc += u[k, i] * t
+    return acc
