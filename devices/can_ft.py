@@ -1,6 +1,7 @@
 """CAN F/T sensors (scene kind ``ft-can``: ATI Net F/T over CAN, frames from a DBC file through cantools)
 received with python-can: ``interface="serial"`` on a serial port or an ``ftc sim`` pty (no kernel
-CAN here), ``"virtual"`` in-process, or any python-can interface on real hardware.
+CAN here; the port is opened as ``readahead://<port>``, :mod:`devices.serial_urls`, unless
+``read_ahead=False``), ``"virtual"`` in-process, or any python-can interface on real hardware.
 
 ``mode="stream"`` asks the sensor to send every sample (opcode 2) and stops it on close (opcode 3);
 ``mode="poll"`` requests one sample (opcode 1) ``poll_hz`` times per second and publishes each new
@@ -20,6 +21,7 @@ import serial
 
 from ftc_hw.bus import Bus
 
+from . import serial_urls
 from .base import DeviceError, DeviceIOError
 from .codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTAssembler, NetFTCodec
 from .ft_base import FTAdapter
@@ -31,7 +33,7 @@ class CanFTAdapter(FTAdapter):
     def __init__(self, name: str, bus: Bus, channel: str, *, interface: str = "serial",
                  dbc: str = "ati_netft_can.dbc", base_id: int = 8, rate_hz: float = 1000.0, mode: str = "stream",
                  poll_hz: float = 100.0, serial_baudrate: int = 115200, silence_s: float | None = 1.0,
-                 can_kwargs: dict[str, Any] | None = None, **kwargs: Any) -> None:
+                 can_kwargs: dict[str, Any] | None = None, read_ahead: bool = True, **kwargs: Any) -> None:
         if mode not in ("stream", "poll"):
             raise DeviceError(f"mode {mode!r}: expected stream or poll")
         kwargs.setdefault("stale_after", max(0.05, 5.0 / rate_hz) if mode == "stream" else max(0.05, 5.0 / poll_hz))
@@ -45,6 +47,7 @@ class CanFTAdapter(FTAdapter):
         self.serial_baudrate = serial_baudrate
         self.silence_s = silence_s
         self.can_kwargs = dict(can_kwargs or {})
+        self.read_ahead = read_ahead  # serial interface: the port read through a buffer (serial_urls)
         self.can: can.BusABC | None = None
         self._last_frame = 0.0
         self._silent = False
@@ -70,7 +73,11 @@ class CanFTAdapter(FTAdapter):
             kwargs.setdefault("baudrate", self.serial_baudrate)
             kwargs.setdefault("timeout", min(self.poll_timeout, self.poll_period / 4) if self.mode == "poll"
                               else self.poll_timeout)
-        self.can = can.Bus(interface=self.interface, channel=self.channel, **kwargs)
+        channel = self.channel
+        if self.interface == "serial" and self.read_ahead and "://" not in channel:
+            serial_urls.register()
+            channel = serial_urls.readahead_url(channel)
+        self.can = can.Bus(interface=self.interface, channel=channel, **kwargs)
         self.assembler.reset()
         if self.mode == "stream":
             self._send(OP_START)
