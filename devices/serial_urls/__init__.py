@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import serial
 
+from .protocol_readahead import PREFIX as READAHEAD
+
 PACKAGE = __name__
 
 
@@ -14,4 +16,4 @@ def register() -> None:
 
 
 def readahead_url(port: str) -> str:
-    return f"readahead://{port}"
+    return f"{READAHEAD}{port}"

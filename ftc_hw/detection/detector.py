@@ -50,7 +50,7 @@ def chi2_isf6(p: float) -> float:
 class Detection:
     active: bool
     d2: float  # under the noise plus this sample's model error
-    blind: bool  # the model error alone is as large as an onset: an offset is not judged
+    blind: bool  # in contact, the model error alone is as large as an onset: an offset is not judged
     probability: float
     change: str | None  # "onset", "offset" or None
     onset_t_ns: int | None  # when the current (or just ended) contact began
@@ -82,16 +82,16 @@ class ContactDetector:
         """``model_error``: optional wrench-sized vectors u_k (rows) of the compensation's own
         uncertainty for this sample: covariance sum u_k u_k^T added to the noise's."""
         w = np.asarray(wrench, dtype=float)
-        blind = False
+        u = None
         if model_error is not None and len(model_error):
             u = np.atleast_2d(np.asarray(model_error, dtype=float))
             d2 = mahalanobis2(w, self.cov, u)
-            blind = quad_sum(u, self.inv) > self.on
         else:
             d2 = float(w @ self.inv @ w)
         if not math.isfinite(d2):
             raise ValueError("wrench holds NaN or Inf")
         change = None
+        blind = False
         if not self.active:
             if d2 > self.on:
                 if self._above == 0:
@@ -104,13 +104,14 @@ class ContactDetector:
                     change = "onset"
             else:
                 self._above = 0
-        elif not blind:
-            if d2 < self.off:
-                self._below += 1
-                if self._below >= self.n_off:
-                    self.active = False
-                    self._above = 0
-                    change = "offset"
-            else:
-                self._below = 0
+        elif u is not None and quad_sum(u, self.inv) > self.on:
+            blind = True  # no offset judged: the count is neither advanced nor reset
+        elif d2 < self.off:
+            self._below += 1
+            if self._below >= self.n_off:
+                self.active = False
+                self._above = 0
+                change = "offset"
+        else:
+            self._below = 0
         return Detection(self.active, d2, blind, 1.0 - chi2_sf6(d2), change, self.onset_t_ns)

@@ -111,6 +111,10 @@ class Evaluation:
                 "delay_limit_ms": self.delay_limit_ms, "events": self.events, "truth_samples": self.truth_samples}
 
 
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x ** 2)))
+
+
 def _episodes(t: np.ndarray, contact: np.ndarray, merge_gap_s: float) -> list[tuple[int, int]]:
     """(first, last) truth indices of each contact."""
     out: list[list[int]] = []
@@ -192,9 +196,6 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
         def stat(x: np.ndarray, f) -> float | None:
             return round(float(f(x)), 2) if len(x) else None
 
-        def rms(x: np.ndarray) -> float:
-            return np.sqrt(np.mean(x ** 2))
-
         ref = [r for r in good if r[5] is not None]
         ref_err, ref_rms = np.array([r[0] for r in ref]), np.array([r[5] for r in ref])
 
@@ -205,19 +206,41 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             delay_ok=bool(delay is not None and delay * 1e6 <= limit_ns), onsets=onsets_in.get(k, 0),
             estimates=len(rows), trusted=len(good), est_link=max(set(est), key=est.count) if est else "-",
             link_right=round(sum(x == link for x in est) / len(est), 3) if est else 0.0,
-            err_median_mm=stat(e, np.median), err_rms_mm=stat(e, lambda x: np.sqrt(np.mean(x ** 2))),
-            err_max_mm=stat(e, np.max),
-            err_rms_all_mm=stat(np.array([r[0] for r in rows]), lambda x: np.sqrt(np.mean(x ** 2))),
+            err_median_mm=stat(e, np.median), err_rms_mm=stat(e, _rms), err_max_mm=stat(e, np.max),
+            err_rms_all_mm=stat(np.array([r[0] for r in rows]), _rms),
             force_err_median_n=stat(np.array([r[1] for r in good]), np.median),
-            crlb_rms_mm=stat(np.array([r[4] for r in good if r[4] is not None]),
-                             lambda x: np.sqrt(np.mean(x ** 2))),
-            err_over_crlb_rms=stat(np.array([r[0] / r[4] for r in good if r[4]]),
-                                   lambda x: np.sqrt(np.mean(x ** 2))),
-            solver_rms_mm=stat(ref_rms, rms),
-            err_over_solver=(round(float(rms(ref_err) / rms(ref_rms)), 2) if len(ref) and rms(ref_rms) > 0
+            crlb_rms_mm=stat(np.array([r[4] for r in good if r[4] is not None]), _rms),
+            err_over_crlb_rms=stat(np.array([r[0] / r[4] for r in good if r[4]]), _rms),
+            solver_rms_mm=stat(ref_rms, _rms),
+            err_over_solver=(round(float(_rms(ref_err) / _rms(ref_rms)), 2) if len(ref) and _rms(ref_rms) > 0
                              else None)))
     splits = sum(max(0, n - 1) for n in onsets_in.values())
     return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))
+
+
+def _reading_of_truth(scene) -> Callable[[dict[str, Any]], tuple | None]:
+    """For a truth record in contact: (solver, q, its noise-free compensated reading, the solver's
+    estimate of it, the true point); None when the estimate does not give back the true point (below
+    the noise floor, or another link's crossing ranked first)."""
+    from ..model import ArmModel, Contact
+    from ..solver import ContactSolver
+
+    model = ArmModel(scene)
+    solver = ContactSolver(model)
+
+    def reading(rec: dict[str, Any]) -> tuple | None:
+        if not rec.get("contact") or rec.get("q") is None:
+            return None
+        q = np.asarray(rec["q"], dtype=float)
+        contacts = [Contact(c["link"], c["point"], c["force"]) for c in rec["contacts"]]
+        clean = model.predicted_wrench(q, level="bias", contacts=contacts)
+        e = solver.solve(clean, q)
+        true_point = np.asarray(rec["point"], dtype=float)
+        if not e.contact or float(np.linalg.norm(e.point - true_point)) > 1e-6:
+            return None
+        return solver, q, clean, e, true_point
+
+    return reading
 
 
 def crlb_of_truth(scene) -> Callable[[dict[str, Any]], float | None]:
@@ -229,21 +252,16 @@ def crlb_of_truth(scene) -> Callable[[dict[str, Any]], float | None]:
     estimates of it that come unflagged are scored against it."""
     import math
 
-    from ..model import ArmModel, Contact
-    from ..solver import ContactSolver
     from ..solver.bench import crlb_point_cov
 
-    model = ArmModel(scene)
-    solver = ContactSolver(model)
+    reading = _reading_of_truth(scene)
 
     def bound(rec: dict[str, Any]) -> float | None:
-        if not rec.get("contact") or rec.get("q") is None:
+        r = reading(rec)
+        if r is None:
             return None
-        contacts = [Contact(c["link"], c["point"], c["force"]) for c in rec["contacts"]]
-        e = solver.solve(model.predicted_wrench(rec["q"], level="bias", contacts=contacts), rec["q"])
-        if not e.contact or float(np.linalg.norm(e.point - np.asarray(rec["point"]))) > 1e-6:
-            return None
-        return math.sqrt(np.trace(crlb_point_cov(solver, np.asarray(rec["point"]), e.normal, e.force))) * 1e3
+        solver, _q, _clean, e, true_point = r
+        return math.sqrt(np.trace(crlb_point_cov(solver, true_point, e.normal, e.force))) * 1e3
 
     return bound
 
@@ -254,23 +272,14 @@ def solver_rms_of_truth(scene, draws: int = 100, seed: int = 0) -> Callable[[dic
     without a flag (as the live figures count them). None where the noise-free reading does not give
     back the true point (as :func:`crlb_of_truth`) or no draw comes unflagged. Draws are seeded by the
     record's time, so an evaluation repeats exactly."""
-    from ..model import ArmModel, Contact
-    from ..solver import ContactSolver
-
-    model = ArmModel(scene)
-    solver = ContactSolver(model)
+    reading = _reading_of_truth(scene)
     std = np.sqrt(np.diag(np.asarray(scene.sensor.noise_cov, dtype=float)))
 
     def rms_error(rec: dict[str, Any]) -> float | None:
-        if not rec.get("contact") or rec.get("q") is None:
+        r = reading(rec)
+        if r is None:
             return None
-        q = np.asarray(rec["q"], dtype=float)
-        contacts = [Contact(c["link"], c["point"], c["force"]) for c in rec["contacts"]]
-        clean = model.predicted_wrench(q, level="bias", contacts=contacts)
-        e = solver.solve(clean, q)
-        true_point = np.asarray(rec["point"], dtype=float)
-        if not e.contact or float(np.linalg.norm(e.point - true_point)) > 1e-6:
-            return None
+        solver, q, clean, _e, true_point = r
         rng = np.random.default_rng([seed, int(round(float(rec["t"]) * 1e6))])
         b = solver.solve_batch(clean + rng.normal(size=(draws, 6)) * std, np.repeat(q[None], draws, axis=0))
         ok = b.contact & (b.flags == 0)

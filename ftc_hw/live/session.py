@@ -90,8 +90,10 @@ def unapplied_calibration(extras: dict[str, Any]) -> str:
     pipeline does not apply (it takes bias and payload), as text; '' when there are none."""
     parts = []
     for key, value in extras.items():
-        arr = np.atleast_1d(np.asarray(value, dtype=float)) if not isinstance(value, str) else None
-        if arr is not None and arr.size and np.any(arr != 0.0):
+        if isinstance(value, str):
+            continue
+        arr = np.atleast_1d(np.asarray(value, dtype=float))
+        if np.any(arr != 0.0):
             parts.append(f"{key} = {', '.join(f'{x:.4g}' for x in arr)}")
     return "; ".join(parts)
 

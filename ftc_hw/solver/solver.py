@@ -228,28 +228,29 @@ class ContactSolver:
                          np.zeros((len(geoms), 9)), np.zeros((m.njnt, 3)), np.zeros((m.njnt, 3)))
 
     # -- frames ---------------------------------------------------------------------------------------
-    def _frame_transform(self, q, sigma_sensor=None) -> tuple[np.ndarray, np.ndarray]:
-        """A maps a sensor-frame wrench about the sensor origin to the base frame about the base
-        origin; the second array stacks W, the inverse covariance of the external wrench in the base
-        frame, over that covariance (12 x 6: the kernels take both at once). ``sigma_sensor``: the
-        wrench covariance in the sensor frame (default: the sensor's noise)."""
-        if q is None:
-            a = self._A0
-        else:
-            b_T_s = self.model.base_T_sensor(q)
-            r, t = b_T_s[:3, :3], b_T_s[:3, 3]
-            a = np.zeros((6, 6))
-            a[:3, :3] = r
-            a[3:, 3:] = r
-            a[3:, :3] = _skew(t) @ r
+    def _sensor_to_base(self, q) -> np.ndarray:
+        """A: maps a sensor-frame wrench about the sensor origin to the base frame about the base
+        origin, at joint angles q."""
+        b_T_s = self.model.base_T_sensor(q)
+        r, t = b_T_s[:3, :3], b_T_s[:3, 3]
+        a = np.zeros((6, 6))
+        a[:3, :3] = r
+        a[3:, 3:] = r
+        a[3:, :3] = _skew(t) @ r
+        return a
+
+    def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """A (``_sensor_to_base``) and, stacked over each other (12 x 6: the kernels take both at
+        once), W, the inverse covariance of the external wrench in the base frame, and that covariance."""
+        a = self._sensor_to_base(q)
         ws = np.empty((12, 6))
-        if not K.weight_stack(a, self.sigma_sensor if sigma_sensor is None else sigma_sensor, ws):
+        if not K.weight_stack(a, self.sigma_sensor, ws):
             raise ValueError("the wrench covariance is not positive definite")
         return a, ws
 
     def external_wrench_base(self, wrench_sensor, q=None) -> np.ndarray:
         """(p, c x p) in the base frame about the base origin from a compensated sensor reading."""
-        a = self._frame_transform(q)[0] if (self.sensor_moves and q is not None) else self._A0
+        a = self._sensor_to_base(q) if (self.sensor_moves and q is not None) else self._A0
         return self.ext_sign * (a @ np.asarray(wrench_sensor, dtype=float))
 
     # -- single frame ---------------------------------------------------------------------------------
@@ -271,7 +272,7 @@ class ContactSolver:
         self._qfull[self.model._qadr] = q
         if extra_cov is not None:
             extra = np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
-            a = self._frame_transform(q)[0] if self.sensor_moves else self._A0
+            a = self._sensor_to_base(q) if self.sensor_moves else self._A0
             wmat = self._ws_extra
             if not (math.isfinite(extra.sum()) and K.weight_stack(a, self.sigma_sensor + extra, wmat)):
                 return self._invalid(saturated)
