@@ -236,8 +236,7 @@ class LiveMonitor:
         if t >= self._tare_until_ns:
             w = np.mean([b[0] for b in self._tare_buf], axis=0)
             q = np.mean([b[1] for b in self._tare_buf], axis=0)
-            zero = np.zeros(self.scene.n_joints)
-            self.pipeline.compensator.tare(w, q, zero, zero)
+            self.pipeline.tare(w, q, len(self._tare_buf), t)
             self.tared = True
             self._tare_buf.clear()
 

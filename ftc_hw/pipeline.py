@@ -15,6 +15,7 @@ from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, make_solver
+from .tracking import ContactTrack, fuse_point, report
 
 G_REFRESH_NS = 10_000_000
 QDD_RING = 64
@@ -36,7 +37,8 @@ class ContactPipeline:
     def __init__(self, scene: Scene, *, level: CompensationLevel | None = None, bias=None,
                  payload: Payload | None = None, method: str = "ours", use_currents: bool = True,
                  p_false: float = 1e-9, n_on: int = 2, n_off: int = 5, update_period_s: float = 0.02,
-                 qdd_tau: float = 0.002, extra_cov=None) -> None:
+                 qdd_tau: float = 0.002, extra_cov=None, track_slide: float | None = 0.01,
+                 bias_var_ratio: float = 0.01) -> None:
         self.scene = scene
         model = ArmModel(scene, payload)
         self.compensator = Compensator(model, level, bias)
@@ -50,6 +52,13 @@ class ContactPipeline:
         self.update_period_ns = int(update_period_s * 1e9)
         self._last_update_ns = 0
         self._last_estimate: ContactEstimate | None = None
+        # events carry the contact's point fused over its frames (None: each frame's own estimate)
+        self.track = (None if track_slide is None else
+                      ContactTrack(model, slide=track_slide, body_poses=getattr(self.solver, "body_poses", None)))
+        self._solved_poses = getattr(self.solver, "solved_body_poses", None)
+        if self.track is not None:
+            # a bias given (calibration file, scene) is taken as known to a tenth of one sample's noise
+            self.track.set_bias(bias_var_ratio)
         # the recent acceleration estimates (a ring: enough rows for the lag window at 7 kHz)
         self._qdd_ring = np.zeros((QDD_RING, scene.n_joints))
         self._qdd_ring_t = np.full(QDD_RING, -1, dtype=np.int64)
@@ -73,6 +82,17 @@ class ContactPipeline:
         window_change(self._qdd_ring, self._qdd_ring_t, 0, self._lag_window_ns, np.zeros(n), self._qdd_change)
         self.solver.solve(np.array([0.0, 0.0, 10.0, 0.0, 0.0, 0.0]), np.asarray(self.scene.robot.home, dtype=float),
                           tau_ext=np.zeros(n), tau_std=np.ones(n), extra_cov=np.zeros((6, 6)))
+        fuse_point(np.zeros(3), np.eye(3), np.zeros(3), np.eye(6), np.zeros((2, 3)), np.ones((2, 4)), 1, 0.0, 0.0,
+                   1.0, np.zeros((4, 3)), np.zeros((3, 4)))
+        report(np.zeros(3), np.eye(3), np.zeros((4, 3)), 0.0, np.zeros((3, 4)), np.zeros(3), np.zeros((3, 3)))
+
+    def tare(self, raw_mean, q, samples: int, t_ns: int) -> None:
+        """Re-zero on the mean ``raw_mean`` of ``samples`` still, untouched frames at joint angles q
+        (taken by host time ``t_ns``): the bias is then known to 1/samples of the sensor's noise."""
+        zero = np.zeros(self.scene.n_joints)
+        self.compensator.tare(raw_mean, q, zero, zero)
+        if self.track is not None:
+            self.track.set_bias(1.0 / max(int(samples), 1), t_ns)
 
     def process(self, t_ns: int, raw, q, qd=None, current=None, qdd=None, saturated: bool = False,
                 t_device_ns: int | None = None) -> FrameResult:
@@ -122,14 +142,23 @@ class ContactPipeline:
                 estimate = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
                                              extra_cov=extra)
                 self._last_estimate = estimate
+                if self.track is not None:
+                    if det.change == "onset":
+                        self.track.reset()
+                    # the solver's kinematics of this very frame, when it has them
+                    poses = self._solved_poses() if self._solved_poses is not None else None
+                    self.track.update(t_ns, estimate, q, poses)
+            track = self.track if self.track is not None and self.track.active else None
             if det.change == "onset":
-                events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det))
+                events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det, track))
                 self._last_update_ns = t_ns
             elif det.change == "offset":
-                events.append(self._event(t_ns, "offset", self._last_estimate, det))
+                events.append(self._event(t_ns, "offset", self._last_estimate, det, track))
                 self._last_estimate = None
+                if self.track is not None:
+                    self.track.reset()
             elif t_ns - self._last_update_ns >= self.update_period_ns:
-                events.append(self._event(t_ns, "update", estimate, det))
+                events.append(self._event(t_ns, "update", estimate, det, track))
                 self._last_update_ns = t_ns
         return FrameResult(t_ns, external, det, estimate, tau_ext, tuple(events))
 
@@ -149,9 +178,17 @@ class ContactPipeline:
         return self.lag_gain * change
 
     @staticmethod
-    def _event(t_ns: int, kind: str, e: ContactEstimate | None, det: Detection) -> ContactEvent:
-        """The event always goes out (an onset above all): an estimate it cannot carry (none, no
-        contact, no link or a non-finite value) gives zeros and the ``no_estimate`` flag."""
+    def _event(t_ns: int, kind: str, e: ContactEstimate | None, det: Detection,
+               track: ContactTrack | None = None) -> ContactEvent:
+        """The event always goes out (an onset above all). With a track, its point is the contact's
+        fused point and the frame's estimate gives the force and flags; otherwise the frame's own
+        estimate, and one it cannot carry (none, no contact, no link or a non-finite value) gives
+        zeros and the ``no_estimate`` flag."""
+        if track is not None:
+            force = e.force if e is not None and math.isfinite(float(e.force.sum())) else np.zeros(3)
+            point, std = track.point_and_std()
+            return ContactEvent.make(t_ns, kind, track.link, point, force, std,
+                                     flags=e.flags if e is not None else (), probability=det.probability)
         if e is not None and e.contact and e.link:
             std = e.point_std
             if math.isfinite(float(e.point.sum() + e.force.sum() + std.sum())):

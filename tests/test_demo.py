@@ -45,7 +45,7 @@ def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary():
     assert "\x1b[" in out  # a terminal: rich drew (and redrew) the live view with escape sequences
     plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out)
     assert plain.count("ftc demo") >= 3  # the live view was refreshed, not printed once
-    for part in ("wrench (sensor frame)", "contact (base frame)", "CONTACT", "wrist_3", "monitor/input",
+    for part in ("wrench (sensor frame)", "contact (base frame)", "CONTACT", "fused", "wrist_3", "monitor/input",
                  "contacts: detected against ground truth"):
         assert part in plain, part
     assert re.search(r"summary: \d/1 contacts detected", plain), plain[-3000:]

@@ -38,6 +38,8 @@ def test_a_timely_onset_detects_the_contact_and_localization_is_measured():
     # the flagged estimate is left out of the accuracy figures, counted in "rms all"
     assert (c.estimates, c.trusted) == (3, 2)
     assert c.err_max_mm == pytest.approx(3.0) and c.err_median_mm == pytest.approx(1.5)
+    # errors 3 and 0 mm against a reported |point_std| of sqrt(3) mm
+    assert c.err_over_std_rms == pytest.approx((3.0 / 2) ** 0.5, abs=0.005)
     assert c.err_rms_all_mm == pytest.approx(((9 + 0 + 100**2) / 3) ** 0.5, rel=1e-3)
     assert c.link_right == 1.0
 

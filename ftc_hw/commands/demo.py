@@ -22,11 +22,14 @@ def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record=
         worst = ev.worst_rms_mm()
         ratio = ev.worst_err_over_crlb()
         own = ev.worst_err_over_solver()
+        honest = ev.worst_err_over_std()
         console.print(f"[bold]summary[/]: {ev.detected}/{len(ev.contacts)} contacts detected, "
                       f"{sum(c.delay_ok for c in ev.contacts)} within {ev.delay_limit_ms:g} ms of their first "
                       f"sample, {len(ev.false_alarms)} false alarms"
                       + (f", worst per-contact RMS point error {worst:.1f} mm" if worst is not None else "")
                       + (f" (worst per-contact RMS of error / Cramer-Rao bound: {ratio:.2f}"
                          + (f"; of error / the solver's own on the true wrench plus sensor noise: {own:.2f}"
-                            if own is not None else "") + ")" if ratio is not None else ""))
+                            if own is not None else "")
+                         + (f"; of error / the uncertainty it reports: {honest:.2f}" if honest is not None else "")
+                         + ")" if ratio is not None else ""))
     return out.exit_code

@@ -25,9 +25,13 @@ time), truth by the ``t_host_ns`` at which the world published each sample to it
   ratio of the RMS error to the RMS bound they swamp the rest either way.
 * ``err_over_solver``: the RMS error over the solver's own RMS error at the same truth samples, when
   it is given the true contact wrench plus the scene's sensor noise and nothing else (``draws``
-  noise draws per sample, its unflagged answers). About 1 when the live chain (devices, clocks,
-  compensation) costs no accuracy. Near an edge (a cylinder's rim) the local Cramer-Rao bound
-  misses the other face's mode, and this is the figure that still says what the solver can do there.
+  noise draws per sample, its unflagged answers): what one frame can do. The events carry the
+  contact's point fused over its frames (:mod:`ftc_hw.tracking`), so this and ``err/CRLB`` fall
+  below 1 by what the fusion gains; near an edge (a cylinder's rim), where the local Cramer-Rao
+  bound misses the other face's mode, this is the figure that still says what one frame can do.
+* ``err_over_std_rms``: the RMS of each estimate's error over the uncertainty it reports itself
+  (|point error| / |point_std|): about 1 when the reported uncertainty is honest, above 1 when it
+  claims more than it has.
 """
 from __future__ import annotations
 
@@ -61,6 +65,7 @@ class ContactResult:
     err_over_crlb_rms: float | None = None  # RMS of error / bound over the unflagged estimates with a bound
     solver_rms_mm: float | None = None  # the solver's RMS error on the same samples' true wrench + sensor noise
     err_over_solver: float | None = None  # RMS error / solver_rms_mm, over the same estimates
+    err_over_std_rms: float | None = None  # RMS of |error| / |reported point_std| over the unflagged estimates
 
     @property
     def detected(self) -> bool:
@@ -103,6 +108,11 @@ class Evaluation:
     def worst_err_over_solver(self) -> float | None:
         """The largest per-contact RMS point error over the solver's own on the same samples."""
         r = [c.err_over_solver for c in self.contacts if c.err_over_solver is not None]
+        return max(r) if r else None
+
+    def worst_err_over_std(self) -> float | None:
+        """The largest per-contact RMS of the point error over the uncertainty the events report."""
+        r = [c.err_over_std_rms for c in self.contacts if c.err_over_std_rms is not None]
         return max(r) if r else None
 
     def to_dict(self) -> dict[str, Any]:
@@ -154,8 +164,9 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
     first_onset: dict[int, int] = {}
     onsets_in: dict[int, int] = {}
     false_alarms: list[float] = []
-    # (point err mm, force err N, link, flagged, bound mm or None, solver's RMS error mm or None)
-    errs: dict[int, list[tuple[float, float, str, bool, float | None, float | None]]] = {}
+    # (point err mm, force err N, link, flagged, bound mm or None, solver's RMS error mm or None,
+    #  reported |point_std| mm)
+    errs: dict[int, list[tuple[float, float, str, bool, float | None, float | None, float]]] = {}
     evs = sorted(events, key=lambda e: e["t_host_ns"])
     t_last = int(th[-1]) if len(th) else 0
     for ev in evs:
@@ -180,7 +191,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
         errs.setdefault(k, []).append((float(np.linalg.norm(np.subtract(ev["point"], rec["point"]))) * 1e3,
                                        float(np.linalg.norm(np.subtract(ev["force"], rec["force"]))), ev["link"],
                                        not trusted, crlb(rec) if crlb is not None and trusted else None,
-                                       solver_rms(rec) if solver_rms is not None and trusted else None))
+                                       solver_rms(rec) if solver_rms is not None and trusted else None,
+                                       float(np.linalg.norm(ev.get("point_std", (0.0, 0.0, 0.0)))) * 1e3))
 
     results = []
     for k, (a, b) in enumerate(episodes):
@@ -213,7 +225,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             err_over_crlb_rms=stat(np.array([r[0] / r[4] for r in good if r[4]]), _rms),
             solver_rms_mm=stat(ref_rms, _rms),
             err_over_solver=(round(float(_rms(ref_err) / _rms(ref_rms)), 2) if len(ref) and _rms(ref_rms) > 0
-                             else None)))
+                             else None),
+            err_over_std_rms=stat(np.array([r[0] / r[6] for r in good if r[6] > 0]), _rms)))
     splits = sum(max(0, n - 1) for n in onsets_in.values())
     return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))
 

@@ -170,6 +170,7 @@ class ContactSolver:
         self.prim_pulls = np.array([bool(touch.get(m.body(int(m.geom_bodyid[g])).name) and
                                          touch[m.body(int(m.geom_bodyid[g])).name].pulls) for g in geoms])
         self.links = tuple(m.body(b).name for b in range(m.nbody))
+        self._kin_q: np.ndarray | None = None  # the q of the scratch's body poses (last solve)
         # joint j moves body b when j's body is b or an ancestor of b
         self.link_joint = np.zeros((m.nbody, m.njnt), dtype=np.bool_)
         for b in range(m.nbody):
@@ -265,6 +266,7 @@ class ContactSolver:
         ``extra_cov``: the compensation's own uncertainty for this frame (6x6, sensor frame), added
         to the sensor noise: it weights the fit and enters the reported covariance.
         """
+        self._kin_q = None  # the scratch's body poses are stale until the kernel has run
         w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
         if not (math.isfinite(w.sum()) and math.isfinite(q.sum())):  # NaN or Inf anywhere
@@ -295,7 +297,26 @@ class ContactSolver:
         n = K.solve_frame_q(ext, self._qfull, wmat, self.prim_i, self.sizes, self.link_joint, self._tau, tau_var,
                             use_tau, self.cfg, tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, self._out, self._cand_prim,
                             self._cand_f, self._ws, self._raw_prim, *sc)
+        self._kin_q = q.copy()
         return self._estimate(n, saturated)
+
+    def solved_body_poses(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``body_poses`` at the last ``solve``'s q without checking q (None when that solve ran no
+        kinematics): for a caller that has just solved at the q it needs."""
+        return None if self._kin_q is None else (self._scratch[0], self._scratch[1])
+
+    def body_poses(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """Every body's position (nbody, 3) and quaternion (nbody, 4) in the base frame at joint
+        angles q, in MuJoCo's layout: the last ``solve``'s own kinematics when it was at this q (no
+        second pass), else computed now. Valid until the next call or solve."""
+        q = np.asarray(q, dtype=np.float64)
+        sc = self._scratch
+        if self._kin_q is None or not np.array_equal(q, self._kin_q):
+            self._qfull[self.model._qadr] = q
+            tr = self._tree
+            K.tree_kinematics(self._qfull, tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, *sc)
+            self._kin_q = q.copy()
+        return sc[0], sc[1]
 
     def _invalid(self, saturated: bool) -> ContactEstimate:
         z = np.zeros(3)
