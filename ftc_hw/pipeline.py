@@ -56,6 +56,7 @@ class ContactPipeline:
         self.track = (None if track_slide is None else
                       ContactTrack(model, slide=track_slide, body_poses=getattr(self.solver, "body_poses", None)))
         self._solved_poses = getattr(self.solver, "solved_body_poses", None)
+        self._prev: tuple | None = None  # the last frame's (t_ns, external, q, model_error, saturated)
         if self.track is not None:
             # a bias given (calibration file, scene) is taken as known to a tenth of one sample's noise
             self.track.set_bias(bias_var_ratio)
@@ -135,19 +136,14 @@ class ContactPipeline:
         estimate = None
         if det.active or det.change == "offset":
             if det.active:
-                # the acceleration estimate's lag error weighs on the fit as it does on detection
-                extra = self.extra_cov
-                if model_error is not None:
-                    extra = model_error.T @ model_error if extra is None else extra + model_error.T @ model_error
+                if self.track is not None and det.change == "onset":
+                    self.track.reset()
+                    self._track_onset_start(det, tau_ext, tau_std)
                 estimate = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
-                                             extra_cov=extra)
+                                             extra_cov=self._extra(model_error))
                 self._last_estimate = estimate
                 if self.track is not None:
-                    if det.change == "onset":
-                        self.track.reset()
-                    # the solver's kinematics of this very frame, when it has them
-                    poses = self._solved_poses() if self._solved_poses is not None else None
-                    self.track.update(t_ns, estimate, q, poses)
+                    self.track.update(t_ns, estimate, q, self._solved_poses() if self._solved_poses else None)
             track = self.track if self.track is not None and self.track.active else None
             if det.change == "onset":
                 events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det, track))
@@ -160,7 +156,29 @@ class ContactPipeline:
             elif t_ns - self._last_update_ns >= self.update_period_ns:
                 events.append(self._event(t_ns, "update", estimate, det, track))
                 self._last_update_ns = t_ns
+        if self.track is not None:
+            self._prev = (t_ns, external, q.copy(), model_error, saturated)
         return FrameResult(t_ns, external, det, estimate, tau_ext, tuple(events))
+
+    def _extra(self, model_error: np.ndarray | None) -> np.ndarray | None:
+        """The compensation's own uncertainty for a frame: the acceleration estimate's lag error weighs
+        on the fit as it does on detection."""
+        extra = self.extra_cov
+        if model_error is not None:
+            extra = model_error.T @ model_error if extra is None else extra + model_error.T @ model_error
+        return extra
+
+    def _track_onset_start(self, det: Detection, tau_ext, tau_std) -> None:
+        """The onset goes out at the detector's n_on-th sample above the threshold; the sample before
+        it, already above, is fused first (with this frame's joint torques: they change slowly), so
+        the onset's point rests on two frames instead of one. Costs one solve, at onsets only."""
+        prev = self._prev
+        if prev is None or det.onset_t_ns is None or prev[0] < det.onset_t_ns:
+            return
+        t_prev, external, q, model_error, saturated = prev
+        e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
+                              extra_cov=self._extra(model_error))
+        self.track.update(t_prev, e, q, self._solved_poses() if self._solved_poses else None)
 
     def _lag_error(self, t_ns: int, qdd: np.ndarray) -> np.ndarray | None:
         """The largest change of the acceleration estimate over the last lag window (2 tau), per

@@ -192,3 +192,20 @@ def test_the_solvers_body_poses_are_mujocos():
         ref_pos, ref_quat = (a.copy() for a in MODEL.body_poses(q))
         assert np.allclose(xpos, ref_pos, atol=1e-12)
         assert np.allclose(np.abs(np.sum(xquat * ref_quat, axis=1)), 1.0, atol=1e-12)  # q and -q alike
+
+
+def test_the_onset_rests_on_the_sample_before_it_too():
+    """The onset goes out at the second sample above the threshold: the first one, already above,
+    is fused too, so the onset's point rests on two frames."""
+    pipe = ContactPipeline(SCENE, level="bias", bias=np.zeros(6), use_currents=False)
+    surf = next(s for s in MODEL.surfaces if s.link == LINK)
+    centre = (MODEL.base_T_link(HOME, LINK) @ surf.link_T_geom)[:3, 3]
+    inward = np.array([0.0, -1.0, 0.0])
+    point = _ray_to_surface(MODEL, HOME, centre - 0.3 * inward, inward)
+    clean = MODEL.predicted_wrench(HOME, level="bias", contacts=[Contact(LINK, point, 30.0 * inward)])
+    for k in range(20):
+        assert not pipe.process(k * MS, np.zeros(6), HOME).events
+    assert not pipe.process(20 * MS, clean, HOME).events  # above the threshold: one sample is no onset
+    (onset,) = pipe.process(21 * MS, clean, HOME).events
+    assert onset.kind == "onset" and onset.t_host_ns == 20 * MS
+    assert pipe.track.fused == 2 and np.linalg.norm(onset.point - point) < 1e-9
