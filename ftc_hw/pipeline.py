@@ -15,7 +15,7 @@ from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, make_solver
-from .tracking import ContactTrack, fuse_point, report
+from .tracking import ContactTrack, fuse_point, link_pose, report
 
 G_REFRESH_NS = 10_000_000
 QDD_RING = 64
@@ -55,7 +55,8 @@ class ContactPipeline:
         # events carry the contact's point fused over its frames (None: each frame's own estimate)
         self.track = (None if track_slide is None else
                       ContactTrack(model, slide=track_slide, body_poses=getattr(self.solver, "body_poses", None)))
-        self._solved_poses = getattr(self.solver, "solved_body_poses", None)
+        # the solver's kinematics of the frame it just solved (the leng2016 method has none)
+        self._solved_poses = getattr(self.solver, "solved_body_poses", lambda: None)
         self._prev: tuple | None = None  # the last frame's (t_ns, external, q, model_error, saturated)
         if self.track is not None:
             # a bias given (calibration file, scene) is taken as known to a tenth of one sample's noise
@@ -83,8 +84,10 @@ class ContactPipeline:
         window_change(self._qdd_ring, self._qdd_ring_t, 0, self._lag_window_ns, np.zeros(n), self._qdd_change)
         self.solver.solve(np.array([0.0, 0.0, 10.0, 0.0, 0.0, 0.0]), np.asarray(self.scene.robot.home, dtype=float),
                           tau_ext=np.zeros(n), tau_std=np.ones(n), extra_cov=np.zeros((6, 6)))
-        fuse_point(np.zeros(3), np.eye(3), np.zeros(3), np.eye(6), np.zeros((2, 3)), np.ones((2, 4)), 1, 0.0, 0.0,
-                   1.0, np.zeros((4, 3)), np.zeros((3, 4)))
+        poses = (np.zeros((2, 3)), np.ones((2, 4)))
+        fuse_point(np.zeros(3), np.eye(3), np.zeros(3), np.eye(6), *poses, 1, 0.0, 0.0, 1.0, np.zeros((4, 3)),
+                   np.zeros((3, 4)))
+        link_pose(*poses, 1, np.zeros((3, 4)))
         report(np.zeros(3), np.eye(3), np.zeros((4, 3)), 0.0, np.zeros((3, 4)), np.zeros(3), np.zeros((3, 3)))
 
     def tare(self, raw_mean, q, samples: int, t_ns: int) -> None:
@@ -143,7 +146,7 @@ class ContactPipeline:
                                              extra_cov=self._extra(model_error))
                 self._last_estimate = estimate
                 if self.track is not None:
-                    self.track.update(t_ns, estimate, q, self._solved_poses() if self._solved_poses else None)
+                    self.track.update(t_ns, estimate, q, self._solved_poses())
             track = self.track if self.track is not None and self.track.active else None
             if det.change == "onset":
                 events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det, track))
@@ -178,7 +181,7 @@ class ContactPipeline:
         t_prev, external, q, model_error, saturated = prev
         e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
                               extra_cov=self._extra(model_error))
-        self.track.update(t_prev, e, q, self._solved_poses() if self._solved_poses else None)
+        self.track.update(t_prev, e, q, self._solved_poses())
 
     def _lag_error(self, t_ns: int, qdd: np.ndarray) -> np.ndarray | None:
         """The largest change of the acceleration estimate over the last lag window (2 tau), per

@@ -78,6 +78,23 @@ def _rotate_cov(r: np.ndarray, c: np.ndarray, to_local: bool, out: np.ndarray) -
 
 
 @njit(cache=True, nogil=True)
+def link_pose(xpos: np.ndarray, xquat: np.ndarray, body: int, pose: np.ndarray) -> None:
+    """pose (3x4: rotation, translation) = base_T_body from MuJoCo-layout body poses."""
+    qw, qx, qy, qz = xquat[body, 0], xquat[body, 1], xquat[body, 2], xquat[body, 3]
+    pose[0, 0] = 1.0 - 2.0 * (qy * qy + qz * qz)
+    pose[0, 1] = 2.0 * (qx * qy - qw * qz)
+    pose[0, 2] = 2.0 * (qx * qz + qw * qy)
+    pose[1, 0] = 2.0 * (qx * qy + qw * qz)
+    pose[1, 1] = 1.0 - 2.0 * (qx * qx + qz * qz)
+    pose[1, 2] = 2.0 * (qy * qz - qw * qx)
+    pose[2, 0] = 2.0 * (qx * qz - qw * qy)
+    pose[2, 1] = 2.0 * (qy * qz + qw * qx)
+    pose[2, 2] = 1.0 - 2.0 * (qx * qx + qy * qy)
+    for i in range(3):
+        pose[i, 3] = xpos[body, i]
+
+
+@njit(cache=True, nogil=True)
 def fuse_point(x: np.ndarray, p: np.ndarray, z_base: np.ndarray, cov: np.ndarray, xpos: np.ndarray,
                xquat: np.ndarray, body: int, q_add: float, r_add: float, gate: float, c_link: np.ndarray,
                pose: np.ndarray) -> float:
@@ -88,33 +105,17 @@ def fuse_point(x: np.ndarray, p: np.ndarray, z_base: np.ndarray, cov: np.ndarray
     pose goes to ``pose`` (3x4: rotation, translation). Returns the distance^2 (inf: broken input).
     ``c_link`` (4x3) receives the measurement's covariance in the link frame (rows 0-2) and, in row
     3, the gain along it: trace(K C) / trace(C), the weight this frame got in the fused point."""
-    qw, qx, qy, qz = xquat[body, 0], xquat[body, 1], xquat[body, 2], xquat[body, 3]
-    b_r_l = np.empty((3, 3))
-    b_r_l[0, 0] = 1.0 - 2.0 * (qy * qy + qz * qz)
-    b_r_l[0, 1] = 2.0 * (qx * qy - qw * qz)
-    b_r_l[0, 2] = 2.0 * (qx * qz + qw * qy)
-    b_r_l[1, 0] = 2.0 * (qx * qy + qw * qz)
-    b_r_l[1, 1] = 1.0 - 2.0 * (qx * qx + qz * qz)
-    b_r_l[1, 2] = 2.0 * (qy * qz - qw * qx)
-    b_r_l[2, 0] = 2.0 * (qx * qz - qw * qy)
-    b_r_l[2, 1] = 2.0 * (qy * qz + qw * qx)
-    b_r_l[2, 2] = 1.0 - 2.0 * (qx * qx + qy * qy)
-    b_t_l = xpos[body]
-    for i in range(3):
-        for j in range(3):
-            pose[i, j] = b_r_l[i, j]
-        pose[i, 3] = b_t_l[i]
-    cov_base = cov
+    link_pose(xpos, xquat, body, pose)
     for i in range(3):
         p[i, i] += q_add
     z = np.empty(3)
     for i in range(3):
         s = 0.0
         for k in range(3):
-            s += b_r_l[k, i] * (z_base[k] - b_t_l[k])
+            s += pose[k, i] * (z_base[k] - pose[k, 3])
         z[i] = s
     # S = P + R^T C R + r_add I
-    _rotate_cov(b_r_l, cov_base, True, c_link)
+    _rotate_cov(pose, cov, True, c_link)
     s_m = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
@@ -278,9 +279,9 @@ class ContactTrack:
             d2 = fuse_point(self.x, self.p, e.point, e.cov, xpos, xquat, self._body, q_add, self.floor_var,
                             self.gate if fusable else -1.0, c, self._pose)
         else:
-            # another link's estimate: a miss; the step still predicts (time passed) and moves the pose
-            fuse_point(self.x, self.p, self.point, np.zeros((3, 3)), xpos, xquat, self._body, q_add,
-                       self.floor_var, -1.0, self._c_work, self._pose)
+            # another link's estimate: a miss; time still passed, and the link moved
+            self.p[np.diag_indices(3)] += q_add
+            link_pose(xpos, xquat, self._body, self._pose)
             d2 = math.inf
         if d2 <= self.gate:
             if not fusable:
@@ -308,13 +309,8 @@ class ContactTrack:
         cov = e.cov[:3, :3]
         if not math.isfinite(float(e.point.sum() + cov.sum())):
             return False
-        xpos, xquat = self.body_poses(q)
-        body = self.model.body_id(e.link)
-        # judged against nothing (gate -1: no update), for the link's pose and a finite point
-        d2 = fuse_point(np.zeros(3), np.zeros((3, 3)), e.point, e.cov, xpos, xquat, body, 0.0, 1.0, -1.0,
-                        self._c_work, self._pose)
-        if not math.isfinite(d2):
-            return False
+        body = self.model.model.body(e.link).id
+        link_pose(*self.body_poses(q), body, self._pose)
         r, t = self._pose[:, :3], self._pose[:, 3]
         c = r.T @ cov @ r
         self.x = r.T @ (e.point - t)
@@ -346,7 +342,7 @@ class ContactTrack:
 
     @property
     def point_std(self) -> np.ndarray:
-        return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+        return self.point_and_std()[1]
 
     def point_and_std(self) -> tuple[np.ndarray, np.ndarray]:
         """``point`` and ``point_std`` in one pass (the events' path)."""

@@ -33,7 +33,7 @@ def est(point, cov3, link=LINK, flags=(), contact=True):
 
 
 def on_link(q, local) -> np.ndarray:
-    b_T_l = MODEL.base_T_link(q, LINK)
+    b_T_l = MODEL.kinematics(q)[LINK]
     return b_T_l[:3, :3] @ np.asarray(local) + b_T_l[:3, 3]
 
 
@@ -145,7 +145,7 @@ def held_contact_events(track_slide):
     rng = np.random.default_rng(3)
     pipe = ContactPipeline(SCENE, level="bias", bias=np.zeros(6), use_currents=False, track_slide=track_slide)
     surf = next(s for s in MODEL.surfaces if s.link == LINK)
-    b_T_l = MODEL.base_T_link(HOME, LINK)
+    b_T_l = MODEL.kinematics(HOME)[LINK]
     centre = (b_T_l @ surf.link_T_geom)[:3, 3]
     # a point on the surface, cast at from outside along base -y (a line that crosses no other link)
     inward = np.array([0.0, -1.0, 0.0])
@@ -199,7 +199,7 @@ def test_the_onset_rests_on_the_sample_before_it_too():
     is fused too, so the onset's point rests on two frames."""
     pipe = ContactPipeline(SCENE, level="bias", bias=np.zeros(6), use_currents=False)
     surf = next(s for s in MODEL.surfaces if s.link == LINK)
-    centre = (MODEL.base_T_link(HOME, LINK) @ surf.link_T_geom)[:3, 3]
+    centre = (MODEL.kinematics(HOME)[LINK] @ surf.link_T_geom)[:3, 3]
     inward = np.array([0.0, -1.0, 0.0])
     point = _ray_to_surface(MODEL, HOME, centre - 0.3 * inward, inward)
     clean = MODEL.predicted_wrench(HOME, level="bias", contacts=[Contact(LINK, point, 30.0 * inward)])

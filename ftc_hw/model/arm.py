@@ -110,7 +110,6 @@ class ArmModel:
         self._dadr = np.array(dadr)
         self._forces_applied = False
         self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
-        self._link_index = {name: i for i, name in enumerate(self.link_names)}
         self.surfaces = self._collect_surfaces()
         self.sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
         self.total_mass = float(m.body_subtreemass[self.sensor_body])
@@ -179,16 +178,6 @@ class ArmModel:
         self._set(q)
         mujoco.mj_kinematics(self.model, self.data)
         return self.data.xpos, self.data.xquat
-
-    def body_id(self, link: str) -> int:
-        return self._link_index[link] + 1
-
-    def base_T_link(self, q, link: str) -> np.ndarray:
-        """``base_T_<link>`` of one body at joint angles q (rad)."""
-        self._set(q)
-        mujoco.mj_kinematics(self.model, self.data)
-        i = self._link_index[link] + 1
-        return pose(self.data.xmat[i].reshape(3, 3), self.data.xpos[i])
 
     def base_T_site(self, q, site: str) -> np.ndarray:
         self._set(q)
