@@ -4,7 +4,8 @@ estimate and contact events out. The live monitor, replay and the benchmarks all
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -19,6 +20,9 @@ from .tracking import ContactTrack, fuse_point, link_pose, report
 
 G_REFRESH_NS = 10_000_000
 QDD_RING = 64
+# an arm's reaction to a contact that counts against the sensor noise (chi-square, 1 dof, p = 0.999)
+IMPACT_CHI2 = 10.83
+IMPACT_PASSES = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,7 +42,7 @@ class ContactPipeline:
                  payload: Payload | None = None, method: str = "ours", use_currents: bool = True,
                  p_false: float = 1e-9, n_on: int = 2, n_off: int = 5, update_period_s: float = 0.02,
                  qdd_tau: float = 0.002, extra_cov=None, track_slide: float | None = 0.01,
-                 bias_var_ratio: float = 0.01) -> None:
+                 bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005) -> None:
         self.scene = scene
         model = ArmModel(scene, payload)
         self.compensator = Compensator(model, level, bias)
@@ -69,6 +73,13 @@ class ContactPipeline:
         self._g_cache: np.ndarray | None = None
         self._g_time = 0
         self._lag_window_ns = int(2 * qdd_tau * 1e9)
+        # how long after a contact's start the estimated acceleration may still miss the arm's
+        # reaction to it (None: never re-weigh; see _impact_solve)
+        self.impact_window_ns = None if impact_window_s is None else int(impact_window_s * 1e9)
+        self._noise_inv = np.linalg.inv(scene.sensor.noise_cov)
+        self._kt = np.asarray(scene.robot.torque_constant, dtype=float)
+        self._pre_current: deque[np.ndarray] = deque(maxlen=3)  # the last frames before a contact
+        self._impact_dtau: np.ndarray | None = None
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
         self.lag_gain = 3.0  # the lag error exceeds the change over the window: 3 covers it with margin
         self._warm_up()
@@ -107,7 +118,8 @@ class ContactPipeline:
         if need_dyn and qd is None:
             raise ValueError("dynamics compensation needs the joint velocities qd")
         lag_error = None
-        if need_dyn and qdd is None:
+        qdd_estimated = need_dyn and qdd is None
+        if qdd_estimated:
             t_clock = t_ns if t_device_ns is None else t_device_ns
             qdd = self.qdd.update(t_clock * 1e-9, qd)
             lag_error = self._lag_error(t_clock, qdd)
@@ -128,6 +140,13 @@ class ContactPipeline:
                 self._g_time = t_clock
             model_error = (self._g_cache * np.where(np.abs(lag_error) >= self.lag_floor, lag_error, 0.0)).T
         det = self.detector.update(t_ns, external, model_error)
+        self._impact_dtau = None
+        if current is not None and qdd_estimated:
+            if not det.active:
+                self._pre_current.append(np.asarray(current, dtype=float))
+            elif self._pre_current:
+                # the joint controllers' reaction since before the contact, in torque
+                self._impact_dtau = self._kt * (np.asarray(current, dtype=float) - self._pre_current[0])
         tau_ext = tau_std = None
         if want_tau and det.active:  # only the solver needs them
             if model_tau is None:
@@ -139,11 +158,12 @@ class ContactPipeline:
         estimate = None
         if det.active or det.change == "offset":
             if det.active:
+                impact = qdd_estimated and self._in_impact(det, t_ns)
                 if self.track is not None and det.change == "onset":
                     self.track.reset()
-                    self._track_onset_start(det, tau_ext, tau_std)
-                estimate = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
-                                             extra_cov=self._extra(model_error))
+                    if not impact:
+                        self._track_onset_start(det, tau_ext, tau_std)
+                estimate = self._solve(external, q, tau_ext, tau_std, saturated, model_error, impact)
                 self._last_estimate = estimate
                 if self.track is not None:
                     self.track.update(t_ns, estimate, q, self._solved_poses())
@@ -171,16 +191,56 @@ class ContactPipeline:
             extra = model_error.T @ model_error if extra is None else extra + model_error.T @ model_error
         return extra
 
+    def _in_impact(self, det: Detection, t_ns: int) -> bool:
+        return (self.impact_window_ns is not None and det.onset_t_ns is not None
+                and t_ns - det.onset_t_ns <= self.impact_window_ns)
+
+    def _solve(self, external, q, tau_ext, tau_std, saturated: bool, model_error, impact: bool) -> ContactEstimate:
+        e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
+                              extra_cov=self._extra(model_error))
+        if impact:
+            # the reaction's unknown share replaces the lag model, which would count it twice
+            e = self._impact_solve(e, external, q, tau_ext, tau_std, saturated, self.extra_cov)
+        return e
+
+    def _impact_solve(self, e: ContactEstimate, external, q, tau_ext, tau_std, saturated: bool,
+                      extra) -> ContactEstimate:
+        """Solve again with the contact's own inertial reaction as an unknown, and flag ``impact``
+        where that reaction is larger than the sensor noise.
+
+        A contact accelerates the arm at once (M^-1 J^T f); the acceleration estimate, a causal filter
+        of the joint velocities, sees that only a few samples later. Until then the compensated
+        wrench holds an unknown fraction (0 to 1) of the wrench that acceleration produces at the
+        sensor, G M^-1 J^T f: one direction of the 6-D wrench, from the first solve. Its variance
+        along that direction lets the fit leave it out; the estimate is still provisional, and the
+        contact's track fuses none of these."""
+        flagged = False
+        for _ in range(IMPACT_PASSES):  # the direction comes from an estimate: a second pass refines it
+            if not (e.contact and e.link) or not math.isfinite(float(e.point.sum() + e.force.sum())):
+                break
+            model = self.compensator.model
+            acc = model.contact_acceleration(q, e.link, e.point, e.force)
+            d = model.wrench_qdd_jacobian() @ acc  # the kinematics are at q after contact_acceleration
+            if float(d @ self._noise_inv @ d) <= IMPACT_CHI2:
+                break
+            cov = np.outer(d, d) if extra is None else extra + np.outer(d, d)
+            if self._impact_dtau is not None:  # and the controllers' reaction, as much unseen
+                d2 = model.wrench_qdd_jacobian() @ model.torque_acceleration(q, self._impact_dtau)
+                cov = cov + np.outer(d2, d2)
+            e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std, extra_cov=cov)
+            flagged = True
+        return replace(e, flags=(*e.flags, "impact")) if flagged else e
+
     def _track_onset_start(self, det: Detection, tau_ext, tau_std) -> None:
         """The onset goes out at the detector's n_on-th sample above the threshold; the sample before
         it, already above, is fused first (with this frame's joint torques: they change slowly), so
-        the onset's point rests on two frames instead of one. Costs one solve, at onsets only."""
+        the onset's point rests on two frames instead of one. Costs one solve, at onsets only; none
+        in an impact, whose estimates the track does not fuse."""
         prev = self._prev
         if prev is None or det.onset_t_ns is None or prev[0] < det.onset_t_ns:
             return
         t_prev, external, q, model_error, saturated = prev
-        e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
-                              extra_cov=self._extra(model_error))
+        e = self._solve(external, q, tau_ext, tau_std, saturated, model_error, False)
         self.track.update(t_prev, e, q, self._solved_poses())
 
     def _lag_error(self, t_ns: int, qdd: np.ndarray) -> np.ndarray | None:

@@ -202,6 +202,30 @@ class ArmModel:
         mujoco.mj_jac(self.model, self.data, jac, None, np.asarray(point, dtype=float), self.model.body(link).id)
         return jac[:, self._dadr]
 
+    def contact_acceleration(self, q, link: str, point, force) -> np.ndarray:
+        """The joint accelerations (rad/s^2) a force (N, base frame) on ``link`` at ``point`` adds at
+        once, before any joint controller reacts to the motion it causes: M(q)^-1 J^T f."""
+        jac = self.jacobian(q, link, point)
+        return self._solve_m(jac.T @ np.asarray(force, dtype=float))
+
+    def torque_acceleration(self, q, tau) -> np.ndarray:
+        """The joint accelerations (rad/s^2) joint torques tau (N m) add at q: M(q)^-1 tau."""
+        self._set(q)
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+        return self._solve_m(np.asarray(tau, dtype=float))
+
+    def _solve_m(self, tau: np.ndarray) -> np.ndarray:
+        """M^-1 tau at the kinematics already computed (mj_kinematics, mj_comPos)."""
+        m, d = self.model, self.data
+        mujoco.mj_crb(m, d)
+        mujoco.mj_factorM(m, d)
+        full = np.zeros(m.nv)
+        full[self._dadr] = tau
+        out = np.zeros(m.nv)
+        mujoco.mj_solveM(m, d, out.reshape(1, -1), full.reshape(1, -1))
+        return out[self._dadr]
+
     # -- predictions ----------------------------------------------------------------------------------
     def predicted_wrench(self, q, qd=None, qdd=None, level: CompensationLevel = "dynamics",
                          contacts: Iterable[Contact] = ()) -> np.ndarray:
