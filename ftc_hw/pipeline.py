@@ -80,6 +80,7 @@ class ContactPipeline:
         self._kt = np.asarray(scene.robot.torque_constant, dtype=float)
         self._pre_current: deque[np.ndarray] = deque(maxlen=3)  # the last frames before a contact
         self._impact_dtau: np.ndarray | None = None
+        self._impact_seed: ContactEstimate | None = None  # the last impact estimate of this contact
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
         self.lag_gain = 3.0  # the lag error exceeds the change over the window: 3 covers it with margin
         self._warm_up()
@@ -159,6 +160,8 @@ class ContactPipeline:
         if det.active or det.change == "offset":
             if det.active:
                 impact = qdd_estimated and self._in_impact(det, t_ns)
+                if det.change == "onset":
+                    self._impact_seed = None
                 if self.track is not None and det.change == "onset":
                     self.track.reset()
                     if not impact:
@@ -196,26 +199,33 @@ class ContactPipeline:
                 and t_ns - det.onset_t_ns <= self.impact_window_ns)
 
     def _solve(self, external, q, tau_ext, tau_std, saturated: bool, model_error, impact: bool) -> ContactEstimate:
-        e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
-                              extra_cov=self._extra(model_error))
-        if impact:
-            # the reaction's unknown share replaces the lag model, which would count it twice
-            e = self._impact_solve(e, external, q, tau_ext, tau_std, saturated, self.extra_cov)
+        e = None
+        if impact and self._impact_seed is not None:
+            # within an impact the last frame's estimate gives the reaction's direction: one solve
+            e = self._impact_solve(self._impact_seed, external, q, tau_ext, tau_std, saturated, 1)
+        if e is None:
+            e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
+                                  extra_cov=self._extra(model_error))
+            if impact:
+                e = self._impact_solve(e, external, q, tau_ext, tau_std, saturated, IMPACT_PASSES) or e
+        self._impact_seed = e if impact and "impact" in e.flags else None
         return e
 
     def _impact_solve(self, e: ContactEstimate, external, q, tau_ext, tau_std, saturated: bool,
-                      extra) -> ContactEstimate:
-        """Solve again with the contact's own inertial reaction as an unknown, and flag ``impact``
-        where that reaction is larger than the sensor noise.
+                      passes: int) -> ContactEstimate | None:
+        """Solve again with the arm's reaction to the contact as an unknown, and flag ``impact``
+        where that reaction is larger than the sensor noise; ``e``: the estimate that gives the
+        reaction's direction. None where there is no such reaction (or no estimate to give it).
 
         A contact accelerates the arm at once (M^-1 J^T f); the acceleration estimate, a causal filter
         of the joint velocities, sees that only a few samples later. Until then the compensated
         wrench holds an unknown fraction (0 to 1) of the wrench that acceleration produces at the
-        sensor, G M^-1 J^T f: one direction of the 6-D wrench, from the first solve. Its variance
-        along that direction lets the fit leave it out; the estimate is still provisional, and the
-        contact's track fuses none of these."""
-        flagged = False
-        for _ in range(IMPACT_PASSES):  # the direction comes from an estimate: a second pass refines it
+        sensor, G M^-1 J^T f, and likewise of the joint controllers' answer since the contact began
+        (from the motor currents). One unit of variance along each of those directions lets the fit
+        leave them out. It replaces the lag model (which would count the reaction twice). The
+        estimate is still provisional, and the contact's track fuses none of these."""
+        out = None
+        for _ in range(passes):  # the direction comes from an estimate: a second pass refines it
             if not (e.contact and e.link) or not math.isfinite(float(e.point.sum() + e.force.sum())):
                 break
             model = self.compensator.model
@@ -223,13 +233,13 @@ class ContactPipeline:
             d = model.wrench_qdd_jacobian() @ acc  # the kinematics are at q after contact_acceleration
             if float(d @ self._noise_inv @ d) <= IMPACT_CHI2:
                 break
-            cov = np.outer(d, d) if extra is None else extra + np.outer(d, d)
-            if self._impact_dtau is not None:  # and the controllers' reaction, as much unseen
+            cov = np.outer(d, d) if self.extra_cov is None else self.extra_cov + np.outer(d, d)
+            if self._impact_dtau is not None:
                 d2 = model.wrench_qdd_jacobian() @ model.torque_acceleration(q, self._impact_dtau)
-                cov = cov + np.outer(d2, d2)
-            e = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std, extra_cov=cov)
-            flagged = True
-        return replace(e, flags=(*e.flags, "impact")) if flagged else e
+                cov += np.outer(d2, d2)
+            e = out = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
+                                        extra_cov=cov)
+        return None if out is None else replace(out, flags=(*out.flags, "impact"))
 
     def _track_onset_start(self, det: Detection, tau_ext, tau_std) -> None:
         """The onset goes out at the detector's n_on-th sample above the threshold; the sample before
