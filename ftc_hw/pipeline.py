@@ -14,6 +14,7 @@ from .compensation import Compensator, JointResiduals, QddEstimator
 from .detection import ContactDetector, Detection
 from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
+from .model.arm import link_reach
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, make_solver
 from .tracking import ContactTrack, fuse_point, link_pose, report
@@ -42,7 +43,8 @@ class ContactPipeline:
                  payload: Payload | None = None, method: str = "ours", use_currents: bool = True,
                  p_false: float = 1e-9, n_on: int = 2, n_off: int = 5, update_period_s: float = 0.02,
                  qdd_tau: float = 0.002, extra_cov=None, track_slide: float | None = 0.01,
-                 bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005) -> None:
+                 bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005,
+                 flag_uncertain: bool = True) -> None:
         self.scene = scene
         model = ArmModel(scene, payload)
         self.compensator = Compensator(model, level, bias)
@@ -81,6 +83,8 @@ class ContactPipeline:
         self._pre_current: deque[np.ndarray] = deque(maxlen=3)  # the last frames before a contact
         self._impact_dtau: np.ndarray | None = None
         self._impact_seed: ContactEstimate | None = None  # the last impact estimate of this contact
+        # an event whose point is less certain than the touched link is big says nothing of where
+        self._link_reach = link_reach(model) if flag_uncertain else None
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
         self.lag_gain = 3.0  # the lag error exceeds the change over the window: 3 covers it with margin
         self._warm_up()
@@ -172,15 +176,15 @@ class ContactPipeline:
                     self.track.update(t_ns, estimate, q, self._solved_poses())
             track = self.track if self.track is not None and self.track.active else None
             if det.change == "onset":
-                events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det, track))
+                events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det, track, self._link_reach))
                 self._last_update_ns = t_ns
             elif det.change == "offset":
-                events.append(self._event(t_ns, "offset", self._last_estimate, det, track))
+                events.append(self._event(t_ns, "offset", self._last_estimate, det, track, self._link_reach))
                 self._last_estimate = None
                 if self.track is not None:
                     self.track.reset()
             elif t_ns - self._last_update_ns >= self.update_period_ns:
-                events.append(self._event(t_ns, "update", estimate, det, track))
+                events.append(self._event(t_ns, "update", estimate, det, track, self._link_reach))
                 self._last_update_ns = t_ns
         if self.track is not None:
             self._prev = (t_ns, external, q.copy(), model_error, saturated)
@@ -270,22 +274,34 @@ class ContactPipeline:
 
     @staticmethod
     def _event(t_ns: int, kind: str, e: ContactEstimate | None, det: Detection,
-               track: ContactTrack | None = None) -> ContactEvent:
+               track: ContactTrack | None = None, reach: dict[str, float] | None = None) -> ContactEvent:
         """The event always goes out (an onset above all). With a track, its point is the contact's
         fused point and the frame's estimate gives the force and flags; otherwise the frame's own
         estimate, and one it cannot carry (none, no contact, no link or a non-finite value) gives
-        zeros and the ``no_estimate`` flag."""
+        zeros and the ``no_estimate`` flag. ``reach``: per link, the size beyond which a point's
+        uncertainty (the norm of its standard deviations) says nothing of where on the link it is:
+        such an event is flagged ``uncertain``."""
         if track is not None:
             force = e.force if e is not None and math.isfinite(float(e.force.sum())) else np.zeros(3)
             point, std = track.point_and_std()
-            return ContactEvent.make(t_ns, kind, track.link, point, force, std,
-                                     flags=e.flags if e is not None else (), probability=det.probability)
+            flags = _with_uncertain(e.flags if e is not None else (), track.link, std, reach)
+            return ContactEvent.make(t_ns, kind, track.link, point, force, std, flags=flags,
+                                     probability=det.probability)
         if e is not None and e.contact and e.link:
             std = e.point_std
             if math.isfinite(float(e.point.sum() + e.force.sum() + std.sum())):
-                return ContactEvent.make(t_ns, kind, e.link, e.point, e.force, std, flags=e.flags,
+                return ContactEvent.make(t_ns, kind, e.link, e.point, e.force, std,
+                                         flags=_with_uncertain(e.flags, e.link, std, reach),
                                          probability=det.probability)
         z = np.zeros(3)
         flags = (*e.flags, "no_estimate") if e is not None else ("no_estimate",)
         link = e.link if e is not None and e.link else "unknown"
         return ContactEvent.make(t_ns, kind, link, z, z, z, flags=flags, probability=det.probability)
+
+
+def _with_uncertain(flags: tuple[str, ...], link: str, std: np.ndarray,
+                    reach: dict[str, float] | None) -> tuple[str, ...]:
+    size = None if reach is None else reach.get(link)
+    if size is None or float(np.linalg.norm(std)) <= size:
+        return tuple(flags)
+    return (*flags, "uncertain")

@@ -32,6 +32,39 @@ def test_an_infinite_uncertainty_gives_a_flagged_event():
     assert ev.probability == 0.9
 
 
+def test_a_point_less_certain_than_its_link_is_big_is_flagged_uncertain():
+    reach = {"link3": 0.05}
+    # norm of the standard deviations 0.049 m: within the link's 0.05 m
+    ev = event(7, "onset", estimate("link3", [0.03, 0.03, 0.0245]), DET, reach=reach)
+    assert ev.flags == ("grazing",)
+    ev = event(7, "onset", estimate("link3", [0.03, 0.03, 0.03]), DET, reach=reach)
+    assert ev.flags == ("grazing", "uncertain") and ev.point.tolist() == [0.1, 0.2, 0.3]  # carried, flagged
+    # a track's point is judged by the track's own uncertainty
+    track = SimpleNamespace(link="link3", point_and_std=lambda: (np.zeros(3), np.full(3, 0.001)))
+    ev = event(7, "update", estimate("link3", [0.3, 0.3, 0.3]), DET, track, reach)
+    assert ev.flags == ("grazing",)
+    track = SimpleNamespace(link="link3", point_and_std=lambda: (np.zeros(3), np.full(3, 0.04)))
+    assert "uncertain" in event(7, "update", estimate("link3", [0.001] * 3), DET, track, reach).flags
+
+
+def test_the_link_reach_holds_every_primitive_of_the_link():
+    from ftc_hw.model import ArmModel
+    from ftc_hw.model.arm import link_reach
+    from ftc_hw.model.sampling import sample_surface_points
+    from ftc_hw.scene import load_scene
+
+    for name in ("ur5e", "dxl-arm", "leng2016"):
+        model = ArmModel(load_scene(name))
+        q = np.array(model.scene.robot.home, dtype=float)
+        reach = link_reach(model)
+        links = model.kinematics(q)
+        far = dict.fromkeys(reach, 0.0)
+        for sp in sample_surface_points(model, q, 3000, np.random.default_rng(0)):
+            far[sp.link] = max(far[sp.link], float(np.linalg.norm(sp.point - links[sp.link][:3, 3])))
+        for link, r in reach.items():
+            assert 0.5 * r < far[link] <= r + 1e-9, (name, link, far[link], r)
+
+
 def test_an_estimate_without_a_link_gives_a_flagged_event():
     ev = event(9, "onset", estimate(None, [0.0, 0.0, 0.0], contact=False), DET)
     assert ev.kind == "onset" and ev.link == "unknown" and "no_estimate" in ev.flags

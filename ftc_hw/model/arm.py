@@ -358,3 +358,28 @@ def apply_point_force(model: mujoco.MjModel, data: mujoco.MjData, link: str, poi
     data.xfrc_applied[bid, :3] += f
     data.xfrc_applied[bid, 3:] += np.cross(np.asarray(point, dtype=float) - data.xipos[bid], f)
 
+
+def _primitive_radius(kind: str, size: np.ndarray) -> float:
+    """The radius of a sphere about the geom's origin that holds the primitive (inf for a plane)."""
+    r, h = float(size[0]), float(size[1])
+    if kind == "sphere":
+        return r
+    if kind == "capsule":
+        return r + h
+    if kind == "cylinder":
+        return math.hypot(r, h)
+    if kind == "box":
+        return float(np.linalg.norm(size[:3]))
+    if kind == "ellipsoid":
+        return float(np.max(size[:3]))
+    return math.inf
+
+
+def link_reach(model: ArmModel) -> dict[str, float]:
+    """Per touchable link, the radius (m) of a sphere about the link's origin that holds all its
+    surface primitives: the link's size, as far as a point on it can be uncertain."""
+    out: dict[str, float] = {}
+    for s in model.surfaces:
+        r = float(np.linalg.norm(s.link_T_geom[:3, 3])) + _primitive_radius(s.kind, s.size)
+        out[s.link] = max(out.get(s.link, 0.0), r)
+    return out
