@@ -174,3 +174,15 @@ def test_each_contact_is_set_against_the_solvers_own_error():
     assert c.solver_rms_mm == pytest.approx(2.0)
     assert c.err_over_solver == pytest.approx(5 ** 0.5 / 2, abs=0.01)
     assert ev.worst_err_over_solver() == c.err_over_solver
+
+
+def test_a_contact_the_run_ends_in_is_marked_cut_and_can_be_left_out_of_the_worst():
+    tr = truth(400, set(range(100, 200)) | set(range(350, 400)))  # the second still on at the end
+    evs = [event("onset", T0 + 101 * MS), event("update", T0 + 150 * MS, point=(0.1, 0.002, 0.5)),
+           event("offset", T0 + 205 * MS),
+           event("onset", T0 + 351 * MS, point=(0.1, 0.009, 0.5))]
+    ev = evaluate(evs, tr, 0.001)
+    assert [c.cut for c in ev.contacts] == [False, True]
+    assert ev.worst_rms_mm() == pytest.approx(9.0)
+    assert ev.worst_rms_mm(whole=True) == pytest.approx(2 ** 0.5, abs=0.01)  # errors 0 and 2 mm
+    assert [c.index for c in ev.judged(whole=True)] == [1] and len(ev.judged()) == 2

@@ -29,6 +29,9 @@ time), truth by the ``t_host_ns`` at which the world published each sample to it
   contact's point fused over its frames (:mod:`ftc_hw.tracking`), so this and ``err/CRLB`` fall
   below 1 by what the fusion gains; near an edge (a cylinder's rim), where the local Cramer-Rao
   bound misses the other face's mode, this is the figure that still says what one frame can do.
+* ``cut``: the truth is still in contact at its last sample (the run ended during the contact). Its
+  figures rest on the few estimates before the end, the contact's track barely started; the
+  ``worst_*`` figures can leave such contacts out (``whole=True``).
 * ``err_over_std_rms``: the RMS of each estimate's error over the uncertainty it reports itself
   (|point error| / |point_std|): about 1 when the reported uncertainty is honest, above 1 when it
   claims more than it has.
@@ -66,6 +69,7 @@ class ContactResult:
     solver_rms_mm: float | None = None  # the solver's RMS error on the same samples' true wrench + sensor noise
     err_over_solver: float | None = None  # RMS error / solver_rms_mm, over the same estimates
     err_over_std_rms: float | None = None  # RMS of |error| / |reported point_std| over the unflagged estimates
+    cut: bool = False  # still in contact at the truth's last sample: the run ended during it
 
     @property
     def detected(self) -> bool:
@@ -91,28 +95,33 @@ class Evaluation:
     def all_in_time(self) -> bool:
         return all(c.detected and c.delay_ok for c in self.contacts)
 
-    def worst_rms_mm(self) -> float | None:
-        errs = [c.err_rms_mm for c in self.contacts if c.err_rms_mm is not None]
+    def judged(self, whole: bool = False) -> list[ContactResult]:
+        """The contacts, or with ``whole`` only those the run saw to their end (a contact cut by the
+        run's end has few estimates, the track's first ones: its figures are those of a few frames)."""
+        return [c for c in self.contacts if not (whole and c.cut)]
+
+    def worst_rms_mm(self, whole: bool = False) -> float | None:
+        errs = [c.err_rms_mm for c in self.judged(whole) if c.err_rms_mm is not None]
         return max(errs) if errs else None
 
-    def worst_rms_to_crlb(self) -> float | None:
+    def worst_rms_to_crlb(self, whole: bool = False) -> float | None:
         """The largest per-contact ratio of the RMS point error to its Cramer-Rao bound."""
-        r = [c.err_rms_mm / c.crlb_rms_mm for c in self.contacts if c.err_rms_mm is not None and c.crlb_rms_mm]
+        r = [c.err_rms_mm / c.crlb_rms_mm for c in self.judged(whole) if c.err_rms_mm is not None and c.crlb_rms_mm]
         return max(r) if r else None
 
-    def worst_err_over_crlb(self) -> float | None:
+    def worst_err_over_crlb(self, whole: bool = False) -> float | None:
         """The largest per-contact RMS of the point error over its own Cramer-Rao bound."""
-        r = [c.err_over_crlb_rms for c in self.contacts if c.err_over_crlb_rms is not None]
+        r = [c.err_over_crlb_rms for c in self.judged(whole) if c.err_over_crlb_rms is not None]
         return max(r) if r else None
 
-    def worst_err_over_solver(self) -> float | None:
+    def worst_err_over_solver(self, whole: bool = False) -> float | None:
         """The largest per-contact RMS point error over the solver's own on the same samples."""
-        r = [c.err_over_solver for c in self.contacts if c.err_over_solver is not None]
+        r = [c.err_over_solver for c in self.judged(whole) if c.err_over_solver is not None]
         return max(r) if r else None
 
-    def worst_err_over_std(self) -> float | None:
+    def worst_err_over_std(self, whole: bool = False) -> float | None:
         """The largest per-contact RMS of the point error over the uncertainty the events report."""
-        r = [c.err_over_std_rms for c in self.contacts if c.err_over_std_rms is not None]
+        r = [c.err_over_std_rms for c in self.judged(whole) if c.err_over_std_rms is not None]
         return max(r) if r else None
 
     def to_dict(self) -> dict[str, Any]:
@@ -226,7 +235,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             solver_rms_mm=stat(ref_rms, _rms),
             err_over_solver=(round(float(_rms(ref_err) / _rms(ref_rms)), 2) if len(ref) and _rms(ref_rms) > 0
                              else None),
-            err_over_std_rms=stat(np.array([r[0] / r[6] for r in good if r[6] > 0]), _rms)))
+            err_over_std_rms=stat(np.array([r[0] / r[6] for r in good if r[6] > 0]), _rms),
+            cut=bool(b == len(truth) - 1)))
     splits = sum(max(0, n - 1) for n in onsets_in.values())
     return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))
 

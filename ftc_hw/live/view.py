@@ -137,7 +137,8 @@ def evaluation_table(ev: Evaluation, title: str = "contacts: detected against gr
         def f(x, fmt="{:.1f}"):
             return "-" if x is None else fmt.format(x)
 
-        t.add_row(str(c.index), f"{c.start_s:.3f}", c.link, det, f(c.onset_delay_ms, "{:.2f}"),
+        start = f"{c.start_s:.3f}" + (" cut" if c.cut else "")
+        t.add_row(str(c.index), start, c.link, det, f(c.onset_delay_ms, "{:.2f}"),
                   f(c.onset_delay_due_ms, "{:.2f}"), c.est_link,
                   f"{c.link_right * 100:.0f} %", f(c.err_median_mm), f(c.err_rms_mm), f(c.crlb_rms_mm),
                   f(c.err_over_crlb_rms, "{:.2f}"), f(c.err_over_solver, "{:.2f}"),
@@ -154,5 +155,5 @@ def evaluation_table(ev: Evaluation, title: str = "contacts: detected against gr
                  "err/solver: RMS error over the solver's own from one frame of the same samples' true wrench plus "
                  "sensor noise (the events' points are fused over the contact's frames: below 1 by what that gains); "
                  "err/std: RMS of each error over the uncertainty the event reports (about 1 when honest); "
-                 "estimates: unflagged/all")
+                 "estimates: unflagged/all; cut: the run ended during the contact")
     return t
