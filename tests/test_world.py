@@ -111,3 +111,36 @@ def test_every_scenario_builds_for_every_scene():
         for name in SCENARIOS:
             setup = build_scenario(name, scene, model, 0, 5.0)
             World(scene, setup, seed=0)
+
+
+def _contact_spans(world, seconds):
+    spans, start = [], None
+    for state, _ in world.run(seconds):
+        if state.contacts and start is None:
+            start = state.t
+        elif not state.contacts and start is not None:
+            spans.append((start, state.t))
+            start = None
+    return spans, start
+
+
+@pytest.mark.parametrize("planned, whole", [(6.9, 1), (8.0, 2)])
+def test_the_obstacle_meets_only_the_swings_that_end_within_the_planned_run(planned, whole):
+    # the second swing's contact ends at about 6.8 s: a 6.9 s run would cut it, an 8 s run holds it
+    scene, setup, world = _world("dxl-arm", "sweep-with-collision", planned)
+    spans, open_at_end = _contact_spans(world, 10.5)  # past the third swing's contact (9.7-10.8 s)
+    assert open_at_end is None, open_at_end
+    assert len(spans) == whole, spans
+    assert all(end < planned for _, end in spans), spans
+    assert all(end - start > 0.8 for start, end in spans), spans  # each a whole swing's contact
+
+
+def test_an_obstacle_is_not_withdrawn_while_it_touches_the_arm():
+    scene, setup, world = _world("dxl-arm", "sweep-with-collision", 4.0)
+    assert setup.obstacles[0].until_s < 5.0
+    for _ in world.run(2.3):
+        pass
+    assert world.state.contacts
+    world.halt()  # held against the obstacle past the time it was due to go
+    for state, _ in world.run(2.7):
+        assert state.contacts, state.t

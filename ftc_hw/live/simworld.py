@@ -102,9 +102,10 @@ def _main(conn, scene: Scene, scenario: str, duration: float, seed: int, noise: 
             runner.run(realtime=True, on_sample=lambda _state: commands(True))
         t_go = world.t
         world.set_reference(setup.trajectory)
-        if setup.probes:  # scripted at scenario times
-            world.setup = dataclasses.replace(setup, probes=tuple(dataclasses.replace(p, t_start=p.t_start + t_go)
-                                                                  for p in setup.probes))
+        # scripted at scenario times
+        world.setup = dataclasses.replace(
+            setup, probes=tuple(dataclasses.replace(p, t_start=p.t_start + t_go) for p in setup.probes),
+            obstacles=tuple(dataclasses.replace(o, until_s=o.until_s + t_go) for o in setup.obstacles))
         runner.duration = duration
         clock0, t0 = time.monotonic_ns(), world.t
         with contextlib.ExitStack() as stack:

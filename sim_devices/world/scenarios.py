@@ -101,13 +101,17 @@ def _cone(axis: np.ndarray, max_angle: float, rng: np.random.Generator) -> np.nd
 
 
 # -- builders ----------------------------------------------------------------------------------------
+WHOLE_CONTACT_MARGIN_S = 0.1  # a scripted contact is planned only if it ends this long before the run's end
+
+
 def build_hold(scene: Scene, model: ArmModel, rng: np.random.Generator, duration: float) -> ScenarioSetup:
     return ScenarioSetup(Hold(np.array(scene.robot.home)))
 
 
 def build_static_pokes(scene: Scene, model: ArmModel, rng: np.random.Generator, duration: float) -> ScenarioSetup:
     q = np.array(scene.robot.home)
-    count = max(1, int((duration - 0.2) / 0.5) + 1)
+    # pokes at 0.2 s + 0.5 s i, 0.3 s each: those that end within the run (at least one)
+    count = max(1, math.floor((duration - WHOLE_CONTACT_MARGIN_S - 0.5) / 0.5) + 1)
     return ScenarioSetup(Hold(q), probes=random_pokes(model, q, rng, count))
 
 
@@ -136,12 +140,18 @@ def build_sweep_with_collision(scene: Scene, model: ArmModel, rng: np.random.Gen
 
     The obstacle sits just off the link's surface at 70 % of the first swing, on a spring along the
     direction of motion whose stiffness makes the peak force about ``peak_force`` N at the swing's end.
+    It meets every swing that ends within ``duration`` (at least the first), then is withdrawn, so no
+    contact is cut short by the run's end.
     """
     traj = sweep_trajectory(scene, speed)
     period = 1.0 / traj.frequency_hz
-    # sin(w t + phase) = 0.7 on the way up to its peak at sin = 1
+    # sin(w t + phase) = 0.7 on the way up to its peak at sin = 1, and again on the way back
     t_touch = traj.start_s + (math.asin(0.7) - traj.phase) / (2 * math.pi) * period
     t_peak = traj.start_s + (math.pi / 2 - traj.phase) / (2 * math.pi) * period
+    t_leave = traj.start_s + (math.pi - math.asin(0.7) - traj.phase) / (2 * math.pi) * period
+    swings = max(1, math.floor((duration - WHOLE_CONTACT_MARGIN_S - t_leave) / period) + 1)
+    # at the low end of the swing after the last one: the arm is furthest from the obstacle
+    until = traj.start_s + (swings + (-math.pi / 2 - traj.phase) / (2 * math.pi)) * period
     q_touch, _, _ = traj.reference(t_touch)
     q_peak, _, _ = traj.reference(t_peak)
     link = scene.touchable[-1].link
@@ -161,7 +171,8 @@ def build_sweep_with_collision(scene: Scene, model: ArmModel, rng: np.random.Gen
     stiffness = peak_force / penetration
     mass = 0.3
     # Heavily over-damped, like soft tissue: it creeps back after the arm leaves instead of chasing it.
-    obstacle = Obstacle(position, radius, v, stiffness=stiffness, damping=2.0 * math.sqrt(stiffness * mass), mass=mass)
+    obstacle = Obstacle(position, radius, v, stiffness=stiffness, damping=2.0 * math.sqrt(stiffness * mass), mass=mass,
+                        until_s=until)
     return ScenarioSetup(traj, obstacles=(obstacle,))
 
 
@@ -197,11 +208,13 @@ def _joint_ranges(model: ArmModel) -> tuple[np.ndarray, np.ndarray]:
 SCENARIOS: dict[str, ScenarioInfo] = {s.name: s for s in [
     ScenarioInfo("hold", "the arm holds its home pose; nothing touches it", build_hold),
     ScenarioInfo("static-pokes", "the arm holds its home pose; a probe pokes random surface points "
-                 "(5 N to the scene's poke limit, within 45 degrees of the inward normal), one every 0.5 s",
+                 "(5 N to the scene's poke limit, within 45 degrees of the inward normal), one every 0.5 s, "
+                 "each ending within the run",
                  build_static_pokes),
     ScenarioInfo("sweep", "sinusoidal sweep of the first two joints (0.25 Hz); no contact", build_sweep),
     ScenarioInfo("sweep-with-collision", "the sweep; the most distal link hits a compliant obstacle "
-                 "(about 40 N peak) once per swing", build_sweep_with_collision),
+                 "(about 40 N peak) once per swing, on every swing that ends within the run",
+                 build_sweep_with_collision),
     ScenarioInfo("payload-poses", "a 0.5 kg payload on the flange; the arm moves through static poses",
                  build_payload_poses),
 ]}

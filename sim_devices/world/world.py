@@ -6,6 +6,7 @@ wrench and the contacts all belong to the same instant: the state before the int
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -64,6 +65,7 @@ class Obstacle:
     stiffness: float = 2000.0  # N/m
     damping: float = 60.0  # N s/m
     mass: float = 0.3
+    until_s: float = math.inf  # withdrawn (no longer touchable) from this world time on, once nothing touches it
 
 
 @dataclass(frozen=True)
@@ -108,6 +110,8 @@ class World:
             attach_payload(spec, scene, setup.payload)
         self._obstacle_bodies = [self._add_obstacle(spec, i, o) for i, o in enumerate(setup.obstacles)]
         self.model = m = spec.compile()
+        self._obstacle_geoms = [m.geom(f"{b}_geom").id for b in self._obstacle_bodies]
+        self._withdrawn: set[int] = set()
         self.data = mujoco.MjData(m)
         r = scene.robot
         self._qadr = np.array([m.joint(j).qposadr[0] for j in r.joints])
@@ -208,12 +212,22 @@ class World:
             probes.append(ContactTruth(p.link, point, force, "probe"))
         mujoco.mj_step2(m, d)
         self.steps += 1
+        if len(self._withdrawn) < len(self._obstacle_geoms) and any(t >= o.until_s for o in self.setup.obstacles):
+            self._withdraw_obstacles(t)
         wrench = np.empty(6)
         wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
         wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
         current = tau / r.torque_constant
         return WorldState(t=t, q=q, qd=qd, qdd=d.qacc[self._dadr].copy(), tau=tau, current=current,
                           wrench=self._sign * wrench, contacts=tuple(probes) + self._obstacle_contacts())
+
+    def _withdraw_obstacles(self, t: float) -> None:
+        m, d = self.model, self.data
+        touching = {g for i in range(d.ncon) for g in (d.contact[i].geom1, d.contact[i].geom2)}
+        for g, o in zip(self._obstacle_geoms, self.setup.obstacles, strict=True):
+            if g not in self._withdrawn and t >= o.until_s and g not in touching:  # never mid-contact:
+                m.geom_contype[g] = m.geom_conaffinity[g] = 0                    # a release nobody made
+                self._withdrawn.add(g)
 
     def _obstacle_contacts(self) -> tuple[ContactTruth, ...]:
         m, d = self.model, self.data
