@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import math
 import multiprocessing as mp
 import random
 import socket
@@ -97,6 +98,9 @@ def _main(conn, scene: Scene, scenario: str, duration: float, seed: int, noise: 
         # Pre-roll: the arm holds the scenario's start pose, in real time (devices stream, adapters
         # connect, the monitor tares), until "go"; then the scenario starts from its own t = 0.
         world.set_reference(Hold(np.asarray(setup.trajectory.reference(0.0)[0], dtype=float)))
+        # nothing scripted happens before go: no probe, no obstacle withdrawn (however long the pre-roll)
+        world.setup = dataclasses.replace(
+            setup, probes=(), obstacles=tuple(dataclasses.replace(o, until_s=math.inf) for o in setup.obstacles))
         runner.duration = 1e9
         with contextlib.suppress(_Go):
             runner.run(realtime=True, on_sample=lambda _state: commands(True))

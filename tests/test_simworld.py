@@ -1,0 +1,25 @@
+"""The monitor's simulated world: nothing scripted happens in its pre-roll, however long it lasts."""
+from __future__ import annotations
+
+import time
+
+from ftc_hw.live.events import read_truth
+from ftc_hw.live.simworld import SimWorld
+from ftc_hw.scene import load_scene
+
+
+def test_a_long_pre_roll_does_not_use_up_the_scenario(tmp_path):
+    # the obstacle is due to go at 4.3 s of a 3 s run: a pre-roll longer than that (a first run
+    # compiling its kernels) must not withdraw it before the scenario has started
+    truth = tmp_path / "truth.jsonl"
+    with SimWorld(load_scene("leng2016"), "sweep-with-collision", duration=3.0, truth=truth) as world:
+        time.sleep(5.0)
+        world.go()
+        deadline = time.monotonic() + 30.0
+        while not world.done and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert world.done, "the world did not report the end of the run"
+    rows = read_truth(truth)
+    touched = [r["t"] for r in rows if r["contact"]]
+    assert touched, "no contact in the run"
+    assert 1.7 < touched[0] < 1.9, touched[0]  # the first swing's, at scenario time
