@@ -117,3 +117,4 @@ def test_demo_ends_by_itself_with_a_summary():
     r = runner.invoke(app, ["demo", "--duration", "3"])
     assert r.exit_code == 0, r.output
     assert "contacts: detected against ground truth" in r.output and "false alarms" in r.output
+    assert "summary: 1/1 contacts detected" in r.output, r.output[-3000:]  # the 3 s run's one collision

@@ -35,4 +35,7 @@ def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record=
                          + ")" if ratio is not None else "")
                       + "".join(f"; contact {c.index} was cut by the run's end after {c.trusted} unflagged "
                                 f"estimates (not in the worst figures; its row above)" for c in cut))
+        if not ev.contacts:
+            console.print(f"[yellow]the world made no contact in this run: scenario {scenario!r} over {duration:g} s "
+                          "had nothing to detect, so nothing above was judged[/]")
     return out.exit_code
