@@ -5,7 +5,7 @@ per emulator.
 The world is built and its emulators started, then it runs in real time holding the scenario's start
 pose (a pre-roll: the devices stream, the adapters connect -- ur_rtde needs data to connect -- and
 the monitor tares the sensor at rest) until :meth:`SimWorld.go`; the scenario then starts from its own
-t = 0 (scripted probes are shifted with it) and runs ``duration`` simulated seconds in real time;
+t = 0 (its scripted events with it: ``World.start_script``) and runs ``duration`` simulated seconds in real time;
 the world reports the end and goes on (a post-roll, without truth) until it is closed. Ground truth
 goes to a JSON Lines file from that start: ``ftc sim --truth``'s records (``t``: scenario time;
 ``t_world``: the world's) plus ``t_host_ns``, the host
@@ -19,9 +19,7 @@ joint ring by :class:`SimJointSource`, which publishes it like an arm adapter wo
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
-import math
 import multiprocessing as mp
 import random
 import socket
@@ -98,18 +96,13 @@ def _main(conn, scene: Scene, scenario: str, duration: float, seed: int, noise: 
         # Pre-roll: the arm holds the scenario's start pose, in real time (devices stream, adapters
         # connect, the monitor tares), until "go"; then the scenario starts from its own t = 0.
         world.set_reference(Hold(np.asarray(setup.trajectory.reference(0.0)[0], dtype=float)))
-        # nothing scripted happens before go: no probe, no obstacle withdrawn (however long the pre-roll)
-        world.setup = dataclasses.replace(
-            setup, probes=(), obstacles=tuple(dataclasses.replace(o, until_s=math.inf) for o in setup.obstacles))
+        world.hold_script()  # nothing scripted happens before go, however long the pre-roll
         runner.duration = 1e9
         with contextlib.suppress(_Go):
             runner.run(realtime=True, on_sample=lambda _state: commands(True))
         t_go = world.t
         world.set_reference(setup.trajectory)
-        # scripted at scenario times
-        world.setup = dataclasses.replace(
-            setup, probes=tuple(dataclasses.replace(p, t_start=p.t_start + t_go) for p in setup.probes),
-            obstacles=tuple(dataclasses.replace(o, until_s=o.until_s + t_go) for o in setup.obstacles))
+        world.start_script()
         runner.duration = duration
         clock0, t0 = time.monotonic_ns(), world.t
         with contextlib.ExitStack() as stack:

@@ -36,7 +36,7 @@ class Probe:
     point_link: np.ndarray  # m, in the link's body frame (the probe tip moves with the link)
     direction: np.ndarray  # unit vector, base frame, of the force applied to the arm
     magnitude: float  # N at the plateau
-    t_start: float
+    t_start: float  # s, scenario time (World.start_script)
     ramp_s: float = 0.05
     hold_s: float = 0.2
 
@@ -65,7 +65,7 @@ class Obstacle:
     stiffness: float = 2000.0  # N/m
     damping: float = 60.0  # N s/m
     mass: float = 0.3
-    until_s: float = math.inf  # withdrawn (no longer touchable) from this world time on, once nothing touches it
+    until_s: float = math.inf  # s, scenario time: withdrawn (no longer touchable) from then on, once nothing touches it
 
 
 @dataclass(frozen=True)
@@ -110,8 +110,10 @@ class World:
             attach_payload(spec, scene, setup.payload)
         self._obstacle_bodies = [self._add_obstacle(spec, i, o) for i, o in enumerate(setup.obstacles)]
         self.model = m = spec.compile()
-        self._obstacle_geoms = [m.geom(f"{b}_geom").id for b in self._obstacle_bodies]
-        self._withdrawn: set[int] = set()
+        # (geom id, spec) of the obstacles still to be withdrawn
+        self._to_withdraw = [(m.geom(f"{b}_geom").id, o) for b, o in zip(self._obstacle_bodies, setup.obstacles,
+                                                                            strict=True) if math.isfinite(o.until_s)]
+        self._script_t0: float | None = 0.0  # world time of scenario time 0; None: the script is held
         self.data = mujoco.MjData(m)
         r = scene.robot
         self._qadr = np.array([m.joint(j).qposadr[0] for j in r.joints])
@@ -168,6 +170,14 @@ class World:
         self._reference = trajectory
         self._t_ref0 = self.data.time
 
+    def hold_script(self) -> None:
+        """Scripted events (probes, obstacle withdrawals) stop happening until ``start_script``."""
+        self._script_t0 = None
+
+    def start_script(self) -> None:
+        """Scenario time 0 is now: scripted events happen at their scenario times from here."""
+        self._script_t0 = self.data.time
+
     def set_goal(self, q_goal) -> None:
         self.set_reference(Hold(np.asarray(q_goal, dtype=float).copy()))
 
@@ -200,8 +210,9 @@ class World:
         d.qfrc_applied[self._dadr] = tau
         d.xfrc_applied[:] = 0.0
         probes = []
-        for p in self.setup.probes:
-            mag = p.magnitude_at(t)
+        ts = None if self._script_t0 is None else t - self._script_t0  # scenario time
+        for p in self.setup.probes if ts is not None else ():
+            mag = p.magnitude_at(ts)
             if mag <= 0.0:
                 continue
             bid = m.body(p.link).id
@@ -212,8 +223,8 @@ class World:
             probes.append(ContactTruth(p.link, point, force, "probe"))
         mujoco.mj_step2(m, d)
         self.steps += 1
-        if len(self._withdrawn) < len(self._obstacle_geoms) and any(t >= o.until_s for o in self.setup.obstacles):
-            self._withdraw_obstacles(t)
+        if self._to_withdraw and ts is not None and any(ts >= o.until_s for _, o in self._to_withdraw):
+            self._withdraw_obstacles(ts)
         wrench = np.empty(6)
         wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
         wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
@@ -221,13 +232,16 @@ class World:
         return WorldState(t=t, q=q, qd=qd, qdd=d.qacc[self._dadr].copy(), tau=tau, current=current,
                           wrench=self._sign * wrench, contacts=tuple(probes) + self._obstacle_contacts())
 
-    def _withdraw_obstacles(self, t: float) -> None:
+    def _withdraw_obstacles(self, ts: float) -> None:
         m, d = self.model, self.data
         touching = {g for i in range(d.ncon) for g in (d.contact[i].geom1, d.contact[i].geom2)}
-        for g, o in zip(self._obstacle_geoms, self.setup.obstacles, strict=True):
-            if g not in self._withdrawn and t >= o.until_s and g not in touching:  # never mid-contact:
-                m.geom_contype[g] = m.geom_conaffinity[g] = 0                    # a release nobody made
-                self._withdrawn.add(g)
+        keep = []
+        for g, o in self._to_withdraw:
+            if ts >= o.until_s and g not in touching:  # never mid-contact: a release nobody made
+                m.geom_contype[g] = m.geom_conaffinity[g] = 0
+            else:
+                keep.append((g, o))
+        self._to_withdraw = keep
 
     def _obstacle_contacts(self) -> tuple[ContactTruth, ...]:
         m, d = self.model, self.data
