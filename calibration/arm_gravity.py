@@ -18,11 +18,7 @@ REL_TOL = 1e-6
 
 
 def joint_limits(gm: GeometryModel) -> tuple[np.ndarray, np.ndarray]:
-    m = gm.arm.model
-    ids = [m.joint(j).id for j in gm.arm.joint_names]
-    lo = np.array([m.jnt_range[i][0] if m.jnt_limited[i] else -np.pi for i in ids])
-    hi = np.array([m.jnt_range[i][1] if m.jnt_limited[i] else np.pi for i in ids])
-    return lo, hi
+    return gm.arm.joint_limits()
 
 
 class ArmGravityBasis:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ftc_hw.model import load_spec
+from ftc_hw.model import JointMap, load_spec
 from ftc_hw.scene import Scene
 
 from .arm_gravity import joint_limits
@@ -41,12 +41,12 @@ class CollisionChecker:
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         self.margin = margin
-        self._qadr = np.array([self.model.joint(j).qposadr[0] for j in scene.robot.joints])
+        self._joints = JointMap(self.model, scene)
 
     def collides(self, q) -> list[tuple[str, str]]:
         """The geom pairs closer than the margin at q (empty: the pose is clear)."""
         m, d = self.model, self.data
-        d.qpos[self._qadr] = q
+        self._joints.set_qpos(np.asarray(q, dtype=float), d.qpos)
         mujoco.mj_kinematics(m, d)
         mujoco.mj_collision(m, d)
         out = []

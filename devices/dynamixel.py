@@ -305,6 +305,8 @@ class DynamixelArm(ArmAdapter):
     def set_goal(self, q: Sequence[float]) -> None:
         """Goal Position for every joint (rad, the scene's convention)."""
         q = np.asarray(q, dtype=float)
+        if q.shape != self.zero.shape:
+            raise ValueError(f"expected {len(self.ids)} joint positions (servos {self.ids}), got shape {q.shape}")
         ticks = np.rint(self.zero + self.direction * q / self.model.rad_per_tick).astype(int)
         self.write_item(116, 4, {i: int(t) for i, t in zip(self.ids, ticks, strict=True)})
 

@@ -10,7 +10,8 @@ Current Limit, ...) a Data Limit Error. Nothing is committed when any item fails
 
 Joint angle convention: ``present_ticks = zero_tick + homing_offset + direction * q / rad_per_tick``
 (q in rad, the scene's joint angle), velocity and current likewise with ``direction``. For the
-OpenMANIPULATOR-X, ROBOTIS puts 0 rad at tick 2048 (the horn's centre) with direction +1.
+OpenMANIPULATOR-X, ROBOTIS puts 0 rad at tick 2048 (the horn's centre) with direction +1 (the
+gripper's -1: its scene angle opens the gripper).
 """
 from __future__ import annotations
 

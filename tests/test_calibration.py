@@ -95,7 +95,7 @@ def synthetic(identifier, poses, rng, n=100, theta=None, q_noise=True):
 
 # -- accuracy against the world ---------------------------------------------------------------------------
 def test_twelve_planned_poses_meet_the_acceptance_against_the_world(identifier, plan12):
-    assert plan12.q.shape == (12, 4)
+    assert plan12.q.shape == (12, SCENE.n_joints)
     taken = run_world(plan12.q)
     assert all(report.still for _, report in taken), [r.reason for _, r in taken]
     samples = [s for s, _ in taken]
@@ -130,8 +130,12 @@ def test_planned_poses_are_inside_limits_and_free_of_collision(identifier, plan1
     checker = CollisionChecker(SCENE)
     assert all(not checker.collides(q) for q in plan12.q)
     # folded down through the table: the forearm and gripper go below the mounting surface
-    assert checker.collides(np.array([0.0, 1.5, 1.4, 1.9]))
+    assert checker.collides(np.array([0.0, 1.5, 1.4, 1.9, 0.0]))
     assert not checker.collides(np.array(SCENE.robot.home))
+    # the gripper closed until its fingers meet
+    assert checker.collides(np.array(SCENE.robot.home) - np.array([0, 0, 0, 0, 0.6]))
+    with pytest.raises(ValueError, match="5 joint positions"):
+        checker.collides(np.zeros(4))
 
 
 def _norms(std: dict) -> np.ndarray:
@@ -173,7 +177,7 @@ def test_twelve_planned_poses_are_at_least_as_accurate_as_35_random(identifier, 
 # -- identifiability --------------------------------------------------------------------------------------
 def test_rotations_about_gravity_only_are_poorly_excited_naming_the_com(identifier):
     home = np.array(SCENE.robot.home)
-    poses = [home + np.array([a, 0, 0, 0]) for a in np.linspace(-2.5, 2.5, 12)]  # joint 1: about gravity
+    poses = [home + np.array([a, 0, 0, 0, 0]) for a in np.linspace(-2.5, 2.5, 12)]  # joint 1: about gravity
     fit = identifier.fit(synthetic(identifier, poses, np.random.default_rng(0)))
     assert fit.verdict == "poorly_excited"
     assert {"com_x", "com_y", "com_z", "mass"} <= set(fit.poorly_excited)
@@ -361,7 +365,7 @@ def test_rezero_refuses_a_moving_arm():
     comp = Compensator(ArmModel(SCENE, PAYLOAD), level="gravity", bias=SCENE.sensor.bias)
     rz = ReZero(comp, window_s=0.5)
     home = np.array(SCENE.robot.home)
-    far = home + np.array([1.0, 0.3, -0.3, 0.2])
+    far = home + np.array([1.0, 0.3, -0.3, 0.2, 0.0])
     world = World(SCENE, ScenarioSetup(PointToPoint(np.array([home, far, home]), 2.0, 0.0), payload=PAYLOAD),
                   seed=0, noise=True)
     got = []

@@ -111,7 +111,7 @@ def test_interactive_wizard_completes_with_keystrokes(tmp_path):
     assert abs(record["mass_kg"] - 0.4) <= 4 * record["std"]["mass_kg"] + 1e-3
     assert np.allclose(record["force_bias_N"], record["truth"]["force_bias_N"], atol=0.1)
     cal = load_calibration(out, scene="dxl-arm", sensor_serial="FTS-0042")
-    assert cal.poses.shape == (5, 4) and cal.samples_per_pose == 50
+    assert cal.poses.shape == (5, 5) and cal.samples_per_pose == 50
 
 
 def test_declining_torque_moves_nothing(tmp_path):

@@ -52,7 +52,7 @@ def test_frames_are_si_and_match_the_world(world, arm):
         got += frames.drain()
     assert len(got) >= 100
     f = got[-1]
-    assert f.t_device_ns is None and f.source == "arm" and f.n_joints == 4
+    assert f.t_device_ns is None and f.source == "arm" and f.n_joints == SCENE.n_joints == 5
     assert [g.seq for g in got] == list(range(got[0].seq, got[0].seq + len(got)))
     js = world.latest_joints()
     # the arm sweeps joints 1-2 at up to ~0.6 rad/s: allow a few ms of motion plus one tick
@@ -75,7 +75,7 @@ def test_fast_sync_read_and_hardware_error_events(world):
             while adapter.counters["frames"] < 50 and time.monotonic() < end:
                 time.sleep(0.05)
             assert adapter.counters["frames"] >= 50
-            assert adapter.hardware_errors == {11: 0, 12: 0, 13: 32, 14: 0}
+            assert adapter.hardware_errors == {11: 0, 12: 0, 13: 32, 14: 0, 15: 0}
             assert bus.latest("joints/arm").q == pytest.approx(world.latest_joints()["q"], abs=0.03)
     finally:
         world.restart("arm", {})
@@ -110,7 +110,9 @@ def test_stop_holds_the_present_position(world, arm):
 
 def test_goal_positions_move_the_arm(arm):
     adapter, bus, _ = arm
-    target = np.array([0.2, -0.9, 0.3, 0.6])
+    target = np.array([0.2, -0.9, 0.3, 0.6, 0.4])  # the gripper opens (its servo turns negative)
+    with pytest.raises(ValueError, match="5 joint positions"):
+        adapter.set_goal(target[:4])
     adapter.set_goal(target)
     end = time.monotonic() + 10.0
     while time.monotonic() < end and not np.allclose(bus.latest("joints/arm").q, target, atol=0.01):

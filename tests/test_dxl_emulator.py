@@ -11,10 +11,13 @@ import pytest
 from dynamixel_sdk import port_handler
 
 from devices import dxl_table as T
+from ftc_hw.scene import load_scene
 from sim_devices.dxl_protocol import PacketReader, packet, parse_status
 from sim_devices.world_process import WorldProcess
 
-IDS = [11, 12, 13, 14]
+ARM = next(d for d in load_scene("dxl-arm").devices if d.kind == "dynamixel").params
+IDS = ARM["ids"]  # 11-14 the joints, 15 the gripper
+DIRS = ARM["directions"]
 RAD = 2 * math.pi / 4096
 
 
@@ -97,9 +100,10 @@ def test_sync_read_reports_the_world_joint_state(world, link):
     port, ph = link
     ticks = [signed(v) for v in sync_read(port, ph, 132, 4)]
     js = world.latest_joints()  # holding still: the same angles
-    assert ticks == [2048 + round(q / RAD) for q in js["q"]]
+    assert ticks == [2048 + d * round(q / RAD) for q, d in zip(js["q"], DIRS, strict=True)]
     current = [signed(v, 16) * 0.00269 for v in sync_read(port, ph, 126, 2)]
-    assert current == pytest.approx(list(world.latest_joints()["current"]), abs=0.0027)
+    assert current == pytest.approx([d * c for c, d in zip(world.latest_joints()["current"], DIRS, strict=True)],
+                                    abs=0.0027)
 
 
 def test_fast_sync_read_and_bulk_read(link):
@@ -128,7 +132,7 @@ def test_goal_sync_write_drives_the_world(world, link):
         time.sleep(0.05)
     assert abs(now[1] - goal[1]) <= 3 and abs(now[0] - start[0]) <= 3
     cmd = [a for a in world.applied() if a.kind == "goal"][-1]
-    assert cmd.q == pytest.approx([(g - 2048) * RAD for g in goal], abs=1e-9)
+    assert cmd.q == pytest.approx([d * (g - 2048) * RAD for g, d in zip(goal, DIRS, strict=True)], abs=1e-9)
 
 
 def test_write_errors_reach_the_client(link):

@@ -120,7 +120,7 @@ class FakeWorld(WorldPort):
 def chain():
     scene = load_scene("dxl-arm")
     device = next(d for d in scene.devices if d.kind == "dynamixel")
-    world = FakeWorld([0.1, -0.2, 0.3, -0.4])
+    world = FakeWorld([0.1, -0.2, 0.3, -0.4, 0.5])
     bus = DxlBus(build_servos(device, scene.n_joints, {}), world, reboot_s=0.05)
     return bus, world
 
@@ -139,8 +139,8 @@ def u32(v):
 
 def test_present_position_follows_the_joint_convention(chain):
     bus, world = chain
-    world.cur[:] = [0.5, 0.0, 0.0, -0.269]
-    world.qd[:] = [0.0, 0.23981, 0.0, 0.0]
+    world.cur[:] = [0.5, 0.0, 0.0, -0.269, 0.0]
+    world.qd[:] = [0.0, 0.23981, 0.0, 0.0, 0.0]
     [(i, err, data)] = ask(bus, 11, T.READ, (126).to_bytes(2, "little") + (10).to_bytes(2, "little"))
     assert (i, err) == (11, 0)
     cur, vel, pos = (int.from_bytes(data[0:2], "little", signed=True), int.from_bytes(data[2:6], "little", signed=True),
@@ -148,6 +148,9 @@ def test_present_position_follows_the_joint_convention(chain):
     assert pos == 2048 + round(0.1 / (2 * np.pi / 4096)) and vel == 0 and cur == round(0.5 / 0.00269)
     [(_, _, d12)] = ask(bus, 12, T.READ, bytes([128, 0, 4, 0]))
     assert int.from_bytes(d12, "little", signed=True) == 10  # 0.23981 rad/s = 10 x 0.229 rpm
+    # the gripper servo turns the other way: + opens, its ticks go down
+    [(_, _, d15)] = ask(bus, 15, T.READ, bytes([132, 0, 4, 0]))
+    assert int.from_bytes(d15, "little", signed=True) == 2048 - round(0.5 / (2 * np.pi / 4096))
 
 
 @pytest.mark.parametrize(("address", "data", "error"), [
@@ -173,12 +176,12 @@ def test_goal_write_drives_the_world_with_every_joint(chain):
     assert err == 0
     (cmd,) = world.sent
     assert cmd.kind == "goal"
-    assert cmd.q == pytest.approx((0.1, 512 * 2 * np.pi / 4096, 0.3, -0.4), abs=1e-3)
+    assert cmd.q == pytest.approx((0.1, 512 * 2 * np.pi / 4096, 0.3, -0.4, 0.5), abs=1e-3)
 
 
 def test_torque_off_then_on_tells_the_world_once_and_holds_present(chain):
     bus, world = chain
-    sync = bytes([64, 0, 1, 0]) + b"".join(bytes([i, 0]) for i in (11, 12, 13, 14))
+    sync = bytes([64, 0, 1, 0]) + b"".join(bytes([i, 0]) for i in (11, 12, 13, 14, 15))
     ask(bus, T.BROADCAST_ID, T.SYNC_WRITE, sync)
     assert [(c.kind, c.on) for c in world.sent] == [("torque", False)]
     ask(bus, 11, T.WRITE, bytes([64, 0, 1]))
@@ -230,14 +233,14 @@ def test_status_return_level_and_broadcast_silence(chain):
     ask(bus, 11, T.WRITE, bytes([68, 0, 1]))  # level 1: reads and pings only
     assert ask(bus, 11, T.WRITE, bytes([65, 0, 0])) == []
     assert len(ask(bus, 11, T.READ, bytes([65, 0, 1, 0]))) == 1
-    assert [r[0] for r in ask(bus, T.BROADCAST_ID, T.PING)] == [11, 12, 13, 14]
+    assert [r[0] for r in ask(bus, T.BROADCAST_ID, T.PING)] == [11, 12, 13, 14, 15]
 
 
 def test_hardware_error_sets_the_alert_bit_blocks_torque_until_reboot():
     scene = load_scene("dxl-arm")
     device = next(d for d in scene.devices if d.kind == "dynamixel")
-    world = FakeWorld([0.0] * 4)
-    bus = DxlBus(build_servos(device, 4, {"hardware_error": {"12": T.HW_OVERLOAD}}), world, reboot_s=0.0)
+    world = FakeWorld([0.0] * 5)
+    bus = DxlBus(build_servos(device, 5, {"hardware_error": {"12": T.HW_OVERLOAD}}), world, reboot_s=0.0)
     [(_, err, _)] = ask(bus, 12, T.PING)
     assert err == T.ERR_ALERT
     assert ask(bus, 12, T.WRITE, bytes([64, 0, 1]))[0][1] == T.ERR_ALERT | T.ERR_RESULT_FAIL

@@ -30,16 +30,16 @@ def test_user_scene_is_a_path(tmp_path):
     assert load_scene(str(p)).name == "mine"
 
 
-def _write(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
+def _write(tmp_path: Path, text: str, name: str = "scene.toml", model: str = "leng2016") -> Path:
     # Copy the model beside the scene so relative paths resolve.
-    (tmp_path / "leng2016.xml").write_text((builtin_dir() / "leng2016.xml").read_text())
+    (tmp_path / f"{model}.xml").write_text((builtin_dir() / f"{model}.xml").read_text())
     p = tmp_path / name
     p.write_text(text)
     return p
 
 
-def _expect(tmp_path, text, key, pattern):
-    p = _write(tmp_path, text)
+def _expect(tmp_path, text, key, pattern, model="leng2016"):
+    p = _write(tmp_path, text, model=model)
     with pytest.raises(SceneError) as info:
         ArmModel(load_scene(p))
     err = info.value
@@ -112,3 +112,30 @@ def test_broken_model_file(tmp_path):
 def test_missing_touchable(tmp_path):
     text = re.sub(r"\[\[touchable\]\]\nlink = \"\w+\"\npulls = false[^\n]*\n", "", LENG)
     _expect(tmp_path, text, "touchable", "at least one")
+
+
+DXL = (builtin_dir() / "dxl-arm.toml").read_text()
+COUPLING = '''joint = "gripper"
+drives = ["gripper_left_joint", "gripper_right_joint"]'''
+
+
+@pytest.mark.parametrize(("old", "new", "key", "pattern"), [
+    ('joint = "gripper"', 'joint = "jaw"', "robot.couplings[0].joint", "not one of robot.joints"),
+    (COUPLING, 'joint = "gripper"\ndrives = ["gripper_left_joint", "gripper_left_joint"]', "robot.couplings[0].drives",
+     "distinct"),
+    (COUPLING, 'joint = "gripper"\ndrives = ["gripper_left_joint", "joint4"]', "robot.couplings[0].drives",
+     "scene joint itself"),
+    (COUPLING, 'joint = "gripper"\ndrives = ["gripper_left_joint", "thumb"]', "robot.couplings", "no joint 'thumb'"),
+    ("ratios = [0.015, 0.015]", "ratios = [0.015, 0.0]", "robot.couplings[0].ratios", "drives nothing"),
+    ("ratios = [0.015, 0.015]", "ratios = [0.015]", "robot.couplings[0].ratios", "2 numbers, got 1"),
+    ("ratios = [0.015, 0.015]", "ratios = [0.015, 0.015]\ngear = 2", "robot.couplings[0].gear", "unknown key"),
+])
+def test_malformed_couplings(tmp_path, old, new, key, pattern):
+    assert old in DXL, old
+    _expect(tmp_path, DXL.replace(old, new, 1), key, pattern, model="dxl-arm")
+
+
+def test_a_model_joint_the_scene_does_not_set_is_an_error(tmp_path):
+    text = DXL.replace(COUPLING, 'joint = "gripper"\ndrives = ["gripper_left_joint"]', 1)
+    _expect(tmp_path, text.replace("ratios = [0.015, 0.015]", "ratios = [0.015]", 1), "robot.joints",
+            "6 position coordinates but the scene sets 5 .*gripper_left_joint", model="dxl-arm")

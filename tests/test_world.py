@@ -38,7 +38,9 @@ def test_noise_free_reading_equals_model_prediction(scene_name, scenario):
         if not np.any(scene.sensor.quantization > 0):
             np.testing.assert_allclose(reading.wrench, expected, atol=1e-8)
     scale = max(1.0, float(np.abs(state.wrench).max()))
-    assert worst <= 1e-9 * scale, worst
+    # A coupling (dxl-arm's gripper) is a soft equality constraint in the world: its fingers' accelerations
+    # differ by up to ~0.02 m/s^2, which their 1 g each turns into ~1e-5 N the 5-joint model cannot hold.
+    assert worst <= (1e-5 if scene.robot.couplings else 1e-9) * scale, worst
     if scenario != "payload-poses":
         assert in_contact > 0, "the scenario produced no contact"
 
@@ -113,11 +115,13 @@ def test_every_scenario_builds_for_every_scene():
             World(scene, setup, seed=0)
 
 
-def _contact_spans(world, seconds):
+def _contact_spans(world, seconds, merge_gap_s=0.05):
+    """Contact spans; runs less than ``merge_gap_s`` apart are one (a contact's end may chatter for a
+    sample as the compliant obstacle lets go: the monitor's evaluation merges them the same way)."""
     spans, start = [], None
     for state, _ in world.run(seconds):
         if state.contacts and start is None:
-            start = state.t
+            start = spans.pop()[0] if spans and state.t - spans[-1][1] < merge_gap_s else state.t
         elif not state.contacts and start is not None:
             spans.append((start, state.t))
             start = None

@@ -12,9 +12,9 @@ A case is *discriminable* when the two best candidates' joint-torque signatures 
 4 standard deviations of tau_ext: only then can any method tell them apart from the currents. The
 others (bodies moved by the same joints, points near a joint) must stay flagged or be right.
 
-A case is *rigid* when no joint separates the two links (parts welded together, e.g. dxl-arm's fingers
-on link5, whose gripper joint the scene does not model): their torque signatures are identical, so
-the currents carry no information on which was touched and only a flag is right. The share the
+A case is *rigid* when no joint separates the two links (parts welded together; none in the built-in
+scenes since dxl-arm models its gripper joint): their torque signatures are identical, so the
+currents carry no information on which was touched and only a flag is right. The share the
 acceptance speaks of, right with currents, is also given over the *jointed* cases (the others).
 """
 from __future__ import annotations
@@ -47,7 +47,8 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
     solver = ContactSolver(model)
     residuals = JointResiduals(scene)
     home = np.array(scene.robot.home)
-    motion = Sinusoid(home, np.full(scene.n_joints, 0.1), 0.25)  # every joint at full speed at t = 1 s
+    # every joint (the gripper too) at full speed at t = 1 s
+    motion = Sinusoid(home, np.full(scene.n_joints, 0.1), 0.25)
     t_eval = 1.0
     q, _, _ = motion.reference(t_eval)
     f_max = min(60.0, 0.15 * float(scene.sensor.range[:3].min()))

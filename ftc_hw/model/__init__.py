@@ -9,8 +9,9 @@ from .build import (
     descends,
     load_spec,
 )
+from .joint_map import JointMap
 
 __all__ = [
-    "FORCE_SENSOR", "TORQUE_SENSOR", "ArmModel", "Contact", "Payload", "PosedSurface", "Surface",
+    "FORCE_SENSOR", "TORQUE_SENSOR", "ArmModel", "Contact", "JointMap", "Payload", "PosedSurface", "Surface",
     "add_ft_sensors", "apply_point_force", "attach_payload", "descends", "load_spec", "pose",
 ]

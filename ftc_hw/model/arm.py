@@ -14,6 +14,7 @@ import numpy as np
 
 from ..scene import CompensationLevel, Scene, SceneError
 from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, load_spec
+from .joint_map import JointMap
 
 GEOM_KINDS = {
     mujoco.mjtGeom.mjGEOM_PLANE: "plane",
@@ -92,22 +93,12 @@ class ArmModel:
 
         self.joint_names = scene.robot.joints
         self.n_joints = len(self.joint_names)
-        qadr, dadr = [], []
-        for j in self.joint_names:
-            try:
-                jnt = m.joint(j)
-            except KeyError:
-                raise SceneError(scene.path, "robot.joints",
-                                 f"no joint {j!r} in {scene.robot.model_path.name}") from None
-            if int(jnt.type[0]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
-                raise SceneError(scene.path, "robot.joints", f"joint {j!r} is not a 1-DoF hinge or slide")
-            qadr.append(int(jnt.qposadr[0]))
-            dadr.append(int(jnt.dofadr[0]))
-        if m.nq != self.n_joints or m.nv != self.n_joints:
+        self.joints = JointMap(m, scene)
+        if m.nq != len(self.joints.qadr) or m.nv != len(self.joints.dadr):
             raise SceneError(scene.path, "robot.joints",
-                             f"the model has {m.nq} position coordinates but the scene lists {self.n_joints} joints")
-        self._qadr = np.array(qadr)
-        self._dadr = np.array(dadr)
+                             f"the model has {m.nq} position coordinates but the scene sets "
+                             f"{len(self.joints.qadr)} ({', '.join(self.joints.model_joints)})")
+        self._dadr = self.joints.dadr
         self._forces_applied = False
         self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
         self.surfaces = self._collect_surfaces()
@@ -142,6 +133,10 @@ class ArmModel:
                                  f"link {t.link!r} has no surface geoms (group {SURFACE_GROUP})")
         return tuple(out)
 
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each joint's position range (lower, upper), -pi..pi where the model sets none."""
+        return self.joints.limits(self.model)
+
     # -- state ----------------------------------------------------------------------------------------
     def _set(self, q: Sequence[float] | np.ndarray, qd=None, qdd=None) -> None:
         q = np.asarray(q, dtype=float)
@@ -151,16 +146,17 @@ class ArmModel:
         if not math.isfinite(q.sum()):  # NaN or Inf anywhere
             raise ValueError("q holds NaN or Inf")
         d = self.data
-        d.qpos[self._qadr] = q
-        # every dof is an arm joint (checked in __init__): no other entries to clear
+        jm = self.joints
+        jm.set_qpos(q, d.qpos)
+        # every dof is set by an arm joint (checked in __init__): no other entries to clear
         if qd is None:
             d.qvel[:] = 0.0
         else:
-            d.qvel[self._dadr] = qd
+            jm.set_dofs(np.asarray(qd, dtype=float), d.qvel)
         if qdd is None:
             d.qacc[:] = 0.0
         else:
-            d.qacc[self._dadr] = qdd
+            jm.set_dofs(np.asarray(qdd, dtype=float), d.qacc)
         if self._forces_applied:
             d.xfrc_applied[:] = 0.0
             self._forces_applied = False
@@ -200,7 +196,7 @@ class ArmModel:
         mujoco.mj_comPos(self.model, self.data)
         jac = np.zeros((3, self.model.nv))
         mujoco.mj_jac(self.model, self.data, jac, None, np.asarray(point, dtype=float), self.model.body(link).id)
-        return jac[:, self._dadr]
+        return self.joints.jacobian(jac)
 
     def contact_acceleration(self, q, link: str, point, force) -> np.ndarray:
         """The joint accelerations (rad/s^2) a force (N, base frame) on ``link`` at ``point`` adds at
@@ -219,6 +215,11 @@ class ArmModel:
         """M^-1 tau at the kinematics already computed (mj_kinematics, mj_comPos)."""
         m, d = self.model, self.data
         mujoco.mj_crb(m, d)
+        if self.joints.coupled:  # the scene joints' mass matrix C^T M C
+            mass = np.zeros((m.nv, m.nv))
+            mujoco.mj_fullM(m, d, mass)
+            c = self.joints.matrix
+            return np.linalg.solve(c.T @ mass @ c, tau)
         mujoco.mj_factorM(m, d)
         full = np.zeros(m.nv)
         full[self._dadr] = tau
@@ -247,7 +248,7 @@ class ArmModel:
         """Joint torques (N m) the motors must apply for this motion with these contacts (M qdd + c - J^T p)."""
         contacts = list(contacts)
         self._inverse(q, qd, qdd, level, ())
-        tau = self.data.qfrc_inverse[self._dadr].copy()
+        tau = self.joints.from_dofs(self.data.qfrc_inverse)
         for c in contacts:
             tau -= self.jacobian(q, c.link, c.point).T @ np.asarray(c.force, dtype=float)
         return tau
@@ -267,7 +268,7 @@ class ArmModel:
             out = np.empty(6)
             out[:3] = d.sensordata[self._force_adr:self._force_adr + 3]
             out[3:] = d.sensordata[self._torque_adr:self._torque_adr + 3]
-            tau = d.qfrc_inverse[self._dadr].copy() if joint_torques else None
+            tau = self.joints.from_dofs(d.qfrc_inverse) if joint_torques else None
             return self.sign * out, tau
         if level != "gravity":
             raise ValueError(f"level must be bias, gravity or dynamics, got {level!r}")
@@ -289,7 +290,7 @@ class ArmModel:
             mujoco.mj_comVel(m, d)
             res = np.zeros(m.nv)
             mujoco.mj_rne(m, d, 0, res)
-            tau = res[self._dadr]
+            tau = self.joints.from_dofs(res)
         return self.sign * out, tau
 
     def wrench_qdd_jacobian(self) -> np.ndarray:
@@ -307,9 +308,10 @@ class ArmModel:
         arm = d.subtree_com[b] - d.site_xpos[self.site_id]
         rot = d.site_xmat[self.site_id].reshape(3, 3)
         g = np.empty((6, self.n_joints))
-        g[:3] = rot.T @ lin[:, self._dadr]
+        lin_q = self.joints.jacobian(lin)
+        g[:3] = rot.T @ lin_q
         skew = np.array([[0.0, -arm[2], arm[1]], [arm[2], 0.0, -arm[0]], [-arm[1], arm[0], 0.0]])
-        g[3:] = rot.T @ (skew @ lin[:, self._dadr] + ang[:, self._dadr])
+        g[3:] = rot.T @ (skew @ lin_q + self.joints.jacobian(ang))
         return self.sign * g
 
     def _inverse(self, q, qd, qdd, level: CompensationLevel, contacts: Iterable[Contact]) -> None:

@@ -4,6 +4,7 @@ from .loader import builtin_names, load_scene, resolve
 from .schema import (
     COMPENSATION_LEVELS,
     CompensationLevel,
+    Coupling,
     DeviceSpec,
     RobotSpec,
     Scene,
@@ -13,6 +14,6 @@ from .schema import (
 )
 
 __all__ = [
-    "COMPENSATION_LEVELS", "CompensationLevel", "DeviceSpec", "RobotSpec", "Scene", "SceneError",
+    "COMPENSATION_LEVELS", "CompensationLevel", "Coupling", "DeviceSpec", "RobotSpec", "Scene", "SceneError",
     "SensorSpec", "SignConvention", "TouchableLink", "builtin_names", "load_scene", "resolve",
 ]

@@ -10,6 +10,7 @@ from .errors import SceneError
 from .schema import (
     COMPENSATION_LEVELS,
     SIGN_CONVENTIONS,
+    Coupling,
     DeviceSpec,
     RobotSpec,
     Scene,
@@ -152,7 +153,7 @@ class _Parser:
     def robot(self, t: dict) -> RobotSpec:
         p = "robot."
         self.unknown_keys(t, {"model", "joints", "home", "flange", "torque_constant", "friction_viscous",
-                              "friction_coulomb", "kp", "kd", "current_noise_std"}, p)
+                              "friction_coulomb", "kp", "kd", "current_noise_std", "couplings"}, p)
         model = self.get(t, "model", p, str)
         model_path = (self.path.parent / model).resolve()
         if model_path.suffix.lower() not in (".xml", ".urdf"):
@@ -176,7 +177,38 @@ class _Parser:
             kp=self.vector(t, "kp", p, n, positive=True, default=[100.0] * n),
             kd=self.vector(t, "kd", p, n, nonneg=True, default=[10.0] * n),
             current_noise_std=self.vector(t, "current_noise_std", p, n, nonneg=True, default=[0.0] * n),
+            couplings=self.couplings(t.get("couplings", []), tuple(joints)),
         )
+
+    def couplings(self, items: Any, joints: tuple[str, ...]) -> tuple[Coupling, ...]:
+        p = "robot.couplings"
+        if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
+            raise self.fail(p, "expected an array of tables ([[robot.couplings]])")
+        out: list[Coupling] = []
+        driven: set[str] = set()
+        for k, item in enumerate(items):
+            q = f"{p}[{k}]."
+            self.unknown_keys(item, {"joint", "drives", "ratios"}, q)
+            joint = self.get(item, "joint", q, str)
+            if joint not in joints:
+                raise self.fail(q + "joint", f"{joint!r} is not one of robot.joints")
+            if any(c.joint == joint for c in out):
+                raise self.fail(q + "joint", f"{joint!r} is coupled twice")
+            drives = self.get(item, "drives", q, list)
+            if not drives or not all(isinstance(d, str) and d for d in drives) or len(set(drives)) != len(drives):
+                raise self.fail(q + "drives", "expected a non-empty list of distinct model joint names")
+            for d in drives:
+                if d in joints:
+                    raise self.fail(q + "drives", f"{d!r} is a scene joint itself: a coupling drives model joints "
+                                                  "that robot.joints does not list")
+                if d in driven:
+                    raise self.fail(q + "drives", f"{d!r} is driven by two couplings")
+                driven.add(d)
+            ratios = self.vector(item, "ratios", q, len(drives))
+            if any(r == 0 for r in ratios):
+                raise self.fail(q + "ratios", "a ratio of 0 drives nothing")
+            out.append(Coupling(joint, tuple(drives), tuple(float(r) for r in ratios)))
+        return tuple(out)
 
     def sensor(self, t: dict) -> SensorSpec:
         p = "sensor."

@@ -23,6 +23,17 @@ def _frozen(values: Any) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class Coupling:
+    """A scene joint that is no joint of the robot model but drives several of them at fixed ratios:
+    model joint ``drives[k]`` = ``ratios[k]`` x the scene joint (a gripper's pinion turning two racks:
+    m per rad). The model joints it drives are not listed among the scene's joints."""
+
+    joint: str
+    drives: tuple[str, ...]
+    ratios: tuple[float, ...]
+
+
+@dataclass(frozen=True)
 class RobotSpec:
     model_path: Path
     joints: tuple[str, ...]
@@ -34,6 +45,7 @@ class RobotSpec:
     kp: np.ndarray  # simulated world's joint PD controller, N m / rad
     kd: np.ndarray  # N m s / rad
     current_noise_std: np.ndarray  # A, the simulated current sensor's noise
+    couplings: tuple[Coupling, ...] = ()  # scene joints that drive several model joints
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,8 @@ F_PULL = 128
 F_OFF_LINE = 256
 F_NOT_CONVERGED = 512
 
+JNT_SLIDE = 2  # MuJoCo's mjJNT_SLIDE and mjJNT_HINGE
+JNT_HINGE = 3
 MAX_CROSS = 6  # crossings collected per primitive before reduction to entry/exit
 # No reference counting (numba's NRT) in kernels that allocate nothing: every slice would otherwise
 # bump an atomic counter, which was half of a frame's time and, shared between the batch's threads,
@@ -872,14 +874,18 @@ def _refine_box_faces(size, pos, mat, w, W, r0, u, f, max_iter, pulls, chi2, con
 
 
 @njit(**JIT)
-def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_joint, tau_ext, tau_var, use_tau,
-                cfg, out, cand_prim, cand_f, ws, raw_prim):
+def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link_joint, jnt_i, jnt_ratio, tau_ext,
+                tau_var, use_tau, cfg, out, cand_prim, cand_f, ws, raw_prim):
     """One frame: external contact wrench w = (p, c x p) about the base origin, base frame.
 
     ``out`` receives point, force, normal, the scalars (flags, best index, candidate count, chi2,
     residual = moment along the force line (N m), cos of incidence, condition number, iterations)
     and the 6x6 covariance of (point, force). Candidates are sorted best first, their score is the
     log-likelihood (higher is better). Returns the number of candidates.
+
+    Joint torques: ``tau_ext``/``tau_var`` per scene joint; model joint j (``link_joint``'s columns)
+    belongs to scene joint ``jnt_i[j, 0]`` (-1: none) at ratio ``jnt_ratio[j]`` and has MuJoCo joint
+    type ``jnt_i[j, 1]`` (hinge: torque about its axis; slide: force along it).
     """
     W = WS[0:6]  # inverse covariance of w
     S = WS[6:12]  # covariance of w
@@ -1062,7 +1068,8 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
     base += max_cand
     cand_conv = ws[base:base + max_cand]  # 1.0 converged, 0.0 not
     cov = cand_cov[0]
-    n_joints = joint_axis.shape[0]
+    n_model_joints = jnt_i.shape[0]
+    n_joints = tau_var.shape[0]
     n_keep = 0
     for k in range(n_raw):
         g = raw_prim[k]
@@ -1077,15 +1084,20 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
         logl = -0.5 * chi2
         if use_tau:
             link = prim_link[g]
-            for j in range(n_joints):
+            for s in range(n_joints):
                 pred = 0.0
-                if link_joint[link, j]:
-                    for i in range(3):
-                        tmp[i] = c[i] - joint_anchor[j, i]
-                    _cross(tmp, p, x)
-                    pred = _dot3(joint_axis[j], x)
-                e = tau_ext[j] - pred
-                logl -= 0.5 * e * e / tau_var[j]
+                for j in range(n_model_joints):
+                    if jnt_i[j, 0] != s or not link_joint[link, j]:
+                        continue
+                    if jnt_i[j, 1] == JNT_SLIDE:
+                        pred += jnt_ratio[j] * _dot3(joint_axis[j], p)
+                    else:
+                        for i in range(3):
+                            tmp[i] = c[i] - joint_anchor[j, i]
+                        _cross(tmp, p, x)
+                        pred += jnt_ratio[j] * _dot3(joint_axis[j], x)
+                e = tau_ext[s] - pred
+                logl -= 0.5 * e * e / tau_var[s]
         # a faint preference for the first crossing along the force (the most exposed point):
         # it only orders candidates the data cannot tell apart
         for i in range(3):
@@ -1204,7 +1216,7 @@ def tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, 
             janchor[j, 0], janchor[j, 1], janchor[j, 2] = an0, an1, an2
             jaxis[j, 0], jaxis[j, 1], jaxis[j, 2] = ax0, ax1, ax2
             angle = q[tree_i[b, 3]]
-            if tree_i[b, 2] == 3:  # hinge: rotate about the axis through the anchor
+            if tree_i[b, 2] == JNT_HINGE:  # rotate about the axis through the anchor
                 half = 0.5 * angle
                 sh = math.sin(half)
                 qw, qx, qy, qz = _quat_mul_s(qw, qx, qy, qz, math.cos(half), a0 * sh, a1 * sh, a2 * sh)
@@ -1254,25 +1266,26 @@ def _quat_rotate(w, x, y, z, v0, v1, v2):
 
 
 @njit(**JIT)
-def solve_frame_q(w, q, W, prim_i, sizes, link_joint, tau_ext, tau_var, use_tau, cfg, tree_i, tree_f, geom_i, geom_f,
-                  out, cand_prim, cand_f, ws, raw_prim, xpos, xquat, gpos, gmat, janchor, jaxis):
+def solve_frame_q(w, q, W, prim_i, sizes, link_joint, jnt_i, jnt_ratio, tau_ext, tau_var, use_tau, cfg, tree_i,
+                  tree_f, geom_i, geom_f, out, cand_prim, cand_f, ws, raw_prim, xpos, xquat, gpos, gmat, janchor,
+                  jaxis):
     """solve_frame at joint angles q (the model's qpos): the same kinematics as the batch path, so a
     frame gets bit-identical answers on either path."""
     tree_kinematics(q, tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis)
-    return solve_frame(w, W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint, tau_ext, tau_var, use_tau, cfg,
-                       out, cand_prim, cand_f, ws, raw_prim)
+    return solve_frame(w, W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint, jnt_i, jnt_ratio, tau_ext,
+                       tau_var, use_tau, cfg, out, cand_prim, cand_f, ws, raw_prim)
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, tau_ext, tau_var, use_tau, cfg, tree_i, tree_f,
-                geom_i, geom_f, max_cand, out, cand_prim, cand_f, n_cand):
+def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, jnt_i, jnt_ratio, tau_ext, tau_var, use_tau, cfg,
+                tree_i, tree_f, geom_i, geom_f, max_cand, out, cand_prim, cand_f, n_cand):
     """solve_frame over N frames, each with its own joint angles; kinematics inside. Frames go in
     chunks over the threads, each chunk with its own scratch; the best cand_prim.shape[1] candidates
     of each frame are kept (n_cand counts them all)."""
     n = wrenches.shape[0]
     nb = tree_i.shape[0]
     ng = geom_i.shape[0]
-    nj = tau_var.shape[0]
+    nj = link_joint.shape[1]
     keep = cand_prim.shape[1]
     n_chunks = min(n, 64)
     for ch in prange(n_chunks):
@@ -1289,8 +1302,8 @@ def solve_batch(wrenches, qs, Ws, prim_i, sizes, link_joint, tau_ext, tau_var, u
         for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
             tree_kinematics(qs[i], tree_i, tree_f, geom_i, geom_f, xpos, xquat, gpos, gmat, janchor, jaxis)
             W = Ws[i] if Ws.shape[0] > 1 else Ws[0]
-            k = solve_frame(wrenches[i], W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint, tau_ext[i],
-                            tau_var, use_tau[i], cfg, out[i], cp, cf, ws, raw_prim)
+            k = solve_frame(wrenches[i], W, prim_i, sizes, gpos, gmat, jaxis, janchor, link_joint, jnt_i, jnt_ratio,
+                            tau_ext[i], tau_var, use_tau[i], cfg, out[i], cp, cf, ws, raw_prim)
             n_cand[i] = k
             for j in range(min(k, keep)):
                 cand_prim[i, j] = cp[j]

@@ -267,11 +267,13 @@ class Leng2016Solver:
                                max(p.scale for p in patches), _bound(kind, size)))
         self._prims = tuple(prims)
         self.extent = max(float(m.stat.extent), 0.1)
-        # 5.4: the most distal joint moving each body (depth = number of joints moving its body)
-        link_joint = self._ours.link_joint
-        self._jnt_ids = np.array([m.joint(j).id for j in self.model.joint_names], dtype=np.int64)
-        depth = np.array([link_joint[m.jnt_bodyid[j]].sum() for j in range(m.njnt)])
-        self._deepest = np.array([int(np.argmax(np.where(link_joint[b], depth, -1))) if link_joint[b].any() else -1
+        # 5.4: the most distal (scene) joint moving each body (depth = number of joints moving its body)
+        jm = self.model.joints
+        moves = np.zeros((m.nbody, self.model.n_joints), dtype=bool)
+        for jid, joint in zip(jm.jnt_ids, jm.joint, strict=True):
+            moves[:, joint] |= self._ours.link_joint[:, jid]
+        depth = np.array([moves[m.jnt_bodyid[j]].sum() for j in jm.jnt_ids[jm.lead]])
+        self._deepest = np.array([int(np.argmax(np.where(moves[b], depth, -1))) if moves[b].any() else -1
                                   for b in range(m.nbody)])
         self._joint_depth = depth
         robot = self.scene.robot
@@ -524,7 +526,7 @@ class Leng2016Solver:
         over = np.abs(tau_ext) > self.mutation_threshold
         if not over.any():
             return None
-        joints = self._jnt_ids[over]
+        joints = np.flatnonzero(over)
         j = int(joints[np.argmax(self._joint_depth[joints])])  # the most distal mutated joint
         return {b for b in range(len(self._deepest)) if self._deepest[b] == j}
 

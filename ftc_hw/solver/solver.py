@@ -179,7 +179,12 @@ class ContactSolver:
                 for j in range(m.body_jntadr[a], m.body_jntadr[a] + m.body_jntnum[a]):
                     self.link_joint[b, j] = True
                 a = int(m.body_parentid[a])
-        self._jnt_ids = np.array([m.joint(j).id for j in self.model.joint_names])
+        jm = self.model.joints
+        # model joint -> (scene joint or -1, MuJoCo joint type), and its ratio
+        self.jnt_i = np.stack([np.full(m.njnt, -1, dtype=np.int64), m.jnt_type.astype(np.int64)], axis=1)
+        self.jnt_i[jm.jnt_ids, 0] = jm.joint
+        self.jnt_ratio = np.zeros(m.njnt)
+        self.jnt_ratio[jm.jnt_ids] = jm.ratio
         sensor_body = self.model.sensor_body
         self.sensor_moves = bool(self.link_joint[sensor_body].any())
         self.sigma_sensor = self.scene.sensor.noise_cov
@@ -196,8 +201,7 @@ class ContactSolver:
         self.max_iter = int(max_iter)
         if tau_std is None:
             tau_std = np.maximum(self.scene.robot.torque_constant * self.scene.robot.current_noise_std, 0.05)
-        self.tau_var = np.zeros(m.njnt)
-        self.tau_var[self._jnt_ids] = np.asarray(tau_std, dtype=float) ** 2
+        self.tau_var = np.asarray(tau_std, dtype=float).reshape(self.model.n_joints) ** 2
         self.tau_var[self.tau_var == 0] = 1.0
         self.prim_i = np.ascontiguousarray(np.stack([self.kinds, self.prim_link, self.prim_touch.astype(np.int64),
                                                      self.prim_pulls.astype(np.int64)], axis=1))
@@ -220,7 +224,7 @@ class ContactSolver:
         self._ws_extra = np.zeros((12, 6))
         self._cand_prim = np.zeros(self.max_candidates, dtype=np.int64)
         self._cand_f = np.zeros((self.max_candidates, K.C_SIZE))
-        self._tau = np.zeros(m.njnt)
+        self._tau = np.zeros(self.model.n_joints)
         self._tau_var_frame = self.tau_var.copy()
         self._ws = np.zeros(K.workspace_size(self.max_candidates))
         self._raw_prim = np.zeros(self.max_candidates, dtype=np.int64)
@@ -271,7 +275,7 @@ class ContactSolver:
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
         if not (math.isfinite(w.sum()) and math.isfinite(q.sum())):  # NaN or Inf anywhere
             return self._invalid(saturated)
-        self._qfull[self.model._qadr] = q
+        self.model.joints.set_qpos(q, self._qfull)
         if extra_cov is not None:
             extra = np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
             a = self._sensor_to_base(q) if self.sensor_moves else self._A0
@@ -289,14 +293,14 @@ class ContactSolver:
             tau_arr = np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
             if not math.isfinite(tau_arr.sum()):
                 return self._invalid(saturated)
-            self._tau[self._jnt_ids] = tau_arr
+            self._tau[:] = tau_arr
             if tau_std is not None:
                 tau_var = self._tau_var_frame
-                tau_var[self._jnt_ids] = np.square(np.asarray(tau_std, dtype=float))
+                tau_var[:] = np.square(np.asarray(tau_std, dtype=float))
         tr, sc = self._tree, self._scratch
-        n = K.solve_frame_q(ext, self._qfull, wmat, self.prim_i, self.sizes, self.link_joint, self._tau, tau_var,
-                            use_tau, self.cfg, tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, self._out, self._cand_prim,
-                            self._cand_f, self._ws, self._raw_prim, *sc)
+        n = K.solve_frame_q(ext, self._qfull, wmat, self.prim_i, self.sizes, self.link_joint, self.jnt_i,
+                            self.jnt_ratio, self._tau, tau_var, use_tau, self.cfg, tr.tree_i, tr.tree_f, tr.geom_i,
+                            tr.geom_f, self._out, self._cand_prim, self._cand_f, self._ws, self._raw_prim, *sc)
         self._kin_q = q.copy()
         return self._estimate(n, saturated)
 
@@ -312,7 +316,7 @@ class ContactSolver:
         q = np.asarray(q, dtype=np.float64)
         sc = self._scratch
         if self._kin_q is None or not np.array_equal(q, self._kin_q):
-            self._qfull[self.model._qadr] = q
+            self.model.joints.set_qpos(q, self._qfull)
             tr = self._tree
             K.tree_kinematics(self._qfull, tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, *sc)
             self._kin_q = q.copy()
@@ -351,7 +355,8 @@ class ContactSolver:
         qs = np.ascontiguousarray(qs, dtype=np.float64).reshape(n, self.model.n_joints)
         m = self.model.model
         qfull = np.zeros((n, m.nq))
-        qfull[:, self.model._qadr] = qs
+        jm = self.model.joints
+        qfull[:, jm.qadr] = jm.ratio * qs[:, jm.joint]
         if self.sensor_moves:
             pairs = [self._frame_transform(q) for q in qs]
             ext = np.einsum("nij,nj->ni", np.array([p[0] for p in pairs]), w) * self.ext_sign
@@ -363,10 +368,10 @@ class ContactSolver:
             ws = self._WS0[None]
         ext = np.ascontiguousarray(ext)
         use_tau = np.zeros(n, dtype=np.bool_)
-        tau = np.zeros((n, m.njnt))
+        tau = np.zeros((n, self.model.n_joints))
         if tau_ext is not None:
             t = np.asarray(tau_ext, dtype=float).reshape(n, self.model.n_joints)
-            tau[:, self._jnt_ids] = t
+            tau[:] = t
             use_tau[:] = np.all(np.isfinite(t), axis=1)
             tau[~use_tau] = 0.0
         bad = ~(np.all(np.isfinite(ext), axis=1) & np.all(np.isfinite(qfull), axis=1))
@@ -376,7 +381,8 @@ class ContactSolver:
         cand_prim = np.zeros((n, BATCH_CANDIDATES), dtype=np.int64)
         n_cand = np.zeros(n, dtype=np.int64)
         tr = self._tree
-        K.solve_batch(ext, qfull, ws, self.prim_i, self.sizes, self.link_joint, tau, self.tau_var, use_tau, self.cfg,
+        K.solve_batch(ext, qfull, ws, self.prim_i, self.sizes, self.link_joint, self.jnt_i, self.jnt_ratio, tau,
+                      self.tau_var, use_tau, self.cfg,
                       tr.tree_i, tr.tree_f, tr.geom_i, tr.geom_f, self.max_candidates, out, cand_prim, cand_f, n_cand)
         sc = out[:, K.O_SCALARS:K.O_SCALARS + 8]
         flags = sc[:, K.S_FLAGS].astype(np.int64)

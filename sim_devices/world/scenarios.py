@@ -190,19 +190,11 @@ def build_payload_poses(scene: Scene, model: ArmModel, rng: np.random.Generator,
     """A 0.5 kg payload on the flange, moved through static poses (1.5 s moves, 1.5 s holds)."""
     home = np.array(scene.robot.home)
     n_poses = max(2, int(duration / 3.0) + 1)
-    lo, hi = _joint_ranges(model)
+    lo, hi = model.joint_limits()
     poses = [home]
     for _ in range(n_poses - 1):
         poses.append(np.clip(home + rng.uniform(-0.6, 0.6, scene.n_joints), lo, hi))
     return ScenarioSetup(PointToPoint(np.array(poses), 1.5, 1.5), payload=Payload(0.5, (0.0, 0.0, 0.05)))
-
-
-def _joint_ranges(model: ArmModel) -> tuple[np.ndarray, np.ndarray]:
-    m = model.model
-    ids = [m.joint(j).id for j in model.joint_names]
-    lo = np.array([m.jnt_range[i][0] if m.jnt_limited[i] else -np.pi for i in ids])
-    hi = np.array([m.jnt_range[i][1] if m.jnt_limited[i] else np.pi for i in ids])
-    return lo, hi
 
 
 SCENARIOS: dict[str, ScenarioInfo] = {s.name: s for s in [

@@ -16,6 +16,7 @@ import numpy as np
 from ftc_hw.model import (
     FORCE_SENSOR,
     TORQUE_SENSOR,
+    JointMap,
     Payload,
     add_ft_sensors,
     attach_payload,
@@ -109,6 +110,7 @@ class World:
         if setup.payload is not None:
             attach_payload(spec, scene, setup.payload)
         self._obstacle_bodies = [self._add_obstacle(spec, i, o) for i, o in enumerate(setup.obstacles)]
+        self._add_couplings(spec, scene)
         self.model = m = spec.compile()
         # (geom id, spec) of the obstacles still to be withdrawn
         self._to_withdraw = [(m.geom(f"{b}_geom").id, o) for b, o in zip(self._obstacle_bodies, setup.obstacles,
@@ -116,17 +118,19 @@ class World:
         self._script_t0: float | None = 0.0  # world time of scenario time 0; None: the script is held
         self.data = mujoco.MjData(m)
         r = scene.robot
-        self._qadr = np.array([m.joint(j).qposadr[0] for j in r.joints])
-        self._dadr = np.array([m.joint(j).dofadr[0] for j in r.joints])
-        m.dof_damping[self._dadr] = r.friction_viscous
-        m.dof_frictionloss[self._dadr] = r.friction_coulomb
+        self.joints = jm = JointMap(m, scene)
+        # each scene joint's friction on the dof its motor drives (a coupling's first driven joint:
+        # the others are tied to it), in that dof's units: b / ratio^2, f_c / |ratio|
+        dofs, ratio = jm.dadr[jm.lead], jm.ratio[jm.lead]
+        m.dof_damping[dofs] = r.friction_viscous / ratio**2
+        m.dof_frictionloss[dofs] = r.friction_coulomb / np.abs(ratio)
         # MuJoCo's friction loss is a soft constraint: its default softness lets joints creep at a
         # fraction of the friction torque. The stiffest stable setting makes it Coulomb-like.
-        m.dof_solref[self._dadr, 0] = 2.0 * m.opt.timestep
+        m.dof_solref[dofs, 0] = 2.0 * m.opt.timestep
         # The impedance matters too: at the default (0.9) a light joint (a bare wrist) slips under a
         # fraction of its friction torque, so the motor current falls short of friction by up to half.
-        m.dof_solimp[self._dadr, 0] = 0.999
-        m.dof_solimp[self._dadr, 1] = 0.9999
+        m.dof_solimp[dofs, 0] = 0.999
+        m.dof_solimp[dofs, 1] = 0.9999
         self._fadr = m.sensor(FORCE_SENSOR).adr[0]
         self._tadr = m.sensor(TORQUE_SENSOR).adr[0]
         self._sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
@@ -143,7 +147,7 @@ class World:
         self._reference: Trajectory = setup.trajectory
         self._t_ref0 = 0.0
         q0, _, _ = self._reference.reference(0.0)
-        self.data.qpos[self._qadr] = q0
+        jm.set_qpos(np.asarray(q0, dtype=float), self.data.qpos)
         mujoco.mj_forward(m, self.data)
         self.steps = 0
         self.state: WorldState = self._step()
@@ -160,10 +164,24 @@ class World:
                       solref=[0.02, 1.0])
         return name
 
+    @staticmethod
+    def _add_couplings(spec: mujoco.MjSpec, scene: Scene) -> None:
+        """Joint equality constraints that tie each coupling's driven joints to its first one (the
+        pinion's racks), as stiff as the physics step allows."""
+        dt = spec.option.timestep
+        for c in scene.robot.couplings:
+            for name, ratio in zip(c.drives[1:], c.ratios[1:], strict=True):
+                eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=name, name2=c.drives[0])
+                eq.data[:5] = [0.0, ratio / c.ratios[0], 0.0, 0.0, 0.0]
+                eq.solref = [2.0 * dt, 1.0]
+
+    def _q(self) -> np.ndarray:
+        return self.joints.joints_of(self.data.qpos, self.joints.qadr)
+
     # -- control ------------------------------------------------------------------------------------
     def halt(self) -> None:
         """Stop the arm where it is (the reflex a stop command triggers): hold the current position."""
-        self.set_reference(Hold(self.data.qpos[self._qadr].copy()))
+        self.set_reference(Hold(self._q()))
 
     def set_reference(self, trajectory: Trajectory) -> None:
         """Follow another trajectory from now on; its time starts at the current world time."""
@@ -196,18 +214,19 @@ class World:
         m, d, r = self.model, self.data, self.scene.robot
         mujoco.mj_step1(m, d)
         t = float(d.time)
-        q = d.qpos[self._qadr].copy()
-        qd = d.qvel[self._dadr].copy()
+        jm = self.joints
+        q = self._q()
+        qd = jm.joints_of(d.qvel)
         q_ref, qd_ref, qdd_ref = self._reference.reference(t - self._t_ref0)
         acc = np.zeros(m.nv)
-        acc[self._dadr] = qdd_ref
+        jm.set_dofs(np.asarray(qdd_ref, dtype=float), acc)
         inertial = np.zeros(m.nv)
         mujoco.mj_mulM(m, d, inertial, acc)
-        tau = r.kp * (q_ref - q) + r.kd * (qd_ref - qd) + d.qfrc_bias[self._dadr] + inertial[self._dadr]
+        tau = r.kp * (q_ref - q) + r.kd * (qd_ref - qd) + jm.from_dofs(d.qfrc_bias + inertial)
         if not self.torque_on:
             tau = np.zeros_like(tau)
         d.qfrc_applied[:] = 0.0
-        d.qfrc_applied[self._dadr] = tau
+        jm.to_dofs(tau, d.qfrc_applied)
         d.xfrc_applied[:] = 0.0
         probes = []
         ts = None if self._script_t0 is None else t - self._script_t0  # scenario time
@@ -229,7 +248,7 @@ class World:
         wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
         wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
         current = tau / r.torque_constant
-        return WorldState(t=t, q=q, qd=qd, qdd=d.qacc[self._dadr].copy(), tau=tau, current=current,
+        return WorldState(t=t, q=q, qd=qd, qdd=jm.joints_of(d.qacc), tau=tau, current=current,
                           wrench=self._sign * wrench, contacts=tuple(probes) + self._obstacle_contacts())
 
     def _withdraw_obstacles(self, ts: float) -> None:
