@@ -18,7 +18,14 @@ REL_TOL = 1e-6
 
 
 def joint_limits(gm: GeometryModel) -> tuple[np.ndarray, np.ndarray]:
-    return gm.arm.joint_limits()
+    """The ranges calibration poses are drawn from: each joint's limits, except that joints which do
+    not move the flange (dxl-arm's gripper) stay at home: they change nothing the fit can use."""
+    lo, hi = gm.arm.joint_limits()
+    arm, flange = gm.arm, gm.scene.robot.flange
+    if flange is not None:
+        idle = ~arm.moving_joints(arm.model.body(arm.model.site(flange).bodyid[0]).name)
+        lo[idle] = hi[idle] = np.asarray(gm.scene.robot.home)[idle]
+    return lo, hi
 
 
 class ArmGravityBasis:

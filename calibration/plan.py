@@ -69,7 +69,7 @@ class Plan:
 
 def candidate_poses(scene: Scene, identifier: Identifier, count: int, rng: np.random.Generator,
                     checker: CollisionChecker | None = None) -> np.ndarray:
-    """Random collision-free poses inside the joint limits (less a margin)."""
+    """Random collision-free poses inside the joint limits (less a margin); see ``joint_limits``."""
     lo, hi = joint_limits(identifier.gm)
     # a full turn changes nothing for gravity: keep unlimited and multi-turn joints within one turn
     lo, hi = np.maximum(lo, -np.pi), np.minimum(hi, np.pi)

@@ -96,6 +96,7 @@ def synthetic(identifier, poses, rng, n=100, theta=None, q_noise=True):
 # -- accuracy against the world ---------------------------------------------------------------------------
 def test_twelve_planned_poses_meet_the_acceptance_against_the_world(identifier, plan12):
     assert plan12.q.shape == (12, SCENE.n_joints)
+    assert np.all(plan12.q[:, 4] == SCENE.robot.home[4])  # the gripper does not move the payload: left alone
     taken = run_world(plan12.q)
     assert all(report.still for _, report in taken), [r.reason for _, r in taken]
     samples = [s for s, _ in taken]

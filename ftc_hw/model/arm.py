@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 
 from ..scene import CompensationLevel, Scene, SceneError
-from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, load_spec
+from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, descends, load_spec
 from .joint_map import JointMap
 
 GEOM_KINDS = {
@@ -132,6 +132,16 @@ class ArmModel:
                 raise SceneError(self.scene.path, "touchable.link",
                                  f"link {t.link!r} has no surface geoms (group {SURFACE_GROUP})")
         return tuple(out)
+
+    def moving_joints(self, body: str) -> np.ndarray:
+        """Which scene joints move ``body`` (bool per joint): those with a model joint on it or on an
+        ancestor of it."""
+        m = self.model
+        bid = m.body(body).id
+        out = np.zeros(self.n_joints, dtype=bool)
+        for jid, joint in zip(self.joints.jnt_ids, self.joints.joint, strict=True):
+            out[joint] |= descends(m, bid, int(m.jnt_bodyid[jid]))
+        return out
 
     def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
         """Each joint's position range (lower, upper), -pi..pi where the model sets none."""
