@@ -229,17 +229,21 @@ class ContactPipeline:
         leave them out. It replaces the lag model (which would count the reaction twice). The
         estimate is still provisional, and the contact's track fuses none of these."""
         out = None
+        model = self.compensator.model
+        g = d2 = None  # both depend on q only: computed once per frame
         for _ in range(passes):  # the direction comes from an estimate: a second pass refines it
             if not (e.contact and e.link) or not math.isfinite(float(e.point.sum() + e.force.sum())):
                 break
-            model = self.compensator.model
             acc = model.contact_acceleration(q, e.link, e.point, e.force)
-            d = model.wrench_qdd_jacobian() @ acc  # the kinematics are at q after contact_acceleration
+            if g is None:
+                g = model.wrench_qdd_jacobian()  # the kinematics are at q after contact_acceleration
+            d = g @ acc
             if float(d @ self._noise_inv @ d) <= IMPACT_CHI2:
                 break
             cov = np.outer(d, d) if self.extra_cov is None else self.extra_cov + np.outer(d, d)
             if self._impact_dtau is not None:
-                d2 = model.wrench_qdd_jacobian() @ model.torque_acceleration(q, self._impact_dtau)
+                if d2 is None:
+                    d2 = g @ model.torque_acceleration(q, self._impact_dtau)
                 cov += np.outer(d2, d2)
             e = out = self.solver.solve(external, q, tau_ext=tau_ext, saturated=saturated, tau_std=tau_std,
                                         extra_cov=cov)
