@@ -98,6 +98,8 @@ class ContactPipeline:
         mahalanobis2(np.zeros(6), self.detector.cov, row)
         quad_sum(row, self.detector.inv)
         window_change(self._qdd_ring, self._qdd_ring_t, 0, self._lag_window_ns, np.zeros(n), self._qdd_change)
+        if self.residuals is not None:
+            self.residuals.external_torques(np.zeros(n), np.zeros(n), np.zeros(n))
         self.solver.solve(np.array([0.0, 0.0, 10.0, 0.0, 0.0, 0.0]), np.asarray(self.scene.robot.home, dtype=float),
                           tau_ext=np.zeros(n), tau_std=np.ones(n), extra_cov=np.zeros((6, 6)))
         poses = (np.zeros((2, 3)), np.ones((2, 4)))

@@ -98,9 +98,10 @@ def test_a_new_pipeline_has_its_compiled_kernels_loaded():
             "from ftc_hw.detection import kernels as D\n"
             "from ftc_hw.solver import kernels as K\n"
             "from ftc_hw.tracking import fuse_point, link_pose, report\n"
+            "from ftc_hw.compensation.residuals import _external_torques\n"
             "ContactPipeline(load_scene('ur5e'))\n"
             "print(all(len(f.signatures) > 0 for f in (D.mahalanobis2, D.quad_sum, D.window_change,"
-            " K.solve_frame_q, K.weight_stack, fuse_point, link_pose, report)))\n")
+            " K.solve_frame_q, K.weight_stack, fuse_point, link_pose, report, _external_torques)))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "True"
