@@ -23,7 +23,7 @@ def joint_limits(gm: GeometryModel) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = gm.arm.joint_limits()
     arm, flange = gm.arm, gm.scene.robot.flange
     if flange is not None:
-        idle = ~arm.moving_joints(arm.model.body(arm.model.site(flange).bodyid[0]).name)
+        idle = ~arm.moving_joints(int(arm.model.site(flange).bodyid[0]))
         lo[idle] = hi[idle] = np.asarray(gm.scene.robot.home)[idle]
     return lo, hi
 

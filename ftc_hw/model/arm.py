@@ -98,7 +98,6 @@ class ArmModel:
             raise SceneError(scene.path, "robot.joints",
                              f"the model has {m.nq} position coordinates but the scene sets "
                              f"{len(self.joints.qadr)} ({', '.join(self.joints.model_joints)})")
-        self._dadr = self.joints.dadr
         self._forces_applied = False
         self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
         self.surfaces = self._collect_surfaces()
@@ -133,11 +132,11 @@ class ArmModel:
                                  f"link {t.link!r} has no surface geoms (group {SURFACE_GROUP})")
         return tuple(out)
 
-    def moving_joints(self, body: str) -> np.ndarray:
-        """Which scene joints move ``body`` (bool per joint): those with a model joint on it or on an
-        ancestor of it."""
+    def moving_joints(self, body: str | int) -> np.ndarray:
+        """Which scene joints move ``body`` (name or id; bool per joint): those with a model joint on it
+        or on an ancestor of it."""
         m = self.model
-        bid = m.body(body).id
+        bid = body if isinstance(body, int) else m.body(body).id
         out = np.zeros(self.n_joints, dtype=bool)
         for jid, joint in zip(self.joints.jnt_ids, self.joints.joint, strict=True):
             out[joint] |= descends(m, bid, int(m.jnt_bodyid[jid]))
@@ -232,10 +231,10 @@ class ArmModel:
             return np.linalg.solve(c.T @ mass @ c, tau)
         mujoco.mj_factorM(m, d)
         full = np.zeros(m.nv)
-        full[self._dadr] = tau
+        full[self.joints.dadr] = tau
         out = np.zeros(m.nv)
         mujoco.mj_solveM(m, d, out.reshape(1, -1), full.reshape(1, -1))
-        return out[self._dadr]
+        return out[self.joints.dadr]
 
     # -- predictions ----------------------------------------------------------------------------------
     def predicted_wrench(self, q, qd=None, qdd=None, level: CompensationLevel = "dynamics",

@@ -50,7 +50,6 @@ class JointMap:
         self.joint = np.array(joint, dtype=np.int64)  # scene joint of each model joint
         self.ratio = np.array(ratio, dtype=float)
         self.coupled = bool(robot.couplings)
-        self.nv = int(m.nv)
         # C over all the model's dofs (rows of other joints stay zero)
         self.matrix = np.zeros((m.nv, self.n_joints))
         self.matrix[self.dadr, self.joint] = self.ratio

@@ -269,9 +269,7 @@ class Leng2016Solver:
         self.extent = max(float(m.stat.extent), 0.1)
         # 5.4: the most distal (scene) joint moving each body (depth = number of joints moving its body)
         jm = self.model.joints
-        moves = np.zeros((m.nbody, self.model.n_joints), dtype=bool)
-        for jid, joint in zip(jm.jnt_ids, jm.joint, strict=True):
-            moves[:, joint] |= self._ours.link_joint[:, jid]
+        moves = np.array([self.model.moving_joints(b) for b in range(m.nbody)])
         depth = np.array([moves[m.jnt_bodyid[j]].sum() for j in jm.jnt_ids[jm.lead]])
         self._deepest = np.array([int(np.argmax(np.where(moves[b], depth, -1))) if moves[b].any() else -1
                                   for b in range(m.nbody)])
