@@ -99,7 +99,7 @@ def test_bench_solver_scores_both_methods_on_the_same_cases(tmp_path):
     figures = json.loads(out.read_text())
     keys = {"pos_err_mm_median", "pos_err_mm_p95", "pos_err_mm_max", "dir_err_deg_median", "mag_err_pct_median",
             "crlb_pos_mm_rms", "pos_err_mm_rms", "coverage95", "latency_us_median", "latency_us_p99",
-            "batch_frames_per_s"}
+            "batch_frames_per_s", "crlb_mag_pct_median", "force_only_mag_pct_median"}
     for label in ("noise_free", "noisy"):
         ours, leng = figures[label]["leng2016"]["ours"], figures[label]["leng2016"]["leng2016"]
         assert keys <= ours.keys() and keys <= leng.keys()
@@ -109,6 +109,10 @@ def test_bench_solver_scores_both_methods_on_the_same_cases(tmp_path):
     for col, d in noisy["leng2016"]["ours_minus_this"].items():
         assert d["ci95"][0] <= d["diff"] <= d["ci95"][1], col
         assert d["diff"] == pytest.approx(noisy["ours"][col] - noisy["leng2016"][col])
+        assert d["verdict"] == ("better" if d["ci95"][1] < 0 else "worse" if d["ci95"][0] > 0 else "tie")
+    # leng2016's force noise is isotropic: the moment adds nothing on the magnitude's scale
+    assert noisy["ours"]["crlb_mag_pct_median"] == pytest.approx(noisy["ours"]["force_only_mag_pct_median"])
+    assert 0 < noisy["ours"]["crlb_mag_pct_median"] < 1
     assert noisy["ours"]["coverage95"] > 0.8 and noisy["leng2016"]["coverage95"] == 0.0  # the paper gives no covariance
     assert noisy["ours"]["pos_err_mm_median"] > 0 and figures["noise_free"]["leng2016"]["ours"]["pos_err_mm_max"] < 1e-6
 

@@ -11,7 +11,15 @@ flag (a flag is a method saying it cannot be sure). ``own_cases`` holds each met
 its own unflagged cases; ``flagged_share`` and ``pos_err_mm_rms_all`` (flagged answers included)
 show the rest. The Cramer-Rao bound is taken over the same cases as the errors. ``ours_minus_this``
 gives each error column's difference to ours with a 95 % paired-bootstrap interval: medians of a few
-thousand cases differ by chance by a few per cent, so "better" means an interval below zero.
+thousand cases differ by chance by a few per cent, so "better" means an interval below zero
+(its ``verdict``: better, worse, or tie when the interval holds 0).
+
+Force magnitude has its own bound. The moment constrains the force only through tau . f = 0, whose
+gradient in f is tau, perpendicular to f: it tells almost nothing about the force's scale. So the
+magnitude can do at best what the bound gives (``crlb_mag_pct_median``: the median error an
+estimator at the bound would show on these cases), and |f_measured| does what the force reading
+alone gives (``force_only_mag_pct_median``). The two are equal when the force noise is isotropic:
+then no unbiased estimator from this wrench beats |f_measured| on magnitude.
 """
 from __future__ import annotations
 
@@ -39,17 +47,46 @@ def _contacts(model: ArmModel, q, n: int, rng: np.random.Generator):
     return sample_contacts(model, q, n, rng, FRICTION_CONE_DEG, (5.0, 200.0))
 
 
-def crlb_point_cov(solver, point, normal, force) -> np.ndarray:
-    """Cramer-Rao bound of the contact point (3x3, base frame, rank 2) for the 6-D wrench
-    measurement with the point constrained to the surface: (J^T W J)^-1 at the truth."""
+def _crlb(solver, point, normal, force) -> tuple[np.ndarray, np.ndarray]:
+    """Cramer-Rao bound (J^T W J)^-1 at the truth for the 6-D wrench measurement with the point
+    constrained to the surface, over (two tangent coordinates, force); and the tangent basis."""
     t1, t2 = np.empty(3), np.empty(3)
     K._tangent_basis(np.asarray(normal, dtype=float), t1, t2)
     jac = np.empty((6, 5))
     K._jacobian(np.asarray(point, dtype=float), np.asarray(force, dtype=float), t1, t2, jac)
-    info = jac.T @ solver._W0 @ jac
-    cov = np.linalg.inv(info)
-    tb = np.stack([t1, t2], axis=1)
+    return np.linalg.inv(jac.T @ solver._W0 @ jac), np.stack([t1, t2], axis=1)
+
+
+def crlb_point_cov(solver, point, normal, force) -> np.ndarray:
+    """Cramer-Rao bound of the contact point (3x3, base frame, rank 2)."""
+    cov, tb = _crlb(solver, point, normal, force)
     return tb @ cov[:2, :2] @ tb.T
+
+
+def crlb_magnitude_std(solver, point, normal, force) -> tuple[float, float]:
+    """Standard deviations (N) of the force magnitude: at the Cramer-Rao bound, and from the force
+    reading alone (|f_measured|, the paper's magnitude). They differ only where the moment tells
+    something about the force's scale: where the point's constraint is not perpendicular to the
+    force in the noise's metric. With isotropic force noise they are equal, and no unbiased
+    estimator from this wrench can beat |f_measured| on magnitude."""
+    cov, _ = _crlb(solver, point, normal, force)
+    u = np.asarray(force, dtype=float) / np.linalg.norm(force)
+    force_only = np.linalg.inv(solver._W0)[:3, :3]
+    return math.sqrt(float(u @ cov[2:, 2:] @ u)), math.sqrt(float(u @ force_only @ u))
+
+
+def median_abs_normal(std: np.ndarray) -> float:
+    """Median of |e| over cases with e ~ N(0, std_i^2), one case drawn uniformly: the median
+    absolute error an estimator at these standard deviations would show."""
+    std = np.asarray(std, dtype=float)
+    if std.size == 0:
+        return math.nan
+    lo, hi = 0.0, 10.0 * float(std.max())
+    for _ in range(100):  # bisection on the mixture's CDF of |e|
+        mid = 0.5 * (lo + hi)
+        cdf = np.mean([math.erf(mid / (s * math.sqrt(2.0))) if s > 0 else 1.0 for s in std])
+        lo, hi = (mid, hi) if cdf < 0.5 else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def _coverage(err: np.ndarray, cov: np.ndarray) -> bool:
@@ -105,11 +142,26 @@ _STATS = {  # column -> (per-case error, statistic)
 }
 
 
-def _columns(err: dict[str, np.ndarray], sel: np.ndarray, crlb: np.ndarray) -> dict:
+def _columns(err: dict[str, np.ndarray], sel: np.ndarray, bound: dict[str, np.ndarray]) -> dict:
     out = {col: float(stat(err[key][sel])) for col, (key, stat) in _STATS.items()}
-    out["crlb_pos_mm_rms"] = float(np.sqrt(np.mean(np.square(crlb[sel]))))
+    out["crlb_pos_mm_rms"] = float(np.sqrt(np.mean(np.square(bound["pos"][sel]))))
+    out["crlb_mag_pct_median"] = median_abs_normal(bound["mag"][sel])
+    out["force_only_mag_pct_median"] = median_abs_normal(bound["mag_force_only"][sel])
     out["coverage95"] = float(np.mean(err["cov"][sel]))
     out["cases"] = int(sel.sum())
+    return out
+
+
+def _bounds(solver, cases, clean_est, well_posed) -> dict[str, np.ndarray]:
+    """Per case, at the truth: the point's Cramer-Rao RMS (mm), and the magnitude's standard
+    deviation (% of |f|) at the bound and from the force reading alone. NaN where not well posed."""
+    out = {k: np.full(len(cases), math.nan) for k in ("pos", "mag", "mag_force_only")}
+    for i, ((sp, f), e, ok) in enumerate(zip(cases, clean_est, well_posed, strict=True)):
+        if ok:
+            out["pos"][i] = math.sqrt(np.trace(crlb_point_cov(solver, sp.point, e.normal, f))) * 1e3
+            mag, force_only = crlb_magnitude_std(solver, sp.point, e.normal, f)
+            fn = np.linalg.norm(f)
+            out["mag"][i], out["mag_force_only"][i] = 100 * mag / fn, 100 * force_only / fn
     return out
 
 
@@ -123,7 +175,8 @@ def _paired(err_a: dict, err_b: dict, sel: np.ndarray, rng: np.random.Generator,
         a, b = err_a[key][idx], err_b[key][idx]
         boot = [stat(a[d]) - stat(b[d]) for d in draws]
         lo, hi = np.percentile(boot, [2.5, 97.5])
-        out[col] = {"diff": float(stat(a) - stat(b)), "ci95": [float(lo), float(hi)]}
+        verdict = "better" if hi < 0 else "worse" if lo > 0 else "tie"
+        out[col] = {"diff": float(stat(a) - stat(b)), "ci95": [float(lo), float(hi)], "verdict": verdict}
     return out
 
 
@@ -147,15 +200,14 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
         ours = make_solver(scene, "ours")
         clean_est = [ours.solve(w, q) for w in clean]
         well_posed = np.array([not e.flags for e in clean_est])
-        crlb = np.array([math.sqrt(np.trace(crlb_point_cov(ours, sp.point, e.normal, f))) * 1e3 if ok else math.nan
-                         for (sp, f), e, ok in zip(cases, clean_est, well_posed, strict=True)])
+        bounds = _bounds(ours, cases, clean_est, well_posed)
         solvers = {m: ours if m == "ours" else make_solver(scene, m) for m in methods}
         for label, readings in (("noise_free", clean), ("noisy", noisy)):
             runs = {m: _solve_all(s, readings, q) for m, s in solvers.items()}
             errs = {m: _errors(cases, est) for m, (est, _, _) in runs.items()}
             answered = {m: _answered(est) for m, (est, _, _) in runs.items()}
             common = well_posed & np.logical_and.reduce(list(answered.values()))
-            bound = crlb if label == "noisy" else np.zeros(n)
+            bound = bounds if label == "noisy" else {k: np.zeros(n) for k in bounds}
             per = results[label].setdefault(name, {})
             for m, (_est, lat, fps) in runs.items():
                 own = well_posed & answered[m]
@@ -173,7 +225,7 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
     for label in ("noise_free", "noisy"):
         table = Table(title=f"solver, {label.replace('_', '-')} ({n} contacts per scene, 5-200 N)")
         cols = ["scene", "method", "pos med mm", "p95 mm", "max mm", "rms mm", "CRLB rms mm", "dir deg", "mag %",
-                "cover95", "lat med us", "lat p99 us", "batch fps"]
+                "CRLB mag %", "cover95", "lat med us", "lat p99 us", "batch fps"]
         for c in cols:
             table.add_column(c, justify="left" if c in ("scene", "method") else "right")
         for name, per in results[label].items():
@@ -181,6 +233,7 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
                 table.add_row(name, method, f"{r['pos_err_mm_median']:.3g}", f"{r['pos_err_mm_p95']:.3g}",
                               f"{r['pos_err_mm_max']:.3g}", f"{r['pos_err_mm_rms']:.3g}", f"{r['crlb_pos_mm_rms']:.3g}",
                               f"{r['dir_err_deg_median']:.3g}", f"{r['mag_err_pct_median']:.3g}",
+                              f"{r['crlb_mag_pct_median']:.3g}",
                               f"{r['coverage95']:.3f}", f"{r['latency_us_median']:.1f}", f"{r['latency_us_p99']:.1f}",
                               f"{r['batch_frames_per_s']:.0f}")
         console.print(table)
@@ -206,7 +259,7 @@ def _print_paired(console, noisy: dict, n: int) -> None:
         for method, r in per.items():
             if "ours_minus_this" not in r:
                 continue
-            cells = [f"{d['diff']:+.3g} [{d['ci95'][0]:+.2g}, {d['ci95'][1]:+.2g}]"
+            cells = [f"{d['diff']:+.3g} [{d['ci95'][0]:+.2g}, {d['ci95'][1]:+.2g}] {d['verdict']}"
                      for d in r["ours_minus_this"].values()]
             table.add_row(name, method, *cells)
     console.print(table)
