@@ -167,13 +167,28 @@ class Identifier:
 
     def _irls(self, geoms, y, samples, p, robust: bool, iters: int = 30) -> np.ndarray:
         lw = self._whiteners(geoms, samples, p)
+
+        def residuals(p: np.ndarray) -> np.ndarray:
+            return np.concatenate([li @ (yi - self.model(g, p)) for li, yi, g in zip(lw, y, geoms, strict=True)])
+
+        r = residuals(p)
         for _ in range(iters):
-            r = np.concatenate([li @ (yi - self.model(g, p)) for li, yi, g in zip(lw, y, geoms, strict=True)])
             j = np.vstack([li @ self.jacobian(g, p) for li, g in zip(lw, geoms, strict=True)])
             w = huber_weights(r, robust_scale(r, len(p))) if robust else np.ones_like(r)
             sw = np.sqrt(w)
             step = np.linalg.lstsq(j * sw[:, None], r * sw, rcond=1e-12)[0]
-            p = p + step
+            # The model is nonlinear in yaw, tilt and the arm-gravity terms: a full step along a
+            # direction the poses barely excite can overshoot far. Halve it until the weighted
+            # residual does not grow (the weights are fixed within the iteration).
+            cost = float(w @ r**2)
+            for _halving in range(30):
+                r_new = residuals(p + step)
+                if float(w @ r_new**2) <= cost * (1 + 1e-12):
+                    break
+                step = 0.5 * step
+            else:
+                break  # no descent left at rounding level
+            p, r = p + step, r_new
             if np.all(np.abs(step) < 1e-12 + 1e-9 * np.abs(p)):
                 break
         return p

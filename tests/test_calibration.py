@@ -206,6 +206,31 @@ def test_optional_mount_yaw_gravity_tilt_and_arm_gravity_parameters(identifier):
     assert np.linalg.norm(fit.com - np.array(PAYLOAD.com)) <= 0.001
 
 
+def test_a_direction_the_poses_never_excite_is_reported_poorly_excited_not_inconsistent(identifier, monkeypatch):
+    """An arm-gravity basis drawn with the gripper free keeps a direction only the gripper excites; the
+    plan holds the gripper at home. The fit must not diverge along it (it once did: 2000-sigma
+    residuals, a negative mass, verdict "inconsistent"): it says which parameters the poses cannot
+    identify and keeps the payload right."""
+    import calibration.arm_gravity as arm_gravity
+    from calibration.regressor import predict
+
+    gm = identifier.gm
+    opts = FitOptions(yaw=True, tilt=True, arm_gravity=True, q_std=TICK / np.sqrt(12))
+    pinned = Identifier(gm, opts)
+    plan = plan_poses(SCENE, pinned, 16, seed=0)
+    monkeypatch.setattr(arm_gravity, "joint_limits", lambda g: g.arm.joint_limits())
+    free = Identifier(gm, opts)
+    assert len(free.basis.names) == len(pinned.basis.names) + 1
+    theta = np.concatenate([SCENE.sensor.bias, [PAYLOAD.mass], PAYLOAD.mass * np.array(PAYLOAD.com)])
+    rng = np.random.default_rng(7)
+    samples = [PoseSample.from_arrays(q, predict(gm.at(q), theta, gm.gravity, gm.sign)
+                                      + rng.normal(size=(100, 6)) * SCENE.sensor.noise_std) for q in plan.q]
+    fit = free.fit(samples)
+    assert fit.verdict == "poorly_excited", fit.reasons
+    assert fit.poorly_excited and "cannot identify" in " ".join(fit.reasons)
+    assert abs(fit.mass - PAYLOAD.mass) <= 3 * fit.std[fit.names.index("mass")] + 1e-3
+
+
 def test_a_mount_yaw_is_recovered(identifier):
     """A sensor mounted 2 degrees off about its z axis: the yaw option finds it."""
     gm = identifier.gm
