@@ -11,6 +11,11 @@ on the first ``tare_s`` of frames, which must be taken with the arm still and un
 received more than 50 ms after its aligned time counts as late (``ft_frames_late``: a backlog between
 the device and the monitor; the clock alignment keeps such frames at their true time).
 
+A frame whose joint state had to be made across missed joint samples (the samples around it more
+than 1.5 joint periods apart, the period being the stream's median spacing) carries that span as
+``joint_gap_ns`` (counted: ``joint_gap_frames``): the motion in between is unknown, and the pipeline
+widens the compensation's uncertainty over it.
+
 What the pipeline consumes for each F/T frame (its aligned time, the raw wrench, the joint state
 interpolated there, whether it went to the tare) is published on ``monitor/input`` as a
 :class:`PipelineInput`: the alignment and interpolation depend on arrival order and thread timing,
@@ -20,6 +25,7 @@ reproduces the events exactly.
 from __future__ import annotations
 
 import bisect
+import itertools
 import queue
 import threading
 import time
@@ -34,6 +40,7 @@ from .scene import Scene
 
 MONITOR_INPUT = "monitor/input"
 LATE_NS = 50_000_000  # an F/T frame received this long after its (aligned) time counts as late
+JOINT_PERIOD_SAMPLES = 64  # the joint period is the median spacing of this many recent samples
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -51,6 +58,7 @@ class PipelineInput:
     current: np.ndarray
     saturated: bool = False
     tare: bool = False
+    joint_gap_ns: int = 0  # > 0: the joint state spans missed joint samples (this long between its samples)
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,6 +101,8 @@ class LiveMonitor:
         self._joint_t: deque[int] = deque(maxlen=4096)
         self._joint_x: deque[np.ndarray] = deque(maxlen=4096)
         self._joint_sub = None
+        self._joint_period_ns: int | None = None  # the joint stream's median spacing (recent samples)
+        self._joint_count = 0
 
     def start(self) -> LiveMonitor:
         if self._thread is None:
@@ -168,8 +178,14 @@ class LiveMonitor:
                 return  # out of order or duplicate: the newer sample is already there
             self._joint_t.append(t)
             self._joint_x.append(x)
+            self._joint_count += 1
+            if self._joint_count % JOINT_PERIOD_SAMPLES == 0 and len(self._joint_t) > JOINT_PERIOD_SAMPLES:
+                recent = list(itertools.islice(self._joint_t, len(self._joint_t) - JOINT_PERIOD_SAMPLES - 1, None))
+                self._joint_period_ns = int(np.median(np.diff(recent)))
 
-    def _joints_at(self, t: int) -> np.ndarray | None:
+    def _joints_at(self, t: int) -> tuple[np.ndarray, int] | None:
+        """The joint state at t and the span, ns, between the joint samples it was made from (to t
+        itself when extrapolated); None when there is none to trust."""
         with self._joint_lock:
             ts = self._joint_t
             i = bisect.bisect_right(ts, t)
@@ -183,26 +199,36 @@ class LiveMonitor:
                 if t - t0 > self.max_extrapolate_ns:
                     return None
                 if i < 2 or t0 - ts[i - 2] > self.max_gap_ns:
-                    return x0
+                    return x0, t - t0
                 tp, xp = ts[i - 2], self._joint_x[i - 2]
-                return x0 + (t - t0) / (t0 - tp) * (x0 - xp)
+                return x0 + (t - t0) / (t0 - tp) * (x0 - xp), t - tp
             t1, x1 = ts[i], self._joint_x[i]
         if t1 - t0 > self.max_gap_ns:
             return None
         w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
-        return x0 + w * (x1 - x0)
+        return x0 + w * (x1 - x0), t1 - t0
+
+    def _gap(self, span_ns: int) -> int:
+        """``span_ns`` when it is more than 1.5 joint periods (missed samples), else 0."""
+        period = self._joint_period_ns
+        return span_ns if period is not None and 2 * span_ns > 3 * period else 0
 
     def handle(self, frame, t: int | None = None) -> MonitoredFrame | None:
         """Process one WrenchFrame; ``t``: its aligned time when already computed."""
         if t is None:
             t = self._aligned(self._ft_clock, frame)
-        x = self._joints_at(t)
-        if x is None:
+        joints = self._joints_at(t)
+        if joints is None:
             self.counters["no_joint_state"] += 1
             return None
+        x, span = joints
+        gap = self._gap(span)
+        if gap:
+            self.counters["joint_gap_frames"] += 1
         n = self.scene.n_joints
         inp = PipelineInput(t, frame.t_device_ns, frame.seq, frame.source, frame.wrench, x[:n], x[n:2 * n],
-                            x[2 * n:], bool(frame.flags & WrenchFlag.SATURATED), tare=not self.tared)
+                            x[2 * n:], bool(frame.flags & WrenchFlag.SATURATED), tare=not self.tared,
+                            joint_gap_ns=gap)
         if self.publish_inputs:
             self.bus.publish(MONITOR_INPUT, inp)
         return self.consume(inp)
@@ -214,7 +240,8 @@ class LiveMonitor:
             return None
         try:
             result = self.pipeline.process(inp.t_host_ns, inp.wrench, inp.q, inp.qd, inp.current,
-                                           saturated=inp.saturated, t_device_ns=inp.t_device_ns)
+                                           saturated=inp.saturated, t_device_ns=inp.t_device_ns,
+                                           joint_gap_ns=inp.joint_gap_ns)
         except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor (nor a replay)
             self.counters["errors"] += 1
             self.counters[f"error:{type(exc).__name__}"] += 1

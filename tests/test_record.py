@@ -32,7 +32,8 @@ def frames(n: int):
             out.append(("joints/arm", JointFrame.make(t + 1, RNG.normal(size=3), RNG.normal(size=3), RNG.normal(size=3),
                                                       source="arm", seq=k // 2)))
         out.append((MONITOR_INPUT, PipelineInput(t + 2, 7 * k + 3, k, "ft", RNG.normal(size=6), RNG.normal(size=3),
-                                                 RNG.normal(size=3), RNG.normal(size=3), k % 5 == 0, k < 3)))
+                                                 RNG.normal(size=3), RNG.normal(size=3), k % 5 == 0, k < 3,
+                                                 joint_gap_ns=7_000_000 if k % 4 == 1 else 0)))
     out.append(("events/contact", ContactEvent.make(2_000_000_000, "onset", "link3", [0.1, 0.2, 0.3],
                                                     [1.0, -2.0, 3.5], [0.001, 0.002, 0.003], flags=("ambiguous",),
                                                     probability=0.75)))
@@ -43,7 +44,7 @@ def frames(n: int):
 
 def same(a, b) -> bool:
     for name in ("t_host_ns", "t_device_ns", "seq", "source", "flags", "kind", "link", "probability", "message",
-                 "saturated", "tare"):
+                 "saturated", "tare", "joint_gap_ns"):
         if getattr(a, name, None) != getattr(b, name, None):
             return False
     for name in ("wrench", "q", "qd", "current", "tau", "point", "force", "point_std"):
@@ -130,3 +131,16 @@ def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_chunk(tmp_path)
     assert got.metadata["scene"] == {"name": "ur5e"}
     with open(path, "rb") as f, pytest.raises(Exception):  # noqa: B017 - no footer: the summary reader fails
         list(make_reader(f).iter_messages())
+
+
+def test_a_pipeline_input_recorded_before_joint_gaps_were_kept_reads_as_no_gap():
+    import json
+
+    from ftc_hw.record.schemas import decode, encode
+
+    inp = PipelineInput(5, None, 1, "ft", np.zeros(6), np.zeros(3), np.zeros(3), np.zeros(3), joint_gap_ns=9_000_000)
+    name, data = encode(inp)
+    assert decode(name, data).joint_gap_ns == 9_000_000
+    old = json.loads(data)
+    del old["joint_gap_ns"]
+    assert decode(name, json.dumps(old).encode()).joint_gap_ns == 0

@@ -1,6 +1,6 @@
 """Compensation: raw sensor wrench -> external contact wrench, and joint-current residuals."""
 from .pipeline import Compensator
-from .qdd import QddEstimator
+from .qdd import QddEstimator, RecentPeak
 from .residuals import JointResiduals
 
-__all__ = ["Compensator", "JointResiduals", "QddEstimator"]
+__all__ = ["Compensator", "JointResiduals", "QddEstimator", "RecentPeak"]

@@ -50,3 +50,35 @@ class QddEstimator:
         """Output std per unit of white velocity-noise std."""
         alpha = math.exp(-dt / tau)
         return math.sqrt(2.0) / dt * (1.0 - alpha) / math.sqrt(1.0 + alpha)
+
+
+class RecentPeak:
+    """Per-component maximum of a vector over a sliding time window, kept in ``bucket_ns`` buckets
+    (a ring of ``buckets``): ``add`` costs one elementwise maximum, ``max_since`` one over the ring.
+    The window is resolved to a bucket: ``max_since(t0)`` covers from the start of t0's bucket."""
+
+    def __init__(self, n: int, bucket_ns: int = 5_000_000, buckets: int = 64) -> None:
+        self.bucket_ns = int(bucket_ns)
+        self._peak = np.zeros((buckets, n))
+        self._id = np.full(buckets, -1, dtype=np.int64)  # which bucket each row holds
+        self._bucket = -1
+        self._row = self._peak[0]
+
+    def add(self, t_ns: int, x: np.ndarray) -> None:
+        b = t_ns // self.bucket_ns
+        if b == self._bucket:
+            np.maximum(self._row, x, out=self._row)
+            return
+        self._bucket = b
+        i = b % len(self._id)
+        self._id[i] = b
+        self._row = self._peak[i]
+        self._row[:] = x
+
+    def max_since(self, t0_ns: int, t_now_ns: int) -> np.ndarray | None:
+        """The maximum over the buckets from t0's to t_now's (None when none holds a value); a window
+        longer than the ring is cut to the ring."""
+        b_now = t_now_ns // self.bucket_ns
+        lo = max(t0_ns // self.bucket_ns, b_now - len(self._id) + 1)
+        keep = (self._id >= lo) & (self._id <= b_now)
+        return self._peak[keep].max(axis=0) if keep.any() else None

@@ -52,7 +52,9 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "t_host_ns": {"type": "integer", "description": "the sample's aligned host time, ns"},
         "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR, "wrench": _vec(6, "N, N m"),
         "q": _vec(None, "rad"), "qd": _vec(None, "rad/s"), "current": _vec(None, "A"),
-        "saturated": {"type": "boolean"}, "tare": {"type": "boolean"}}),
+        "saturated": {"type": "boolean"}, "tare": {"type": "boolean"},
+        "joint_gap_ns": {"type": "integer", "description": "> 0: the joint state spans missed joint samples "
+                         "(ns between them); absent in older recordings"}}),
 }
 
 
@@ -105,7 +107,7 @@ def encode(frame: Any) -> tuple[str, bytes]:
                                            "seq": frame.seq, "source": frame.source, "wrench": _list(frame.wrench),
                                            "q": _list(frame.q), "qd": _list(frame.qd),
                                            "current": _list(frame.current), "saturated": bool(frame.saturated),
-                                           "tare": bool(frame.tare)}
+                                           "tare": bool(frame.tare), "joint_gap_ns": int(frame.joint_gap_ns)}
     else:
         raise TypeError(f"no schema for {type(frame).__name__}")
     return name, json.dumps(d, separators=(",", ":")).encode()
@@ -135,5 +137,6 @@ def decode(schema: str, data: bytes) -> Any:
             return a
 
         return PipelineInput(int(d["t_host_ns"]), d["t_device_ns"], int(d["seq"]), str(d["source"]), arr("wrench"),
-                             arr("q"), arr("qd"), arr("current"), bool(d["saturated"]), bool(d["tare"]))
+                             arr("q"), arr("qd"), arr("current"), bool(d["saturated"]), bool(d["tare"]),
+                             int(d.get("joint_gap_ns", 0)))
     raise ValueError(f"unknown schema {schema!r}")
