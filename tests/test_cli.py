@@ -117,6 +117,23 @@ def test_bench_solver_scores_both_methods_on_the_same_cases(tmp_path):
     assert noisy["ours"]["pos_err_mm_median"] > 0 and figures["noise_free"]["leng2016"]["ours"]["pos_err_mm_max"] < 1e-6
 
 
+def test_bench_solver_compares_the_magnitude_with_the_force_reading_on_many_cases(tmp_path):
+    out = tmp_path / "solver.json"
+    r = runner.invoke(app, ["bench", "solver", "--cases", "100", "--scene", "leng2016", "--method", "ours",
+                            "--magnitude-cases", "4000", "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "|f_measured|" in r.output
+    d = json.loads(out.read_text())["magnitude_vs_force_reading"]["leng2016"]
+    assert d["cases"] > 3000
+    assert d["diff"] == pytest.approx(d["ours_pct_median"] - d["force_reading_pct_median"])
+    assert d["ci95"][0] <= d["diff"] <= d["ci95"][1]
+    assert d["verdict"] == ("better" if d["ci95"][1] < 0 else "worse" if d["ci95"][0] > 0 else "tie")
+    # both at the force noise's limit (0.05 N on 5-200 N: a few hundredths of a per cent)
+    assert 0.01 < d["force_reading_pct_median"] < 0.1 and abs(d["diff"]) < 0.01
+    bad = runner.invoke(app, ["bench", "solver", "--magnitude-cases", "10"])
+    assert bad.exit_code != 0 and "magnitude-cases" in bad.output
+
+
 def test_demo_ends_by_itself_with_a_summary():
     r = runner.invoke(app, ["demo", "--duration", "3"])
     assert r.exit_code == 0, r.output
