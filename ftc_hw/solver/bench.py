@@ -47,6 +47,20 @@ def _contacts(model: ArmModel, q, n: int, rng: np.random.Generator):
     return sample_contacts(model, q, n, rng, FRICTION_CONE_DEG, (5.0, 200.0))
 
 
+def _scene_cases(name: str, n: int, seed: int):
+    """(scene, model, q, cases, clean readings (n, 6), noisy readings (n, 6)): the bench's contacts
+    at the scene's home pose and their sensor readings, noise-free and with the scene's noise."""
+    scene = load_scene(name)
+    model = ArmModel(scene)
+    q = np.array(scene.robot.home)
+    rng = np.random.default_rng(seed)
+    cases = _contacts(model, q, n, rng)
+    clean = np.array([model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, f)])
+                      for sp, f in cases])
+    noisy = clean + rng.normal(size=clean.shape) * np.sqrt(np.diag(scene.sensor.noise_cov))
+    return scene, model, q, cases, clean, noisy
+
+
 def _crlb(solver, point, normal, force) -> tuple[np.ndarray, np.ndarray]:
     """Cramer-Rao bound (J^T W J)^-1 at the truth for the 6-D wrench measurement with the point
     constrained to the surface, over (two tangent coordinates, force); and the tangent basis."""
@@ -189,14 +203,7 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
     console = table_console()
     results: dict = {"noise_free": {}, "noisy": {}}
     for name in scenes or builtin_names():
-        scene = load_scene(name)
-        model = ArmModel(scene)
-        q = np.array(scene.robot.home)
-        rng = np.random.default_rng(seed)
-        cases = _contacts(model, q, n, rng)
-        clean = [model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, f)]) for sp, f in cases]
-        noise_std = np.sqrt(np.diag(scene.sensor.noise_cov))
-        noisy = [w + rng.normal(size=6) * noise_std for w in clean]
+        scene, model, q, cases, clean, noisy = _scene_cases(name, n, seed)
         ours = make_solver(scene, "ours")
         clean_est = [ours.solve(w, q) for w in clean]
         well_posed = np.array([not e.flags for e in clean_est])
@@ -253,14 +260,7 @@ def magnitude_check(n: int, seed: int = 0, scenes: list[str] | None = None, n_bo
     their difference with a 95 % paired-bootstrap interval and its verdict."""
     out = {}
     for name in scenes or builtin_names():
-        scene = load_scene(name)
-        model = ArmModel(scene)
-        q = np.array(scene.robot.home)
-        rng = np.random.default_rng(seed)
-        cases = _contacts(model, q, n, rng)
-        clean = np.array([model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, f)])
-                          for sp, f in cases])
-        noisy = clean + rng.normal(size=clean.shape) * np.sqrt(np.diag(scene.sensor.noise_cov))
+        scene, _, q, cases, clean, noisy = _scene_cases(name, n, seed)
         solver = make_solver(scene, "ours")
         qs = np.repeat(q[None], n, axis=0)
         est_clean, est = solver.solve_batch(clean, qs), solver.solve_batch(noisy, qs)
