@@ -324,9 +324,9 @@ def run(json_path: str | Path | None = None, duration: float = 60.0, stops: int 
     load = os.getloadavg()
     console.print(f"[bold]arm adapters[/bold]: UR receive for {duration:g} s, {stops} stops per arm, then the rest; "
                   f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs")
-    from .base import responsive_readers
+    from .base import frozen_heap, responsive_readers
 
-    with responsive_readers():  # as the monitor runs the adapters and their reflex
+    with responsive_readers(), frozen_heap():  # as the monitor runs the adapters and their reflex
         ur = bench_ur(duration, stops)
         dxl = bench_dxl(duration, stops)
     rows = acceptance(ur, dxl)

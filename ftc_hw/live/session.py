@@ -182,6 +182,7 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
 def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, cal_kwargs: dict[str, Any],
          cal_meta: dict[str, str] | None, out: MonitorOutcome) -> MonitorOutcome:
     from devices.arm_registry import make_arm_adapter
+    from devices.base import frozen_heap
     from devices.registry import make_adapter
     from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 
@@ -269,6 +270,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, ca
                 if not monitor.tared:
                     raise MonitorSetupError(f"no tare within {cfg.connect_timeout_s:g} s: {dict(monitor.counters)}")
                 world.go()
+            stack.enter_context(frozen_heap())  # set up: no collector pause may stall the readers now
             t_end = None if (cfg.sim or not cfg.duration) else time.monotonic() + cfg.duration
             view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
                            + (f", scenario {cfg.scenario} (emulated devices)" if cfg.sim else ""))
