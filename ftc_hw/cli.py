@@ -159,21 +159,15 @@ def bench_solver(
                     "'magnitude_vs_force_reading'.")] = 0,
 ) -> None:
     """Solver accuracy (noise-free and with the scene's noise) against latency, ours vs leng2016."""
-    import json
-
-    from .solver.bench import magnitude_check, print_magnitude_check, run
+    from .solver.bench import run
 
     methods = tuple(method or ("ours", "leng2016"))
     if not set(methods) <= {"ours", "leng2016"}:
         raise typer.BadParameter("ours or leng2016", param_hint="--method")
     if 0 < magnitude_cases < 100:
         raise typer.BadParameter("0 (off) or at least 100", param_hint="--magnitude-cases")
-    results = run(json_path=None, plot_path=plot, n=cases, seed=seed, scenes=scene, methods=methods)
-    if magnitude_cases:
-        results["magnitude_vs_force_reading"] = magnitude_check(magnitude_cases, seed, scene)
-        print_magnitude_check(results["magnitude_vs_force_reading"])
-    if json_path is not None:
-        json_path.write_text(json.dumps(results, indent=2))
+    run(json_path=json_path, plot_path=plot, n=cases, seed=seed, scenes=scene, methods=methods,
+        magnitude_cases=magnitude_cases)
 
 
 @bench_app.command("compensation")

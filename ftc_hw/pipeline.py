@@ -292,10 +292,8 @@ class ContactPipeline:
             self._gap_span = joint_gap_ns
         if t_clock > self._gap_until or self.detector.active:
             return None
-        held = self._lag_peak.max_since(t_clock - self.gap_hold_ns - self._gap_span, t_clock)
-        if held is None or lag_error is None:
-            return held
-        return np.maximum(lag_error, held)
+        # this frame's own lag error is in the newest bucket: the maximum covers it
+        return self._lag_peak.max_since(t_clock - self.gap_hold_ns - self._gap_span, t_clock)
 
     def _lag_error(self, t_ns: int, qdd: np.ndarray) -> np.ndarray | None:
         """The largest change of the acceleration estimate over the last lag window (2 tau), per

@@ -184,18 +184,24 @@ def _paired(err_a: dict, err_b: dict, sel: np.ndarray, rng: np.random.Generator,
     an interval that holds 0 means the sample cannot tell the two methods apart in that column."""
     idx = np.flatnonzero(sel)
     draws = rng.integers(0, len(idx), size=(n_boot, len(idx)))
-    out = {}
-    for col, (key, stat) in _STATS.items():
-        a, b = err_a[key][idx], err_b[key][idx]
-        boot = [stat(a[d]) - stat(b[d]) for d in draws]
-        lo, hi = np.percentile(boot, [2.5, 97.5])
-        verdict = "better" if hi < 0 else "worse" if lo > 0 else "tie"
-        out[col] = {"diff": float(stat(a) - stat(b)), "ci95": [float(lo), float(hi)], "verdict": verdict}
-    return out
+    return {col: _paired_difference(err_a[key][idx], err_b[key][idx], stat, draws)
+            for col, (key, stat) in _STATS.items()}
+
+
+def _paired_difference(a: np.ndarray, b: np.ndarray, stat, draws: np.ndarray) -> dict:
+    """stat(a) - stat(b) over paired cases, its 95 % interval over the bootstrap ``draws`` (rows of
+    case indices) and the verdict: better (interval below 0), worse (above) or tie."""
+    boot = [stat(a[d]) - stat(b[d]) for d in draws]
+    lo, hi = np.percentile(boot, [2.5, 97.5])
+    verdict = "better" if hi < 0 else "worse" if lo > 0 else "tie"
+    return {"diff": float(stat(a) - stat(b)), "ci95": [float(lo), float(hi)], "verdict": verdict}
 
 
 def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2000, seed: int = 0,
-        scenes: list[str] | None = None, methods: tuple[str, ...] = ("ours", "leng2016")) -> dict:
+        scenes: list[str] | None = None, methods: tuple[str, ...] = ("ours", "leng2016"),
+        magnitude_cases: int = 0) -> dict:
+    """``magnitude_cases`` > 0: also :func:`magnitude_check` on that many cases per scene, in the
+    results as ``magnitude_vs_force_reading``."""
     from rich.table import Table
 
     from ..report import table_console
@@ -245,6 +251,9 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
                               f"{r['batch_frames_per_s']:.0f}")
         console.print(table)
     _print_paired(console, results["noisy"], n)
+    if magnitude_cases:
+        results["magnitude_vs_force_reading"] = magnitude_check(magnitude_cases, seed, scenes)
+        _print_magnitude_check(console, results["magnitude_vs_force_reading"])
     if json_path is not None:
         json_path.write_text(json.dumps(results, indent=2))
     if plot_path is not None:
@@ -269,19 +278,14 @@ def magnitude_check(n: int, seed: int = 0, scenes: list[str] | None = None, n_bo
         ours = (np.abs(np.linalg.norm(est.force, axis=1) - true) / true * 100)[ok]
         reading = (np.abs(np.linalg.norm(noisy[:, :3], axis=1) - true) / true * 100)[ok]
         draws = np.random.default_rng(seed).integers(0, ours.size, size=(n_boot, ours.size))
-        boot = [np.median(ours[d]) - np.median(reading[d]) for d in draws]
-        lo, hi = np.percentile(boot, [2.5, 97.5])
         out[name] = {"cases": int(ok.sum()), "ours_pct_median": float(np.median(ours)),
                      "force_reading_pct_median": float(np.median(reading)),
-                     "diff": float(np.median(ours) - np.median(reading)), "ci95": [float(lo), float(hi)],
-                     "verdict": "better" if hi < 0 else "worse" if lo > 0 else "tie"}
+                     **_paired_difference(ours, reading, np.median, draws)}
     return out
 
 
-def print_magnitude_check(check: dict) -> None:
+def _print_magnitude_check(console, check: dict) -> None:
     from rich.table import Table
-
-    from ..report import table_console
 
     table = Table(title="force magnitude error, median % of |f|: ours against |f_measured| (the leng2016 "
                         "method's magnitude), same noisy cases, 95 % paired bootstrap")
@@ -290,7 +294,7 @@ def print_magnitude_check(check: dict) -> None:
     for name, r in check.items():
         table.add_row(name, str(r["cases"]), f"{r['ours_pct_median']:.6f}", f"{r['force_reading_pct_median']:.6f}",
                       f"{r['diff']:+.2e}", f"[{r['ci95'][0]:+.2e}, {r['ci95'][1]:+.2e}]", r["verdict"])
-    table_console().print(table)
+    console.print(table)
 
 
 def _print_paired(console, noisy: dict, n: int) -> None:
