@@ -175,7 +175,7 @@ def load_calibration(path: str | Path, scene: Scene | str | None = None,
 
 def calibration_from_fit(fit, scene: Scene, sensor_serial: str | None, poses: np.ndarray,
                          samples_per_pose: int) -> Calibration:
-    """A Calibration from :class:`calibration.identify.Fit`. No payload when the fit found none."""
+    """A Calibration from :class:`ftc_hw.calibration.identify.Fit`. No payload when the fit found none."""
     d, s = fit.derived, fit.derived_std
     payload = None
     if d.get("com") is not None and fit.mass > 0:

@@ -1,9 +1,9 @@
 """Identification from static poses: weighted, Huber-robust least squares with standard errors,
 identifiability and a verdict (``good``, ``poorly_excited``, ``inconsistent``) with reasons.
 
-Parameters: the 10 core ones of :mod:`calibration.regressor`, optionally the sensor's mount rotation
+Parameters: the 10 core ones of :mod:`ftc_hw.calibration.regressor`, optionally the sensor's mount rotation
 about its z axis (``mount_yaw``), a gravity tilt (``gravity_tilt_x``/``_y``) and the arm's gravity base
-parameters (:mod:`calibration.arm_gravity`). Each pose's mean reading is weighted by the scene's sensor
+parameters (:mod:`ftc_hw.calibration.arm_gravity`). Each pose's mean reading is weighted by the scene's sensor
 noise covariance over the samples averaged, plus the joint encoders' resolution carried through the
 model (a tick of a DYNAMIXEL moves a base-mounted sensor's torque by more than a second of averaging).
 """

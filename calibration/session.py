@@ -81,12 +81,12 @@ class DeviceSession:
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self, timeout: float = 20.0) -> None:
-        from devices.arm_registry import make_arm_adapter
-        from devices.registry import make_adapter
+        from ftc_hw.devices.arm_registry import make_arm_adapter
+        from ftc_hw.devices.registry import make_adapter
 
         endpoints: dict[str, dict] = {}
         if self.sim:
-            from sim_devices.world_process import WorldProcess
+            from ftc_hw.sim_devices.world_process import WorldProcess
 
             self.world = WorldProcess(self.scene, "hold", devices=[self.ft_spec.name, self.arm_spec.name],
                                       seed=self.seed, noise=self.noise, payload=self.sim_payload)

@@ -1,7 +1,7 @@
 """``ftc bench arms``: the arm adapters' acceptance numbers, measured against the emulators.
 
 Each part runs the scene's world and its arm emulator in their own processes
-(:class:`sim_devices.world_process.WorldProcess`, the code ``ftc sim`` runs) and the client here:
+(:class:`ftc_hw.sim_devices.world_process.WorldProcess`, the code ``ftc sim`` runs) and the client here:
 
 * UR: ``rtde_receive.RTDEReceiveInterface(address)`` with default arguments for ``duration`` s --
   every new packet's ``actual_q`` compared with the world's joint sample of the same time (the
@@ -25,7 +25,7 @@ import numpy as np
 
 from ftc_hw.bus import Bus
 from ftc_hw.scene import load_scene
-from sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.world_process import WorldProcess
 
 from .base import DeviceError
 

@@ -1,7 +1,7 @@
-"""Arm adapters by device kind, for ``devices.registry.make_adapter``.
+"""Arm adapters by device kind, for ``ftc_hw.devices.registry.make_adapter``.
 
 Each factory is ``(device_spec, bus, endpoint=None, *, scene=None, **overrides) -> Adapter``, like
-``devices.registry.make_adapter``: ``endpoint`` is the dict ``ftc sim`` prints for the device (or a
+``ftc_hw.devices.registry.make_adapter``: ``endpoint`` is the dict ``ftc sim`` prints for the device (or a
 port path / address string; None: the spec's ``address``), ``scene`` gives the UR joints' torque
 constants, ``overrides`` are keyword arguments of the adapter class.
 """

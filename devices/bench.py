@@ -49,7 +49,7 @@ class _World:
         return time.monotonic(), float(self.runner.world.t)
 
     def sample_number(self, t: float) -> int:
-        from sim_devices.emulator import sample_number
+        from ftc_hw.sim_devices.emulator import sample_number
 
         return sample_number(t, self.scene.sensor.rate_hz)
 
@@ -57,8 +57,8 @@ class _World:
 @contextmanager
 def _world(scene_name: str, seconds: float, scenario: str = "static-pokes") -> Iterator[_World]:
     """The scene's physics world running in real time on a thread, and a record of every sample."""
-    from sim_devices.link import RingReader
-    from sim_devices.runner import SimRunner
+    from ftc_hw.sim_devices.link import RingReader
+    from ftc_hw.sim_devices.runner import SimRunner
 
     scene = load_scene(scene_name)
     runner = SimRunner(scene, scenario, duration=seconds + 60.0, devices=False)
@@ -91,7 +91,7 @@ def _spec(scene: Scene, kind: str, name: str | None = None, transport: str | Non
 
 
 def _start(spec: DeviceSpec, w: _World, tmp: Path, **options):
-    from sim_devices.runner import EmulatorProcess
+    from ftc_hw.sim_devices.runner import EmulatorProcess
 
     options.setdefault("path", str(tmp / f"{spec.name}.tty"))
     options.setdefault("stats_path", str(tmp / f"{spec.name}.json"))

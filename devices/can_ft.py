@@ -1,6 +1,6 @@
 """CAN F/T sensors (scene kind ``ft-can``: ATI Net F/T over CAN, frames from a DBC file through cantools)
 received with python-can: ``interface="serial"`` on a serial port or an ``ftc sim`` pty (no kernel
-CAN here; the port is opened as ``readahead://<port>``, :mod:`devices.serial_urls`, unless
+CAN here; the port is opened as ``readahead://<port>``, :mod:`ftc_hw.devices.serial_urls`, unless
 ``read_ahead=False``), ``"virtual"`` in-process, or any python-can interface on real hardware.
 
 ``mode="stream"`` asks the sensor to send every sample (opcode 2) and stops it on close (opcode 3);
@@ -20,10 +20,10 @@ import can
 import serial
 
 from ftc_hw.bus import Bus
+from ftc_hw.codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTAssembler, NetFTCodec
 
 from . import serial_urls
 from .base import DeviceError, DeviceIOError
-from .codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTAssembler, NetFTCodec
 from .ft_base import FTAdapter
 
 

@@ -42,10 +42,10 @@ import numpy as np
 import serial
 
 from ftc_hw.bus import Bus, JointFrame, joints_topic
+from ftc_hw.codecs.dxl_table import MODELS, PRESENT_LENGTH, PRESENT_START
 
 from .arm_base import ArmAdapter
 from .base import DeviceError, DeviceIOError
-from .dxl_table import MODELS, PRESENT_LENGTH, PRESENT_START
 
 try:
     import termios

@@ -5,7 +5,7 @@
    is quiet (the manual's way of stopping the stream);
 2. identity: FC03 at 500 (firmware, must start with ``F``), 510 (serial), 514 (production year);
 3. stream mode: FC16 writes 0x0200 to register 410, then ``20 4E`` frames arrive on the same port
-   (:data:`devices.codecs.stream.FT300_STREAM`); closing sends the jam signal again.
+   (:data:`ftc_hw.codecs.stream.FT300_STREAM`); closing sends the jam signal again.
 
 The stream carries neither sequence numbers nor timestamps: frames get the adapter's own ``seq`` and
 their receive time. Saturation: an axis at the FT 300's range (300 N, 30 N m).
@@ -18,10 +18,10 @@ from typing import Any
 import serial
 
 from ftc_hw.bus import Bus
+from ftc_hw.codecs.registers import FT300_MAP
+from ftc_hw.codecs.stream import FT300_STREAM
 
 from .base import DeviceError, DeviceIOError
-from .codecs.registers import FT300_MAP
-from .codecs.stream import FT300_STREAM
 from .modbus_ft import ModbusFTAdapter, PollFailed
 from .serial_stream import StreamReader
 

@@ -1,6 +1,6 @@
 """What every F/T adapter does with a decoded sample before it reaches the bus.
 
-:class:`FTAdapter` adds to :class:`~devices.base.Adapter`: a staleness watchdog on its topic (a
+:class:`FTAdapter` adds to :class:`~ftc_hw.devices.base.Adapter`: a staleness watchdog on its topic (a
 ``stale`` event ``stale_after`` s after the last frame, ``recovered`` on the next), sequence
 tracking (device counters unwrapped; a gap flags ``SEQ_GAP`` on the first frame after it and is
 counted; a repeated number is a duplicate and never published; a backwards jump is a device reset),

@@ -1,5 +1,5 @@
 """Generic Modbus F/T sensors (scene kind ``modbus-ft``) over RTU or TCP through pymodbus (3.16.1:
-``device_id=``, keyword-only ``count=``): one engine, any register map (:mod:`devices.codecs.registers`).
+``device_id=``, keyword-only ``count=``): one engine, any register map (:mod:`ftc_hw.codecs.registers`).
 
 Each poll reads the map's block in one request and publishes one frame (no device sequence or
 clock: ``seq`` is the adapter's own count). A failed poll is counted as ``timeouts`` (no answer),
@@ -17,11 +17,11 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
 from ftc_hw.bus import Bus
+from ftc_hw.codecs.checksums import crc16_modbus
+from ftc_hw.codecs.errors import FrameFormatError
+from ftc_hw.codecs.registers import RegisterMap, register_map
 
 from .base import DeviceError, DeviceIOError
-from .codecs.checksums import crc16_modbus
-from .codecs.errors import FrameFormatError
-from .codecs.registers import RegisterMap, register_map
 from .ft_base import FTAdapter
 
 # pymodbus logs every failed connect on stderr ("Connection ... refused", "Repeating...."): the

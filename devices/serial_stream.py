@@ -1,5 +1,5 @@
 """Streaming serial F/T sensors (scene kind ``ft-serial-stream``) through pyserial, for any frame format
-of :mod:`devices.codecs.stream` (``ftc-1k``, ``ft300``, or a format table from the scene)."""
+of :mod:`ftc_hw.codecs.stream` (``ftc-1k``, ``ft300``, or a format table from the scene)."""
 from __future__ import annotations
 
 import time
@@ -9,9 +9,9 @@ from typing import Any
 import serial
 
 from ftc_hw.bus import Bus
+from ftc_hw.codecs.stream import StreamFormat, StreamParser, stream_format
 
 from .base import DeviceIOError
-from .codecs.stream import StreamFormat, StreamParser, stream_format
 from .ft_base import FTAdapter
 
 

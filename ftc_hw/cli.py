@@ -203,7 +203,7 @@ def bench_devices(
     duration: Annotated[float, typer.Option(min=1.0, help="Seconds per streaming run.")] = 60.0,
 ) -> None:
     """F/T adapters against their emulators: rates, loss, corruption, reconnects."""
-    from devices.bench import run
+    from ftc_hw.devices.bench import run
 
     run(json_path=json_path, duration=duration)
 
@@ -215,7 +215,7 @@ def bench_arms(
     stops: Annotated[int, typer.Option(min=1, help="stop() calls per arm.")] = 200,
 ) -> None:
     """Arm adapters against their emulators: RTDE rate and accuracy, Dynamixel reads, stop, reconnects."""
-    from devices.arm_bench import run
+    from ftc_hw.devices.arm_bench import run
 
     run(json_path=json_path, duration=duration, stops=stops)
 

@@ -17,9 +17,9 @@ import select
 import time
 from typing import Any
 
-from devices.codecs import serial_can
-from devices.codecs.errors import CodecError
-from devices.codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTCodec
+from ftc_hw.codecs import serial_can
+from ftc_hw.codecs.errors import CodecError
+from ftc_hw.codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTCodec
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .emulator import Emulator, Pacer, PtyLink, default_pty_path, serve_with

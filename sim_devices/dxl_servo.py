@@ -1,6 +1,6 @@
 """One emulated DYNAMIXEL servo: its control-table memory and the rules of reading and writing it.
 
-Memory is a byte array laid out as the model's control table (``devices.dxl_table``). Reads return
+Memory is a byte array laid out as the model's control table (``ftc_hw.codecs.dxl_table``). Reads return
 the stored bytes (present values are refreshed from the world first by the bus); Indirect Data k
 reads and writes the byte at Indirect Address k. A write must cover whole items: a partial item is
 a Data Length Error, a read-only item or reserved byte an Access Error, an EEPROM item while torque
@@ -18,7 +18,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
-from devices.dxl_table import (
+from ftc_hw.codecs.dxl_table import (
     ERR_ACCESS,
     ERR_DATA_LENGTH,
     ERR_DATA_LIMIT,

@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from devices.dxl_table import (
+from ftc_hw.codecs.dxl_table import (
     ACTION,
     BAUD_CODES,
     BAUD_RATES,

@@ -10,7 +10,7 @@ by the client's input flush on open), and the symlink points at that descriptor,
 ``/proc/<emulator pid>/fd/<n>``, not at ``/dev/pts/<n>``: when the emulator dies the path stops
 resolving, where a ``/dev/pts`` name would soon be reused by another process's pty.
 
-Options every emulator understands: ``faults``, ``seed`` (see :mod:`sim_devices.faults`),
+Options every emulator understands: ``faults``, ``seed`` (see :mod:`ftc_hw.sim_devices.faults`),
 ``stats_path`` (JSON file with the emulator's counters, rewritten at most every 0.1 s and at exit),
 ``max_frames`` (stop sending after this many samples; the stats then say ``"done": true``).
 """

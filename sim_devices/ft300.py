@@ -8,7 +8,7 @@ streaming ``20 4E`` frames at 100 Hz with the newest world sample; a run of 0xFF
 """
 from __future__ import annotations
 
-from devices.codecs.stream import FT300_STREAM
+from ftc_hw.codecs.stream import FT300_STREAM
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .emulator import serve_with

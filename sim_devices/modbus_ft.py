@@ -1,8 +1,8 @@
-"""Emulator of a Modbus F/T sensor (scene kind ``modbus-ft``; the FT 300 in :mod:`sim_devices.ft300`
+"""Emulator of a Modbus F/T sensor (scene kind ``modbus-ft``; the FT 300 in :mod:`ftc_hw.sim_devices.ft300`
 is one) over Modbus RTU on a pty or Modbus TCP on loopback.
 
 The register map is data (``params.map``: a built-in name or a table, see
-:mod:`devices.codecs.registers`); each read answers the newest world sample. Identity registers
+:mod:`ftc_hw.codecs.registers`); each read answers the newest world sample. Identity registers
 hold ``params.identity`` (``{name: value}``). Transport: the device's ``transport``
 (``modbus-rtu`` | ``modbus-tcp``) unless ``options["transport"]``; TCP binds ``options["host"]`` or
 the device's ``address`` (default 127.0.0.1) and ``options["port"]`` (default 0: a free port, reported).
@@ -22,10 +22,10 @@ import socket
 import time
 from typing import Any
 
-from devices.codecs.errors import CodecError
-from devices.codecs.modbus_frames import mbap_decode, mbap_encode, rtu_decode_request, rtu_encode
-from devices.codecs.registers import RegisterMap, encode_identity, register_map
-from devices.codecs.stream import StreamFormat
+from ftc_hw.codecs.errors import CodecError
+from ftc_hw.codecs.modbus_frames import mbap_decode, mbap_encode, rtu_decode_request, rtu_encode
+from ftc_hw.codecs.registers import RegisterMap, encode_identity, register_map
+from ftc_hw.codecs.stream import StreamFormat
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .emulator import Emulator, Pacer, PtyLink, default_pty_path, serve_with

@@ -1,6 +1,6 @@
 """A Modbus server's application layer: a register bank answering FC03/04 (read), FC06/16 (write).
 
-Framing (RTU CRC, MBAP) is in :mod:`devices.codecs.modbus_frames`; transports are the emulators'.
+Framing (RTU CRC, MBAP) is in :mod:`ftc_hw.codecs.modbus_frames`; transports are the emulators'.
 """
 from __future__ import annotations
 

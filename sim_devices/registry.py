@@ -10,10 +10,10 @@ then serves until the process is terminated.
 from __future__ import annotations
 
 EMULATORS: dict[str, str] = {
-    "ft300": "sim_devices.ft300:serve",
-    "ft-serial-stream": "sim_devices.serial_stream:serve",
-    "ft-can": "sim_devices.can_ft:serve",
-    "modbus-ft": "sim_devices.modbus_ft:serve",
-    "dynamixel": "sim_devices.dynamixel:serve",
-    "ur-rtde": "sim_devices.ur:serve",
+    "ft300": "ftc_hw.sim_devices.ft300:serve",
+    "ft-serial-stream": "ftc_hw.sim_devices.serial_stream:serve",
+    "ft-can": "ftc_hw.sim_devices.can_ft:serve",
+    "modbus-ft": "ftc_hw.sim_devices.modbus_ft:serve",
+    "dynamixel": "ftc_hw.sim_devices.dynamixel:serve",
+    "ur-rtde": "ftc_hw.sim_devices.ur:serve",
 }

@@ -5,14 +5,14 @@ with its sequence number (the world sample index plus an offset) and its device 
 plus an offset); frames leave at absolute deadlines of the world's sensor period. The offsets are 0,
 or set so that the first frame sent carries ``options["seq_start"]`` and ``options["t_device_start_s"]``
 (tests use it to make the counters wrap); the stats report them. Byte-level faults: all of
-:mod:`sim_devices.faults`.
+:mod:`ftc_hw.sim_devices.faults`.
 """
 from __future__ import annotations
 
 import time
 from typing import Any
 
-from devices.codecs.stream import stream_format
+from ftc_hw.codecs.stream import stream_format
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .emulator import Emulator, Pacer, PtyLink, default_pty_path, serve_with

@@ -2,7 +2,7 @@
 
 Tests and benchmarks run device clients (dynamixel_sdk, ur_rtde, the adapters) in their own process;
 the world must keep real time next to them, and the protocol notes forbid in-process emulators. A
-:class:`WorldProcess` runs a :class:`~sim_devices.runner.SimRunner` (the code ``ftc sim`` runs) in a
+:class:`WorldProcess` runs a :class:`~ftc_hw.sim_devices.runner.SimRunner` (the code ``ftc sim`` runs) in a
 child process, limited to the devices asked for, and lets the caller kill, restart, suspend (SIGSTOP,
 a hung device) and resume an emulator, read the world's joint samples from the shared-memory ring,
 and list the commands the world applied with the host time (``time.monotonic_ns``, comparable across

@@ -11,8 +11,8 @@ import numpy as np
 
 from ftc_hw.bus import EVENTS_DEVICE, Bus
 from ftc_hw.scene import DeviceSpec, load_scene
-from sim_devices.link import WorldLink
-from sim_devices.runner import EmulatorProcess
+from ftc_hw.sim_devices.link import WorldLink
+from ftc_hw.sim_devices.runner import EmulatorProcess
 
 
 def wrench_of(k: int) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.model.sampling import SurfacePoint
 from ftc_hw.scene import load_scene
-from sim_devices.world.scenarios import sample_contacts
+from ftc_hw.sim_devices.world.scenarios import sample_contacts
 
 
 def contacts(model: ArmModel, q, n: int, seed: int, max_angle_deg: float = 80.0, f_range=(5.0, 200.0)):

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from calibration import (
+from ftc_hw.calibration import (
     CalibrationError,
     CollisionChecker,
     FitOptions,
@@ -23,15 +23,15 @@ from calibration import (
     plan_poses,
     save_calibration,
 )
-from calibration.plan import candidate_poses
-from calibration.regressor import arm_load, core_rows
+from ftc_hw.calibration.plan import candidate_poses
+from ftc_hw.calibration.regressor import arm_load, core_rows
 from ftc_hw.compensation import Compensator
 from ftc_hw.model import ArmModel, Payload
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
-from sim_devices.world import World
-from sim_devices.world.trajectory import Hold, PointToPoint
-from sim_devices.world.world import Probe, ScenarioSetup
+from ftc_hw.sim_devices.world import World
+from ftc_hw.sim_devices.world.trajectory import Hold, PointToPoint
+from ftc_hw.sim_devices.world.world import Probe, ScenarioSetup
 
 SCENE = load_scene("dxl-arm")  # FT 300: 0.1 N / 0.005 N m (Mz 0.003) per axis at 100 Hz
 TICK = 2 * np.pi / 4096  # DYNAMIXEL X-series position resolution
@@ -124,7 +124,7 @@ def test_twelve_planned_poses_meet_the_acceptance_against_the_world(identifier, 
 
 
 def test_planned_poses_are_inside_limits_and_free_of_collision(identifier, plan12):
-    from calibration.arm_gravity import joint_limits
+    from ftc_hw.calibration.arm_gravity import joint_limits
 
     lo, hi = joint_limits(identifier.gm)
     assert np.all(plan12.q >= lo) and np.all(plan12.q <= hi)
@@ -211,8 +211,8 @@ def test_a_direction_the_poses_never_excite_is_reported_poorly_excited_not_incon
     plan holds the gripper at home. The fit must not diverge along it (it once did: 2000-sigma
     residuals, a negative mass, verdict "inconsistent"): it says which parameters the poses cannot
     identify and keeps the payload right."""
-    import calibration.arm_gravity as arm_gravity
-    from calibration.regressor import predict
+    import ftc_hw.calibration.arm_gravity as arm_gravity
+    from ftc_hw.calibration.regressor import predict
 
     gm = identifier.gm
     opts = FitOptions(yaw=True, tilt=True, arm_gravity=True, q_std=TICK / np.sqrt(12))
@@ -237,7 +237,7 @@ def test_a_mount_yaw_is_recovered(identifier):
     rng = np.random.default_rng(7)
     yaw = np.radians(2.0)
     plan = plan_poses(SCENE, identifier, 12, seed=0)
-    from calibration.regressor import predict
+    from ftc_hw.calibration.regressor import predict
 
     theta = np.concatenate([SCENE.sensor.bias, [PAYLOAD.mass], PAYLOAD.mass * np.array(PAYLOAD.com)])
     samples = []

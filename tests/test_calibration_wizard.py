@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration import load_calibration
+from ftc_hw.calibration import load_calibration
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
 
@@ -169,7 +169,7 @@ def test_jogging_a_ur_shows_the_live_joint_error_until_within_tolerance():
 
     from rich.console import Console
 
-    from calibration import DeviceSession
+    from ftc_hw.calibration import DeviceSession
     from ftc_hw.commands.calibrate import JOG_TOLERANCE, _jog
     from ftc_hw.scene import load_scene
 

@@ -10,7 +10,7 @@ from ftc_hw.detection import ContactDetector, chi2_isf6, chi2_sf6
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
-from sim_devices.world import Hold, Probe, ScenarioSetup, Sinusoid, World, build_scenario
+from ftc_hw.sim_devices.world import Hold, Probe, ScenarioSetup, Sinusoid, World, build_scenario
 
 from solver_cases import contacts
 

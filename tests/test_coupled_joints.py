@@ -7,7 +7,7 @@ import pytest
 
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import load_scene
-from sim_devices.world import Hold, Probe, ScenarioSetup, Sinusoid, World
+from ftc_hw.sim_devices.world import Hold, Probe, ScenarioSetup, Sinusoid, World
 
 RATIO = 0.015  # m of each finger per rad of the gripper servo
 SCENE = load_scene("dxl-arm")

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from arm_helpers import check_kill_and_restart, collect_events, kill_and_restart, wait_event
 
-from devices.arm_registry import make_arm_adapter
-from devices.base import DeviceError
-from devices.dynamixel import DynamixelArm
 from ftc_hw.bus import Bus
+from ftc_hw.devices.arm_registry import make_arm_adapter
+from ftc_hw.devices.base import DeviceError
+from ftc_hw.devices.dynamixel import DynamixelArm
 from ftc_hw.scene import load_scene
-from sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.world_process import WorldProcess
 
 SCENE = load_scene("dxl-arm")
 DEVICE = next(d for d in SCENE.devices if d.kind == "dynamixel")

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from dynamixel_sdk import port_handler
 
-from devices import dxl_table as T
+from ftc_hw.codecs import dxl_table as T
 from ftc_hw.scene import load_scene
-from sim_devices.dxl_protocol import PacketReader, packet, parse_status
-from sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.dxl_protocol import PacketReader, packet, parse_status
+from ftc_hw.sim_devices.world_process import WorldProcess
 
 ARM = next(d for d in load_scene("dxl-arm").devices if d.kind == "dynamixel").params
 IDS = ARM["ids"]  # 11-14 the joints, 15 the gripper

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from dynamixel_sdk.protocol2_packet_handler import Protocol2PacketHandler
 
-from devices import dxl_table as T
+from ftc_hw.codecs import dxl_table as T
 from ftc_hw.scene import load_scene
-from sim_devices.dxl_protocol import PacketReader, crc16, fast_status, packet, parse_status, status, unstuff
-from sim_devices.dynamixel import DxlBus, WorldPort, build_servos
+from ftc_hw.sim_devices.dxl_protocol import PacketReader, crc16, fast_status, packet, parse_status, status, unstuff
+from ftc_hw.sim_devices.dynamixel import DxlBus, WorldPort, build_servos
 
 # -- framing -------------------------------------------------------------------------------------------
 

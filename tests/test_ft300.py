@@ -10,8 +10,8 @@ import serial
 from pymodbus.client import ModbusSerialClient
 from pymodbus.framer.rtu import FramerRTU
 
-from devices.registry import make_adapter
 from ftc_hw.bus import Bus, WrenchFlag
+from ftc_hw.devices.registry import make_adapter
 
 from ft_helpers import SyntheticWorld, device, read_stats, start_emulator, wait_done, wait_for, wrench_of
 

@@ -6,10 +6,10 @@ import can
 import numpy as np
 import pytest
 
-from devices.can_ft import CanFTAdapter
-from devices.codecs.netft_can import OP_START, NetFTCodec
-from devices.registry import make_adapter
 from ftc_hw.bus import Bus, WrenchFlag
+from ftc_hw.codecs.netft_can import OP_START, NetFTCodec
+from ftc_hw.devices.can_ft import CanFTAdapter
+from ftc_hw.devices.registry import make_adapter
 
 from ft_helpers import (
     SyntheticWorld,

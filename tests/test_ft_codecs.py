@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymodbus.framer.rtu import FramerRTU
 
-from devices.codecs import (
+from ftc_hw.codecs import (
     AXES,
     FT300_MAP,
     FT300_STREAM,
@@ -24,10 +24,10 @@ from devices.codecs import (
     register_map,
     stream_format,
 )
-from devices.codecs import serial_can as scan
-from devices.codecs.modbus_frames import mbap_decode, mbap_encode, rtu_decode_request, rtu_encode
-from devices.codecs.netft_can import NetFTAssembler, NetFTCodec
-from devices.codecs.registers import IDENTITY_DECODERS, encode_identity
+from ftc_hw.codecs import serial_can as scan
+from ftc_hw.codecs.modbus_frames import mbap_decode, mbap_encode, rtu_decode_request, rtu_encode
+from ftc_hw.codecs.netft_can import NetFTAssembler, NetFTCodec
+from ftc_hw.codecs.registers import IDENTITY_DECODERS, encode_identity
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 FORMATS = [FT300_STREAM, FTC_1K]
@@ -162,7 +162,7 @@ def test_stream_format_tables():
     nan = bytearray(fmt.encode([1, 2, 3, 4, 5, 6]))
     nan[2:6] = struct.pack("<f", math.nan)
     nan[-1] = 0
-    from devices.codecs.checksums import xor8
+    from ftc_hw.codecs.checksums import xor8
     nan[-1] = xor8(bytes(nan[2:-1]))
     with pytest.raises(CodecError):
         fmt.decode(bytes(nan))

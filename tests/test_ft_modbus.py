@@ -6,10 +6,10 @@ import time
 import numpy as np
 import pytest
 
-from devices.codecs import AXES
-from devices.modbus_ft import ModbusFTAdapter
-from devices.registry import make_adapter
 from ftc_hw.bus import Bus, WrenchFlag
+from ftc_hw.codecs import AXES
+from ftc_hw.devices.modbus_ft import ModbusFTAdapter
+from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import DeviceSpec, load_scene
 
 from ft_helpers import SyntheticWorld, device, read_stats, start_emulator, wait_for, wrench_of
@@ -121,7 +121,7 @@ def test_ft300_polled_over_tcp_through_the_registry(tmp_path):
 def test_bad_configurations_are_reported():
     with pytest.raises(ValueError):
         ModbusFTAdapter("ft", Bus(), {"axes": []}, transport="modbus-tcp")
-    from devices.base import DeviceError
+    from ftc_hw.devices.base import DeviceError
     with pytest.raises(DeviceError):
         ModbusFTAdapter("ft", Bus(), "ft300", transport="modbus-rtu")  # no port
     with pytest.raises(DeviceError):

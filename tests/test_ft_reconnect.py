@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from devices.registry import make_adapter
 from ftc_hw.bus import Bus
+from ftc_hw.devices.registry import make_adapter
 
 from ft_helpers import SyntheticWorld, device, device_events, start_emulator, wait_for
 

@@ -12,16 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from devices.base import DeviceError
-from devices.can_ft import CanFTAdapter
-from devices.ft300 import FT300Adapter
-from devices.modbus_ft import ModbusFTAdapter
-from devices.registry import ADAPTERS, make_adapter
-from devices.serial_stream import SerialStreamFTAdapter
 from ftc_hw.bus import Bus
+from ftc_hw.devices.base import DeviceError
+from ftc_hw.devices.can_ft import CanFTAdapter
+from ftc_hw.devices.ft300 import FT300Adapter
+from ftc_hw.devices.modbus_ft import ModbusFTAdapter
+from ftc_hw.devices.registry import ADAPTERS, make_adapter
+from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 from ftc_hw.scene import DeviceSpec, load_scene
-from sim_devices.faults import FaultConfig, FaultInjector
-from sim_devices.registry import EMULATORS
+from ftc_hw.sim_devices.faults import FaultConfig, FaultInjector
+from ftc_hw.sim_devices.registry import EMULATORS
 
 from ft_helpers import wait_for
 
@@ -102,7 +102,7 @@ def test_ftc_sim_endpoint_line_to_adapter():
 
 
 def test_device_bench_runs_and_reports(tmp_path, capsys):
-    from devices.bench import run
+    from ftc_hw.devices.bench import run
 
     out = run(tmp_path / "bench.json", duration=1.0, sections=["modbus_tcp", "serial_1k"])
     assert "Modbus TCP polling" in capsys.readouterr().out

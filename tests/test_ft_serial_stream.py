@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 import serial
 
-from devices.codecs import FTC_1K, StreamParser
-from devices.registry import make_adapter
-from devices.serial_stream import SerialStreamFTAdapter
 from ftc_hw.bus import Bus, WrenchFlag
+from ftc_hw.codecs import FTC_1K, StreamParser
+from ftc_hw.devices.registry import make_adapter
+from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 
 from ft_helpers import (
     SyntheticWorld,

@@ -8,8 +8,8 @@ import numpy as np
 from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
-from sim_devices.world.scenarios import build_scenario
-from sim_devices.world.world import World
+from ftc_hw.sim_devices.world.scenarios import build_scenario
+from ftc_hw.sim_devices.world.world import World
 
 SCENE = load_scene("leng2016")
 WINDOW_S = 0.005

@@ -13,7 +13,7 @@ from ftc_hw.compensation import RecentPeak
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
-from sim_devices.world import World, build_scenario
+from ftc_hw.sim_devices.world import World, build_scenario
 
 SCENE = load_scene("ur5e")
 REVERSAL_S = 2.3  # the sweep's high end (0.3 s at rest, then a 4 s period)
@@ -101,7 +101,7 @@ def test_the_live_session_freezes_its_heap_against_collector_pauses():
     import gc
     import inspect
 
-    from devices.base import frozen_heap
+    from ftc_hw.devices.base import frozen_heap
     from ftc_hw.live import session
 
     before = gc.get_freeze_count()

@@ -11,10 +11,10 @@ import pytest
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.model.sampling import SurfacePoint, sample_local
 from ftc_hw.scene import load_scene
+from ftc_hw.sim_devices.world.scenarios import _cone, visible_filter
 from ftc_hw.solver import BatchEstimate, ContactEstimate, ContactSolver, flag_names, make_solver
 from ftc_hw.solver import geometry as G
 from ftc_hw.solver.leng2016 import Leng2016Solver, _inliers
-from sim_devices.world.scenarios import _cone, visible_filter
 
 from solver_cases import reading
 

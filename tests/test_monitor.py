@@ -9,8 +9,8 @@ from ftc_hw.bus import EVENTS_CONTACT, Bus
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
-from sim_devices.world import World, build_scenario
-from sim_devices.world.bus_feeder import WorldFeeder
+from ftc_hw.sim_devices.world import World, build_scenario
+from ftc_hw.sim_devices.world.bus_feeder import WorldFeeder
 
 
 def test_monitor_detects_the_collision_and_nothing_else():

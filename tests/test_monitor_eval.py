@@ -105,7 +105,7 @@ def test_the_cramer_rao_bound_of_a_truth_record():
     from ftc_hw.live.evaluate import crlb_of_truth
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
-    from sim_devices.world.truth import truth_record
+    from ftc_hw.sim_devices.world.truth import truth_record
 
     from solver_cases import contacts
 
@@ -146,7 +146,7 @@ def test_the_solvers_own_error_at_a_truth_record():
     from ftc_hw.live.evaluate import crlb_of_truth, solver_rms_of_truth
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
-    from sim_devices.world.truth import truth_record
+    from ftc_hw.sim_devices.world.truth import truth_record
 
     from solver_cases import contacts
 

@@ -18,7 +18,7 @@ from ftc_hw.live.evaluate import evaluate
 from ftc_hw.live.events import read_events, read_truth
 from ftc_hw.live.view import evaluation_table
 from ftc_hw.scene import load_scene
-from sim_devices.world.scenarios import sweep_trajectory
+from ftc_hw.sim_devices.world.scenarios import sweep_trajectory
 
 # Per-contact median point error of the unflagged estimates, mm: the solver's noisy static accuracy
 # (RMS: ur5e 5.6, dxl-arm 0.7, leng2016 0.7) grows while the arm moves (joint state interpolated
@@ -82,7 +82,7 @@ def test_reflex_stop_halts_the_arm_at_the_onset(tmp_path):
 
 
 def test_a_calibration_file_replaces_the_tare_and_goes_into_the_recording(tmp_path):
-    from calibration.file import Calibration, now_iso, save_calibration
+    from ftc_hw.calibration.file import Calibration, now_iso, save_calibration
     from ftc_hw.record.reader import read_recording
 
     scene = load_scene("dxl-arm")

@@ -1,4 +1,4 @@
-"""``readahead://<port>`` (devices.serial_urls): the port read through a buffer, for python-can's
+"""``readahead://<port>`` (ftc_hw.devices.serial_urls): the port read through a buffer, for python-can's
 byte-by-byte serial parser. Same bytes in the same order as written, however they are split;
 timeouts, a reset and a vanished device as on the plain port."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from devices import serial_urls
+from ftc_hw.devices import serial_urls
 
 
 @pytest.fixture
@@ -49,7 +49,7 @@ def test_the_bytes_come_back_in_order_however_split(data, writes, reads):
     try:
         make_raw(name)
         with open_port(name, timeout=0.05) as port:
-            assert type(port).__module__ == "devices.serial_urls.protocol_readahead"
+            assert type(port).__module__ == "ftc_hw.devices.serial_urls.protocol_readahead"
             i = 0
             k = 0
             while i < len(data):

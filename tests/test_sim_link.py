@@ -6,7 +6,7 @@ import socket
 
 import pytest
 
-from sim_devices.link import Command, CommandLinkError, EmulatorSide, LinkInfo, WorldLink
+from ftc_hw.sim_devices.link import Command, CommandLinkError, EmulatorSide, LinkInfo, WorldLink
 
 GOAL = Command("arm", "goal", q=(0.1, -1.05, 0.35 + 1e-12, 0.7), extra={"t_rx_ns": 123})
 

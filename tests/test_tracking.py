@@ -10,8 +10,8 @@ import pytest
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
+from ftc_hw.sim_devices.world.scenarios import _ray_to_surface
 from ftc_hw.tracking import ContactTrack
-from sim_devices.world.scenarios import _ray_to_surface
 
 SCENE = load_scene("ur5e")
 MODEL = ArmModel(SCENE)

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from arm_helpers import check_kill_and_restart, collect_events, kill_and_restart
 
-from devices.arm_registry import make_arm_adapter
-from devices.base import DeviceError
-from devices.ur import DashboardLink, URArm, probe_rtde
 from ftc_hw.bus import Bus, JointFlag
+from ftc_hw.devices.arm_registry import make_arm_adapter
+from ftc_hw.devices.base import DeviceError
+from ftc_hw.devices.ur import DashboardLink, URArm, probe_rtde
 from ftc_hw.scene import load_scene
-from sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.world_process import WorldProcess
 
 ADDRESS = "127.0.0.43"
 SCENE = load_scene("ur5e")

@@ -15,10 +15,10 @@ import rtde_receive
 
 from ftc_hw.model import ArmModel
 from ftc_hw.scene import load_scene
-from sim_devices import ur_data as D
-from sim_devices.ur import Emulator
-from sim_devices.ur_model import rotation_vector
-from sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices import ur_data as D
+from ftc_hw.sim_devices.ur import Emulator
+from ftc_hw.sim_devices.ur_model import rotation_vector
+from ftc_hw.sim_devices.world_process import WorldProcess
 
 ADDRESS = "127.0.0.41"
 SCENE = load_scene("ur5e")

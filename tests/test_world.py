@@ -8,8 +8,8 @@ import pytest
 
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import builtin_names, load_scene
-from sim_devices.world import SCENARIOS, World, build_scenario, truth_record
-from sim_devices.world.sensor_model import FTSensorModel
+from ftc_hw.sim_devices.world import SCENARIOS, World, build_scenario, truth_record
+from ftc_hw.sim_devices.world.sensor_model import FTSensorModel
 
 
 def _world(scene_name, scenario, duration, seed=3, noise=False):

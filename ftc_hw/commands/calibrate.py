@@ -136,7 +136,7 @@ def run_calibrate(scene_name: str, *, sim: bool, sim_payload: str | None, intera
                   out: Path | None, json_path: Path | None, sample_s: float = 1.0, seed: int = 0,
                   yaw: bool = False, tilt: bool = False, arm_gravity: bool = False, expected_mass: float = 0.5,
                   speed: float = 1.0) -> int:
-    from calibration import (
+    from ftc_hw.calibration import (
         CalibrationError,
         DeviceSession,
         FitOptions,
@@ -148,8 +148,8 @@ def run_calibrate(scene_name: str, *, sim: bool, sim_payload: str | None, intera
         save_calibration,
         take_sample,
     )
-    from calibration.session import SessionError
-    from devices.base import DeviceError
+    from ftc_hw.calibration.session import SessionError
+    from ftc_hw.devices.base import DeviceError
 
     from ..model import ArmModel
 
@@ -269,7 +269,7 @@ def run_calibrate(scene_name: str, *, sim: bool, sim_payload: str | None, intera
 
 def _jog(console: Console, session, q_goal: np.ndarray) -> None:
     """A person jogs the arm: show the live joint error until it is within tolerance and held."""
-    from calibration.acquire import pose_error
+    from ftc_hw.calibration.acquire import pose_error
 
     console.print("jog the arm to this pose (teach pendant); the error updates live")
     held_since = None

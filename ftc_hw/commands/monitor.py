@@ -22,7 +22,7 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
         typer.echo(f"error: --level: scene, bias, gravity or dynamics, got {level!r}", err=True)
         return 2
     if sim:
-        from sim_devices.world import SCENARIOS
+        from ftc_hw.sim_devices.world import SCENARIOS
 
         if scenario not in SCENARIOS:
             typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)

@@ -13,7 +13,7 @@ from .common import scene_or_exit
 
 
 def list_scenarios() -> None:
-    from sim_devices.world import SCENARIOS
+    from ftc_hw.sim_devices.world import SCENARIOS
 
     for info in SCENARIOS.values():
         typer.echo(f"{info.name:22s} {info.description}")
@@ -21,8 +21,8 @@ def list_scenarios() -> None:
 
 def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: Path | None,
             realtime: bool, noise: bool, devices: bool = True) -> None:
-    from sim_devices.runner import EmulatorStartError, SimRunner
-    from sim_devices.world import SCENARIOS, TruthWriter
+    from ftc_hw.sim_devices.runner import EmulatorStartError, SimRunner
+    from ftc_hw.sim_devices.world import SCENARIOS, TruthWriter
 
     scene = scene_or_exit(scene_name)
     if scenario not in SCENARIOS:

@@ -48,8 +48,8 @@ def arm_rate(scene: Scene) -> float:
 
 
 def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int) -> Recording:
-    from sim_devices.world import World
-    from sim_devices.world.scenarios import SCENARIOS
+    from ftc_hw.sim_devices.world import World
+    from ftc_hw.sim_devices.world.scenarios import SCENARIOS
 
     model = ArmModel(scene)
     rng = np.random.default_rng(seed)

@@ -39,8 +39,8 @@ EXACT_CHI2 = 1e-6  # a noise-free crossing fits the wrench exactly
 def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | None = None) -> dict:
     """Counts and shares over the two-link cases among ``n_cases`` sampled contacts (stopping early
     once ``max_discriminable`` discriminable ones were seen)."""
-    from sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
-    from sim_devices.world.scenarios import sample_contacts
+    from ftc_hw.sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
+    from ftc_hw.sim_devices.world.scenarios import sample_contacts
 
     scene = load_scene(scene_name)
     model = ArmModel(scene)

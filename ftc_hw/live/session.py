@@ -67,7 +67,7 @@ class MonitorOutcome:
 def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any], dict[str, str]]:
     """``(pipeline kwargs, MCAP metadata)`` of a calibration file (issue 7's ``load_calibration``)."""
     try:
-        from calibration.file import load_calibration
+        from ftc_hw.calibration.file import load_calibration
     except ImportError as exc:
         raise MonitorSetupError(f"--calibration: the calibration package cannot load files ({exc})") from None
     try:
@@ -140,8 +140,8 @@ class StopReflex:
 
 
 def _devices(scene: Scene, sim: bool):
-    from devices.arm_registry import ARM_ADAPTERS
-    from devices.registry import ADAPTERS
+    from ftc_hw.devices.arm_registry import ARM_ADAPTERS
+    from ftc_hw.devices.registry import ADAPTERS
 
     ft = next((d for d in scene.devices if d.kind in ADAPTERS), None)
     arm = next((d for d in scene.devices if d.kind in ARM_ADAPTERS), None)
@@ -173,7 +173,7 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
         console.print(f"[yellow]warning[/]: {cfg.calibration} also fitted {cal_meta['unapplied']}; the pipeline "
                       "applies its bias and payload only: if these matter, correct the scene (the sensor site's "
                       "orientation, the gravity vector, the link masses)")
-    from devices.base import responsive_readers
+    from ftc_hw.devices.base import responsive_readers
 
     with responsive_readers():  # readers that poll, and the reflex, while the pipeline computes
         return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out)
@@ -181,9 +181,9 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
 
 def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, cal_kwargs: dict[str, Any],
          cal_meta: dict[str, str] | None, out: MonitorOutcome) -> MonitorOutcome:
-    from devices.arm_registry import make_arm_adapter
-    from devices.base import frozen_heap
-    from devices.registry import make_adapter
+    from ftc_hw.devices.arm_registry import make_arm_adapter
+    from ftc_hw.devices.base import frozen_heap
+    from ftc_hw.devices.registry import make_adapter
     from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 
     with contextlib.ExitStack() as stack:

@@ -1,5 +1,5 @@
 """What ``ftc monitor --sim`` connects to: the scene's physics world and its protocol emulators (the
-code ``ftc sim`` runs, :class:`~sim_devices.runner.SimRunner`) in a child process, one more process
+code ``ftc sim`` runs, :class:`~ftc_hw.sim_devices.runner.SimRunner`) in a child process, one more process
 per emulator.
 
 The world is built and its emulators started, then it runs in real time holding the scenario's start
@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from devices.base import Adapter
 from ftc_hw.bus import Bus, JointFrame, joints_topic
+from ftc_hw.devices.base import Adapter
 from ftc_hw.scene import Scene
 
 UR_PORTS = (30004, 29999)  # RTDE (hard-coded by ur_rtde) and dashboard
@@ -67,8 +67,8 @@ class _Go(Exception):
 
 def _main(conn, scene: Scene, scenario: str, duration: float, seed: int, noise: bool, truth: str | None,
           options: dict) -> None:
-    from sim_devices.runner import SimRunner
-    from sim_devices.world import Hold, truth_record
+    from ftc_hw.sim_devices.runner import SimRunner
+    from ftc_hw.sim_devices.world import Hold, truth_record
 
     try:
         runner = SimRunner(scene, scenario, duration=duration, seed=seed, noise=noise, options=options)
@@ -239,7 +239,7 @@ class SimJointSource(Adapter):
         self._seq = 0
 
     def _connect(self) -> None:
-        from sim_devices.link import Ring, RingReader, joint_width
+        from ftc_hw.sim_devices.link import Ring, RingReader, joint_width
 
         # attached, not owned (Ring does not register it with the resource tracker): closing it
         # never unlinks the world's ring

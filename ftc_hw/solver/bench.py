@@ -42,7 +42,7 @@ FRICTION_CONE_DEG = 45.0  # forces within a friction cone of coefficient 1: what
 
 
 def _contacts(model: ArmModel, q, n: int, rng: np.random.Generator):
-    from sim_devices.world.scenarios import sample_contacts
+    from ftc_hw.sim_devices.world.scenarios import sample_contacts
 
     return sample_contacts(model, q, n, rng, FRICTION_CONE_DEG, (5.0, 200.0))
 

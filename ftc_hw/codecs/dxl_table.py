@@ -1,6 +1,6 @@
 """DYNAMIXEL X-series (Protocol 2.0) control table and servo models, as data.
 
-Shared by the arm adapter (``devices.dynamixel``) and the emulator (``sim_devices.dynamixel``).
+Shared by the arm adapter (``ftc_hw.devices.dynamixel``) and the emulator (``ftc_hw.sim_devices.dynamixel``).
 Source: ROBOTIS e-manual, XM430-W350 and XM430-W210 pages, "Control Table"
 (https://emanual.robotis.com/docs/en/dxl/x/xm430-w350/#control-table, .../xm430-w210/), and the
 Protocol 2.0 page (https://emanual.robotis.com/docs/en/dxl/protocol2/) for instructions and errors.

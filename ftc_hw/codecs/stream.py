@@ -21,7 +21,7 @@ carried but ignored. Two formats ship:
     33     2    crc       CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF) over bytes 2-32, LE
 
 :meth:`StreamFormat.decode` does no I/O: bytes in, ``(consumed, sample or None)`` out, or a typed
-:class:`~devices.codecs.errors.CodecError` whose ``consumed`` says how far to skip.
+:class:`~ftc_hw.codecs.errors.CodecError` whose ``consumed`` says how far to skip.
 """
 from __future__ import annotations
 
