@@ -8,14 +8,26 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
-from .samples import PoseSample
-from .session import DeviceSession
+from ftc_hw.scene import Scene
+
+from .samples import PoseSample, Window
 from .stillness import StillnessGate
 
 SETTLE_WINDOW_S = 0.3
+
+
+class WindowSource(Protocol):
+    """What a pose's sampling needs of the devices (the wizard's device session is one)."""
+
+    scene: Scene
+
+    def collect(self, duration: float, progress: Callable[[float], None] | None = None) -> Window: ...
+
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 @dataclass
@@ -25,7 +37,7 @@ class PoseResult:
     sim_t: tuple[float, float] | None = None
 
 
-def wait_still(session: DeviceSession, gate: StillnessGate, timeout: float,
+def wait_still(session: WindowSource, gate: StillnessGate, timeout: float,
                status: Callable[[str, float], None] | None = None) -> str | None:
     """Block until a settle window is still; None when it is, else the last reason at the timeout."""
     t0 = time.monotonic()
@@ -42,7 +54,7 @@ def wait_still(session: DeviceSession, gate: StillnessGate, timeout: float,
     return reason
 
 
-def take_sample(session: DeviceSession, gate: StillnessGate, duration: float, *, attempts: int = 4,
+def take_sample(session: WindowSource, gate: StillnessGate, duration: float, *, attempts: int = 4,
                 settle_timeout: float = 15.0, progress: Callable[[str, float], None] | None = None) -> PoseResult:
     out = PoseResult(None)
     for _ in range(attempts):
@@ -65,6 +77,6 @@ def take_sample(session: DeviceSession, gate: StillnessGate, duration: float, *,
     return out
 
 
-def pose_error(session: DeviceSession, q_goal: np.ndarray) -> np.ndarray:
+def pose_error(session: WindowSource, q_goal: np.ndarray) -> np.ndarray:
     q, _ = session.joint_state()
     return q - np.asarray(q_goal, dtype=float)

@@ -1,4 +1,5 @@
-"""One static pose's data: the mean reading while the arm held still, and how still it was."""
+"""One static pose's data: the raw samples of a collection window, and the mean reading while the arm
+held still, with how still it was."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -34,3 +35,26 @@ class PoseSample:
         t_mid = float(np.mean(t))
         return cls(q=q.mean(axis=0), wrench=w.mean(axis=0), wrench_std=w.std(axis=0, ddof=1), n=len(w),
                    qd_max=qd_max, t=t_mid)
+
+
+@dataclass
+class Window:
+    """Raw samples over one collection window."""
+
+    wrench: np.ndarray  # (N, 6)
+    t: np.ndarray  # (N,) host s
+    q: np.ndarray  # (k, n)
+    qd: np.ndarray  # (k, n)
+    sim_t: tuple[float, float] | None = None  # world time at the start and end (sim only)
+    duration: float = 0.0
+
+    def gap(self, rate_hz: float) -> str | None:
+        """Why the window is not a complete record (a device dropped out and is reconnecting), or None."""
+        expected = self.duration * rate_hz
+        if len(self.q) == 0 or len(self.wrench) < 0.8 * expected:
+            return (f"data interrupted ({len(self.wrench)} of ~{expected:.0f} F/T frames, {len(self.q)} joint "
+                    "frames): waiting for the devices")
+        return None
+
+    def sample(self) -> PoseSample:
+        return PoseSample.from_arrays(self.q, self.wrench, self.qd, self.t)

@@ -2,7 +2,7 @@
 
 import json
 
-from ftc_hw.bus.bench import run
+from ftc_hw.bench.bus import run
 
 
 def test_bench_writes_json_with_all_figures(tmp_path, capsys):

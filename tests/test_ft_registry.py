@@ -102,7 +102,7 @@ def test_ftc_sim_endpoint_line_to_adapter():
 
 
 def test_device_bench_runs_and_reports(tmp_path, capsys):
-    from ftc_hw.devices.bench import run
+    from ftc_hw.bench.devices import run
 
     out = run(tmp_path / "bench.json", duration=1.0, sections=["modbus_tcp", "serial_1k"])
     assert "Modbus TCP polling" in capsys.readouterr().out

@@ -734,7 +734,7 @@ def test_surface_normal_matches_crossings(kind: str) -> None:
 
 
 def test_bench_runs() -> None:
-    from ftc_hw.solver.geometry_bench import bench
+    from ftc_hw.bench.geometry import bench
 
     r = bench(2000, repeat=1)
     assert set(r) == set(KINDS) and all(v["intersect"] > 0 for v in r.values())

@@ -101,8 +101,8 @@ def test_the_live_session_freezes_its_heap_against_collector_pauses():
     import gc
     import inspect
 
+    from ftc_hw.app import session
     from ftc_hw.devices.base import frozen_heap
-    from ftc_hw.live import session
 
     before = gc.get_freeze_count()
     with frozen_heap():

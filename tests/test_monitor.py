@@ -47,7 +47,7 @@ def test_monitor_detects_the_collision_and_nothing_else():
 def test_calibration_fits_the_pipeline_does_not_apply_are_named():
     """A calibration that also fitted a mount yaw and a gravity tilt: the monitor applies bias and
     payload only, so it names the rest (shown as a warning) instead of dropping them silently."""
-    from ftc_hw.live.session import unapplied_calibration
+    from ftc_hw.app.session import unapplied_calibration
 
     assert unapplied_calibration({}) == ""
     assert unapplied_calibration({"mount_yaw": 0.0}) == ""

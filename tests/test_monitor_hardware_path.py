@@ -9,7 +9,7 @@ import subprocess
 import sys
 from importlib import resources
 
-from ftc_hw.live.events import read_events
+from ftc_hw.record.events import read_events
 from ftc_hw.record.reader import read_recording
 
 

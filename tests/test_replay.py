@@ -9,8 +9,8 @@ import sys
 import pytest
 from mcap.reader import make_reader
 
-from ftc_hw.live.events import read_events
 from ftc_hw.monitor import MONITOR_INPUT
+from ftc_hw.record.events import read_events
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import pipeline_kwargs_from_json, replay
 

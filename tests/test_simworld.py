@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import time
 
-from ftc_hw.live.events import read_truth
-from ftc_hw.live.simworld import SimWorld
+from ftc_hw.app.simworld import SimWorld
+from ftc_hw.record.events import read_truth
 from ftc_hw.scene import load_scene
 
 

@@ -9,10 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ftc_hw.bench.solver import median_abs_normal
 from ftc_hw.model import ArmModel
 from ftc_hw.scene import load_scene
 from ftc_hw.solver import make_solver
-from ftc_hw.solver.bench import crlb_magnitude_std, median_abs_normal
+from ftc_hw.solver.bound import crlb_magnitude_std
 from tests.solver_cases import contacts, reading
 
 

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent
-from ftc_hw.live.events import event_record
 from ftc_hw.model import Payload
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
+from ftc_hw.record.events import event_record
 from ftc_hw.scene import Scene, SceneError, load_scene
 
 from .reader import Recording

@@ -150,7 +150,7 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
              early_s: float = 0.001, late_s: float = 0.05,
              crlb: Callable[[dict[str, Any]], float | None] | None = None,
              solver_rms: Callable[[dict[str, Any]], float | None] | None = None) -> Evaluation:
-    """``events``: event records (:func:`ftc_hw.live.events.event_record`); ``truth``: truth records
+    """``events``: event records (:func:`ftc_hw.record.events.event_record`); ``truth``: truth records
     with ``t_host_ns``; ``crlb``: the Cramer-Rao bound (mm) of a truth record's contact
     (:func:`crlb_of_truth`), to set each contact's error against what the sensor noise allows;
     ``solver_rms``: the solver's own RMS error (mm) there under that noise (:func:`solver_rms_of_truth`)."""
@@ -245,8 +245,8 @@ def _reading_of_truth(scene) -> Callable[[dict[str, Any]], tuple | None]:
     """For a truth record in contact: (solver, q, its noise-free compensated reading, the solver's
     estimate of it, the true point); None when the estimate does not give back the true point (below
     the noise floor, or another link's crossing ranked first)."""
-    from ..model import ArmModel, Contact
-    from ..solver import ContactSolver
+    from ftc_hw.model import ArmModel, Contact
+    from ftc_hw.solver import ContactSolver
 
     model = ArmModel(scene)
     solver = ContactSolver(model)
@@ -275,7 +275,7 @@ def crlb_of_truth(scene) -> Callable[[dict[str, Any]], float | None]:
     estimates of it that come unflagged are scored against it."""
     import math
 
-    from ..solver.bench import crlb_point_cov
+    from ftc_hw.solver.bound import crlb_point_cov
 
     reading = _reading_of_truth(scene)
 

@@ -24,10 +24,9 @@ from typing import Any
 import numpy as np
 
 from ftc_hw.bus import Bus
+from ftc_hw.devices.base import DeviceError
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world_process import WorldProcess
-
-from .base import DeviceError
 
 UR_ADDRESS = "127.0.0.61"
 
@@ -153,7 +152,7 @@ def _adapter_rate(bus: Bus, topic: str, seconds: float) -> dict[str, float]:
 def bench_ur(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any]:
     import rtde_receive
 
-    from .arm_registry import make_arm_adapter
+    from ftc_hw.devices.arm_registry import make_arm_adapter
 
     scene = load_scene("ur5e")
     device = next(d for d in scene.devices if d.kind == "ur-rtde")
@@ -227,7 +226,7 @@ def _mover(world: WorldProcess, adapter: Any, scene: Any) -> Any:
 def bench_dxl(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any]:
     import dynamixel_sdk as sdk
 
-    from .arm_registry import make_arm_adapter
+    from ftc_hw.devices.arm_registry import make_arm_adapter
 
     scene = load_scene("dxl-arm")
     device = next(d for d in scene.devices if d.kind == "dynamixel")
@@ -318,13 +317,13 @@ def run(json_path: str | Path | None = None, duration: float = 60.0, stops: int 
 
     from rich.table import Table
 
-    from ftc_hw.report import table_console
+    from ftc_hw.bench.report import table_console
 
     console = table_console()
     load = os.getloadavg()
     console.print(f"[bold]arm adapters[/bold]: UR receive for {duration:g} s, {stops} stops per arm, then the rest; "
                   f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs")
-    from .base import frozen_heap, responsive_readers
+    from ftc_hw.devices.base import frozen_heap, responsive_readers
 
     with responsive_readers(), frozen_heap():  # as the monitor runs the adapters and their reflex
         ur = bench_ur(duration, stops)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import typer
 
-from ..scene import Scene, SceneError, load_scene
+from ftc_hw.scene import Scene, SceneError, load_scene
 
 
 def scene_or_exit(name: str) -> Scene:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import typer
 
-from .common import scene_or_exit
+from ftc_hw.cli.common import scene_or_exit
 
 
 def list_scenarios() -> None:

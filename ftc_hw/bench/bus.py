@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from .bus import Bus
-from .frames import JointFrame, WrenchFrame
+from ftc_hw.bus.bus import Bus
+from ftc_hw.bus.frames import JointFrame, WrenchFrame
 
 __all__ = ["run"]
 

@@ -12,33 +12,31 @@ import time
 from pathlib import Path
 
 import numpy as np
-import typer
 from rich.console import Console
 from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.prompt import Confirm
 from rich.table import Table
 
-from ..model import Payload
-from .common import scene_or_exit
+from ftc_hw.calibration import (
+    CalibrationError,
+    FitOptions,
+    GeometryModel,
+    Identifier,
+    StillnessGate,
+    calibration_from_fit,
+    plan_poses,
+    save_calibration,
+    take_sample,
+)
+from ftc_hw.calibration.acquire import pose_error
+from ftc_hw.devices.base import DeviceError
+from ftc_hw.model import ArmModel, Payload
+from ftc_hw.scene import Scene
+
+from .calibration_session import DeviceSession, SessionError
 
 JOG_TOLERANCE = 0.01  # rad: how close a jogged UR must be to the planned pose
-
-
-def parse_sim_payload(text: str) -> Payload:
-    """``mass=KG,com=X,Y,Z`` (m, flange frame)."""
-    try:
-        head, _, com = text.partition(",com=")
-        key, _, mass = head.partition("=")
-        if key.strip() != "mass" or not com:
-            raise ValueError
-        c = [float(x) for x in com.split(",")]
-        if len(c) != 3:
-            raise ValueError
-        return Payload(float(mass), (c[0], c[1], c[2]))
-    except ValueError as exc:
-        raise typer.BadParameter(f"expected mass=KG,com=X,Y,Z (a positive mass, 3 numbers in m), got {text!r}"
-                                 + (f": {exc}" if str(exc) else ""), param_hint="--sim-payload") from None
 
 
 def _fmt(v: float, scale: float, digits: int) -> str:
@@ -132,32 +130,14 @@ def _ask(console: Console, interactive: bool, question: str, default: bool = Tru
     return Confirm.ask(question, console=console, default=default)
 
 
-def run_calibrate(scene_name: str, *, sim: bool, sim_payload: str | None, interactive: bool, poses: int,
+def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, interactive: bool, poses: int,
                   out: Path | None, json_path: Path | None, sample_s: float = 1.0, seed: int = 0,
                   yaw: bool = False, tilt: bool = False, arm_gravity: bool = False, expected_mass: float = 0.5,
                   speed: float = 1.0) -> int:
-    from ftc_hw.calibration import (
-        CalibrationError,
-        DeviceSession,
-        FitOptions,
-        GeometryModel,
-        Identifier,
-        StillnessGate,
-        calibration_from_fit,
-        plan_poses,
-        save_calibration,
-        take_sample,
-    )
-    from ftc_hw.calibration.session import SessionError
-    from ftc_hw.devices.base import DeviceError
-
-    from ..model import ArmModel
-
+    """The wizard on ``scene``'s devices (``sim``: emulated, hiding ``sim_payload``, default 0.5 kg 5 cm
+    out along the flange's z). Returns the exit code (module docstring)."""
     console = Console()
-    scene = scene_or_exit(scene_name)
-    payload = parse_sim_payload(sim_payload) if sim_payload else None
-    if payload is not None and not sim:
-        raise typer.BadParameter("--sim-payload needs --sim", param_hint="--sim-payload")
+    payload = sim_payload
     if sim and payload is None:
         payload = Payload(0.5, (0.0, 0.0, 0.05))
     out = out or Path(f"calibration-{scene.name}.toml")
@@ -269,8 +249,6 @@ def run_calibrate(scene_name: str, *, sim: bool, sim_payload: str | None, intera
 
 def _jog(console: Console, session, q_goal: np.ndarray) -> None:
     """A person jogs the arm: show the live joint error until it is within tolerance and held."""
-    from ftc_hw.calibration.acquire import pose_error
-
     console.print("jog the arm to this pose (teach pendant); the error updates live")
     held_since = None
     with Live(console=console, refresh_per_second=10, transient=True) as live:

@@ -31,10 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model import ArmModel, Contact
-from ..scene import builtin_names, load_scene
-from . import kernels as K
-from . import make_solver
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.scene import builtin_names, load_scene
+from ftc_hw.solver import make_solver
+from ftc_hw.solver.bound import crlb_magnitude_std, crlb_point_cov
 
 CHI2_2DOF_95 = 5.991464547107979
 BATCH_RUNS = 5
@@ -59,34 +59,6 @@ def _scene_cases(name: str, n: int, seed: int):
                       for sp, f in cases])
     noisy = clean + rng.normal(size=clean.shape) * np.sqrt(np.diag(scene.sensor.noise_cov))
     return scene, model, q, cases, clean, noisy
-
-
-def _crlb(solver, point, normal, force) -> tuple[np.ndarray, np.ndarray]:
-    """Cramer-Rao bound (J^T W J)^-1 at the truth for the 6-D wrench measurement with the point
-    constrained to the surface, over (two tangent coordinates, force); and the tangent basis."""
-    t1, t2 = np.empty(3), np.empty(3)
-    K._tangent_basis(np.asarray(normal, dtype=float), t1, t2)
-    jac = np.empty((6, 5))
-    K._jacobian(np.asarray(point, dtype=float), np.asarray(force, dtype=float), t1, t2, jac)
-    return np.linalg.inv(jac.T @ solver._W0 @ jac), np.stack([t1, t2], axis=1)
-
-
-def crlb_point_cov(solver, point, normal, force) -> np.ndarray:
-    """Cramer-Rao bound of the contact point (3x3, base frame, rank 2)."""
-    cov, tb = _crlb(solver, point, normal, force)
-    return tb @ cov[:2, :2] @ tb.T
-
-
-def crlb_magnitude_std(solver, point, normal, force) -> tuple[float, float]:
-    """Standard deviations (N) of the force magnitude: at the Cramer-Rao bound, and from the force
-    reading alone (|f_measured|, the paper's magnitude). They differ only where the moment tells
-    something about the force's scale: where the point's constraint is not perpendicular to the
-    force in the noise's metric. With isotropic force noise they are equal, and no unbiased
-    estimator from this wrench can beat |f_measured| on magnitude."""
-    cov, _ = _crlb(solver, point, normal, force)
-    u = np.asarray(force, dtype=float) / np.linalg.norm(force)
-    force_only = np.linalg.inv(solver._W0)[:3, :3]
-    return math.sqrt(float(u @ cov[2:, 2:] @ u)), math.sqrt(float(u @ force_only @ u))
 
 
 def median_abs_normal(std: np.ndarray) -> float:
@@ -204,7 +176,7 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
     results as ``magnitude_vs_force_reading``."""
     from rich.table import Table
 
-    from ..report import table_console
+    from ftc_hw.bench.report import table_console
 
     console = table_console()
     results: dict = {"noise_free": {}, "noisy": {}}

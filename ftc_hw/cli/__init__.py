@@ -1,4 +1,4 @@
-"""The ``ftc`` command. Subcommands live in ``ftc_hw/commands``; heavy imports happen inside them."""
+"""The ``ftc`` command. Subcommands live in ``ftc_hw/cli``; heavy imports happen inside them."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,7 +6,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from . import __version__
+from ftc_hw import __version__
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
                   help="ftc-hw: where, in which direction and how hard a robot arm was touched, "
@@ -32,7 +32,7 @@ def main(
 @app.command()
 def scenes() -> None:
     """List the built-in scenes, one line each."""
-    from .commands.scenes import list_scenes
+    from ftc_hw.cli.scenes import list_scenes
 
     list_scenes()
 
@@ -51,7 +51,7 @@ def sim(
                                           help="Start the scene's device emulators.")] = True,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth."""
-    from .commands.sim import list_scenarios, run_sim
+    from ftc_hw.cli.sim import list_scenarios, run_sim
 
     if list_:
         list_scenarios()
@@ -70,7 +70,7 @@ def solve(
     bias: Annotated[Optional[str], typer.Option(help="Sensor bias to subtract, JSON list of 6 (N, N m).")] = None,  # noqa: UP045
 ) -> None:
     """Localize contacts: one JSON line in ({"q", "wrench", ...}), one estimate or error line out."""
-    from .commands.solve import run_solve
+    from ftc_hw.cli.solve import run_solve
 
     if method not in ("ours", "leng2016"):
         raise typer.BadParameter("ours or leng2016", param_hint="--method")
@@ -83,7 +83,7 @@ def bench_bus(
     frames: Annotated[int, typer.Option(min=1000, help="Frames per throughput run.")] = 200_000,
 ) -> None:
     """Bus throughput (publish to deliver, 1 and 4 subscribers) and sample_at latency."""
-    from .bus.bench import run
+    from ftc_hw.bench.bus import run
 
     run(json_path=json_path, frames=frames)
 
@@ -97,7 +97,7 @@ def demo(
     record: Annotated[Optional[Path], typer.Option(help="Also record the run to this MCAP file.")] = None,  # noqa: UP045
 ) -> None:
     """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
-    from .commands.demo import run_demo
+    from ftc_hw.cli.demo import run_demo
 
     raise typer.Exit(run_demo(scene, scenario, duration, seed, record))
 
@@ -123,7 +123,7 @@ def monitor(
                                        "scene (the level the scene file declares).")] = "dynamics",
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
-    from .commands.monitor import run_monitor_command
+    from ftc_hw.cli.monitor import run_monitor_command
 
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record, reflex, events,
                                          truth, noise, view, level))
@@ -139,7 +139,7 @@ def replay(
     view: Annotated[bool, typer.Option("--view/--no-view", help="The live view (with --speed > 0).")] = True,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
-    from .commands.replay import run_replay
+    from ftc_hw.cli.replay import run_replay
 
     raise typer.Exit(run_replay(path, speed, events, calibration, check, view))
 
@@ -159,7 +159,7 @@ def bench_solver(
                     "'magnitude_vs_force_reading'.")] = 0,
 ) -> None:
     """Solver accuracy (noise-free and with the scene's noise) against latency, ours vs leng2016."""
-    from .solver.bench import run
+    from ftc_hw.bench.solver import run
 
     methods = tuple(method or ("ours", "leng2016"))
     if not set(methods) <= {"ours", "leng2016"}:
@@ -179,7 +179,7 @@ def bench_compensation(
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
 ) -> None:
     """Compensation levels on moving sweeps: free-motion error, false alarms, detection delay, cost."""
-    from .compensation.bench import run
+    from ftc_hw.bench.compensation import run
 
     run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene)
 
@@ -192,7 +192,7 @@ def bench_isolation(
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: ur5e, dxl-arm).")] = None,  # noqa: UP045
 ) -> None:
     """Link isolation by motor currents when the force line crosses two links: right, flagged, wrong."""
-    from .compensation.isolation_bench import run
+    from ftc_hw.bench.isolation import run
 
     run(json_path=json_path, cases=cases, seed=seed, scenes=scene)
 
@@ -203,7 +203,7 @@ def bench_devices(
     duration: Annotated[float, typer.Option(min=1.0, help="Seconds per streaming run.")] = 60.0,
 ) -> None:
     """F/T adapters against their emulators: rates, loss, corruption, reconnects."""
-    from ftc_hw.devices.bench import run
+    from ftc_hw.bench.devices import run
 
     run(json_path=json_path, duration=duration)
 
@@ -215,7 +215,7 @@ def bench_arms(
     stops: Annotated[int, typer.Option(min=1, help="stop() calls per arm.")] = 200,
 ) -> None:
     """Arm adapters against their emulators: RTDE rate and accuracy, Dynamixel reads, stop, reconnects."""
-    from ftc_hw.devices.arm_bench import run
+    from ftc_hw.bench.arms import run
 
     run(json_path=json_path, duration=duration, stops=stops)
 
@@ -241,9 +241,9 @@ def calibrate(
     speed: Annotated[float, typer.Option(min=0.05, max=3.0, help="Peak joint speed of the moves, rad/s.")] = 1.0,
 ) -> None:
     """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
-    from .commands.calibrate import run_calibrate
+    from .calibrate import run_calibrate_command
 
-    raise typer.Exit(run_calibrate(scene, sim=sim, sim_payload=sim_payload, interactive=not non_interactive,
+    raise typer.Exit(run_calibrate_command(scene, sim=sim, sim_payload=sim_payload, interactive=not non_interactive,
                                    poses=poses, out=out, json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw,
                                    tilt=tilt, arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
 

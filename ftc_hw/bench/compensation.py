@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model import ArmModel
-from ..pipeline import ContactPipeline
-from ..scene import COMPENSATION_LEVELS, Scene, builtin_names, load_scene
+from ftc_hw.model import ArmModel
+from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.scene import COMPENSATION_LEVELS, Scene, builtin_names, load_scene
 
 SPEEDS = (0.5, 1.0, 2.0)
 TARE_FROM_S, TARE_S = 0.15, 0.1  # inside the sweeps' initial rest (SWEEP_REST_S = 0.3 s)
@@ -148,7 +148,7 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, minutes: f
         scenes: list[str] | None = None, speeds: tuple[float, ...] = SPEEDS) -> dict:
     from rich.table import Table
 
-    from ..report import table_console
+    from ftc_hw.bench.report import table_console
 
     console = table_console()
     results: dict = {}

@@ -1,5 +1,5 @@
 """One monitor run: the scene's device adapters on a bus (with ``sim``, connected to the emulated
-devices of :class:`~ftc_hw.live.simworld.SimWorld`), the live contact monitor, optionally the MCAP
+devices of :class:`~ftc_hw.app.simworld.SimWorld`), the live contact monitor, optionally the MCAP
 recorder, the events file and the stop reflex; the live view while it runs; the summary (with the
 ground truth when simulated) at the end. ``ftc monitor`` and ``ftc demo`` run this.
 """
@@ -20,12 +20,11 @@ from rich.console import Console
 from rich.live import Live
 
 from ftc_hw import __version__
+from ftc_hw.app.evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
+from ftc_hw.app.view import LiveView, evaluation_table, stream_table
 from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, joints_topic, wrench_topic
+from ftc_hw.record.events import EventWriter, event_record, read_truth
 from ftc_hw.scene import Scene, SceneError, load_scene
-
-from .evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
-from .events import EventWriter, event_record, read_truth
-from .view import LiveView, evaluation_table, stream_table
 
 SETTLE_S = 0.5
 
@@ -194,7 +193,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, ca
         world = None
         truth_path = cfg.truth
         if cfg.sim:
-            from .simworld import SimJointSource, SimWorld
+            from ftc_hw.app.simworld import SimJointSource, SimWorld
 
             if truth_path is None:
                 tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))

@@ -9,8 +9,8 @@ import typer
 def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duration: float | None,
                         calibration: Path | None, record: Path | None, reflex: str | None, events: Path | None,
                         truth: Path | None, noise: bool, view: bool, level: str = "dynamics") -> int:
-    from ..live.session import MonitorConfig
-    from ..live.view import make_console
+    from ftc_hw.app.session import MonitorConfig
+    from ftc_hw.app.view import make_console
 
     if truth is not None and not sim:
         typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
@@ -36,7 +36,7 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
 
 def run_guarded(cfg, console):
     """``run_monitor`` with setup errors and Ctrl-C turned into exit codes (1, 130)."""
-    from ..live.session import MonitorSetupError, run_monitor
+    from ftc_hw.app.session import MonitorSetupError, run_monitor
 
     try:
         return run_monitor(cfg, console)

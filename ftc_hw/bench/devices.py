@@ -30,9 +30,8 @@ from typing import Any
 import numpy as np
 
 from ftc_hw.bus import EVENTS_DEVICE, Bus, WrenchFlag
+from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
-
-from .registry import make_adapter
 
 __all__ = ["run"]
 
@@ -294,7 +293,7 @@ def run(json_path: Path | str | None = None, duration: float = 60.0, *, trials: 
 def _print(res: dict[str, Any]) -> None:
     from rich.table import Table
 
-    from ftc_hw.report import table_console
+    from ftc_hw.bench.report import table_console
 
     ok = "[green]yes[/]"
     no = "[red]NO[/]"

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 
 def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record=None) -> int:
-    from ..live.session import MonitorConfig
-    from ..live.view import make_console
-    from .monitor import run_guarded
+    from ftc_hw.app.session import MonitorConfig
+    from ftc_hw.app.view import make_console
+    from ftc_hw.cli.monitor import run_guarded
 
     console = make_console()
     console.print(f"[bold]ftc demo[/]: scene [cyan]{scene_name}[/], scenario [cyan]{scenario}[/], {duration:g} s: "

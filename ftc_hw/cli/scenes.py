@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import typer
 
-from ..scene import builtin_names, load_scene
+from ftc_hw.scene import builtin_names, load_scene
 
 
 def list_scenes() -> None:

@@ -13,15 +13,13 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
 from ftc_hw.bus import Bus, joints_topic, wrench_topic
+from ftc_hw.calibration.samples import Window
 from ftc_hw.model import Payload
 from ftc_hw.scene import DeviceSpec, Scene
-
-from .samples import PoseSample
 
 FT_KINDS = ("ft300", "modbus-ft", "ft-serial-stream", "ft-can")
 ARM_KINDS = ("dynamixel", "ur-rtde")
@@ -29,29 +27,6 @@ ARM_KINDS = ("dynamixel", "ur-rtde")
 
 class SessionError(RuntimeError):
     pass
-
-
-@dataclass
-class Window:
-    """Raw samples over one collection window."""
-
-    wrench: np.ndarray  # (N, 6)
-    t: np.ndarray  # (N,) host s
-    q: np.ndarray  # (k, n)
-    qd: np.ndarray  # (k, n)
-    sim_t: tuple[float, float] | None = None  # world time at the start and end (sim only)
-    duration: float = 0.0
-
-    def gap(self, rate_hz: float) -> str | None:
-        """Why the window is not a complete record (a device dropped out and is reconnecting), or None."""
-        expected = self.duration * rate_hz
-        if len(self.q) == 0 or len(self.wrench) < 0.8 * expected:
-            return (f"data interrupted ({len(self.wrench)} of ~{expected:.0f} F/T frames, {len(self.q)} joint "
-                    "frames): waiting for the devices")
-        return None
-
-    def sample(self) -> PoseSample:
-        return PoseSample.from_arrays(self.q, self.wrench, self.qd, self.t)
 
 
 def _device(scene: Scene, kinds: tuple[str, ...], what: str) -> DeviceSpec:

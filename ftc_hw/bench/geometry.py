@@ -1,6 +1,6 @@
 """Micro-benchmark of the vectorised line/primitive queries (not a test).
 
-Run: ``python -m ftc_hw.solver.geometry_bench [n]``.
+Run: ``python -m ftc_hw.bench.geometry [n]``.
 """
 
 from __future__ import annotations

@@ -9,8 +9,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from ..compensation import Compensator
-from ..solver import ContactEstimate
+from ftc_hw.compensation import Compensator
+from ftc_hw.solver import ContactEstimate
 
 
 class InputError(ValueError):
@@ -77,8 +77,8 @@ def solve_lines(solver, compensator: Compensator, lines: Iterable[str]) -> Itera
 
 
 def run_solve(scene_name: str, method: str, input_path: str, output_path: str, bias: str | None) -> None:
-    from ..solver import make_solver
-    from .common import scene_or_exit
+    from ftc_hw.cli.common import scene_or_exit
+    from ftc_hw.solver import make_solver
 
     scene = scene_or_exit(scene_name)
     solver = make_solver(scene, method)

@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model import ArmModel, Contact
-from ..scene import load_scene
-from ..solver import ContactSolver
-from .pipeline import Compensator
-from .residuals import JointResiduals
+from ftc_hw.compensation.pipeline import Compensator
+from ftc_hw.compensation.residuals import JointResiduals
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.scene import load_scene
+from ftc_hw.solver import ContactSolver
 
 SCENES = ("ur5e", "dxl-arm")
 DISCRIMINABLE_SIGMA = 4.0
@@ -117,7 +117,7 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
 def run(json_path: Path | None = None, cases: int = 400, seed: int = 0, scenes: list[str] | None = None) -> dict:
     from rich.table import Table
 
-    from ..report import table_console
+    from ftc_hw.bench.report import table_console
 
     results = {name: evaluate(name, cases, seed) for name in scenes or SCENES}
     table = Table(title=f"link isolation by motor currents, force line crossing two links ({cases} sampled contacts "

@@ -1,1 +1,0 @@
-"""The live monitor's run: emulated world (``simworld``), session, live view, events, evaluation against truth."""
