@@ -5,7 +5,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from ftc_hw.compensation import Compensator, JointResiduals, QddEstimator, isolation_bench
+from ftc_hw.bench import isolation as isolation_bench
+from ftc_hw.compensation import Compensator, JointResiduals, QddEstimator
 from ftc_hw.detection import ContactDetector, chi2_isf6, chi2_sf6
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.pipeline import ContactPipeline
