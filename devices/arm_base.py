@@ -8,6 +8,7 @@ from .base import Adapter, DeviceIOError
 
 
 class ArmAdapter(Adapter):
+    role = "arm"
     _stale = False
 
     @property

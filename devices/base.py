@@ -33,6 +33,8 @@ class Adapter(ABC):
     """One device on the bus. ``open``/``close`` are idempotent; use it as a context manager."""
 
     kind = "device"
+    role = ""  # "ft" (publishes WrenchFrames) or "arm" (JointFrames)
+    topic = ""  # the bus topic it publishes its frames on
 
     def __init__(self, name: str, bus: Bus, *, reconnect_backoff: tuple[float, float] = (0.05, 1.0),
                  poll_timeout: float = 0.05) -> None:

@@ -62,6 +62,7 @@ class FTAdapter(Adapter):
     the sensor rate is a clock); ``stale_after``: seconds without a frame before ``stale``."""
 
     kind = "ft"
+    role = "ft"
 
     def __init__(self, name: str, bus: Bus, *, range: Sequence[float] | None = None, stale_after: float = 0.05,
                  seq_modulus: int | None = None, t_device_modulus_ns: int | None = None,

@@ -1,27 +1,31 @@
-"""Adapters by scene device kind: ``make_adapter(device, bus, endpoint)`` builds the adapter of a scene's
-``[[devices]]`` entry, connected to the endpoint ``ftc sim`` printed for it (its first stdout line,
+"""Every adapter by scene device kind, with its role (``ft``: an F/T sensor, ``arm``: joint state):
+``make_adapter(device, bus, endpoint)`` builds the adapter of a scene's ``[[devices]]`` entry,
+connected to the endpoint ``ftc sim`` printed for it (its first stdout line,
 ``{"scene", "devices": [endpoint, ...]}``) or, without one, to the device's ``address`` (hardware).
 
-Device params read here (all optional): ``stale_after_s``, ``range`` (else the device model's or the
-scene sensor's), and per kind: ``ft300``: ``mode`` (stream | poll), ``device_id``, ``baudrate``,
+F/T device params read here (all optional): ``stale_after_s``, ``range`` (else the device model's or
+the scene sensor's), and per kind: ``ft300``: ``mode`` (stream | poll), ``device_id``, ``baudrate``,
 ``poll_hz``; ``modbus-ft``: ``map``, ``device_id``, ``baudrate``, ``poll_hz``, ``port``;
 ``ft-serial-stream``: ``format``, ``baudrate``; ``ft-can``: ``dbc``, ``base_id``, ``mode``,
-``poll_hz``, ``interface``.
+``poll_hz``, ``interface``. Arm adapters read theirs in their ``from_spec``.
 """
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 from ftc_hw.bus import Bus
 from ftc_hw.scene import DeviceSpec, Scene
 
-from .base import DeviceError
+from .base import Adapter, DeviceError
 from .can_ft import CanFTAdapter
+from .dynamixel import DynamixelArm
 from .ft300 import FT300Adapter
 from .ft_base import FTAdapter
 from .modbus_ft import ModbusFTAdapter
 from .serial_stream import SerialStreamFTAdapter
+from .ur import URArm
 
 
 def _where(device: DeviceSpec, ep: Mapping[str, Any]) -> str:
@@ -106,21 +110,57 @@ def _can(device: DeviceSpec, bus: Bus, ep: Mapping[str, Any], kw: dict[str, Any]
                         mode=str(p.get("mode", "stream")), poll_hz=float(p.get("poll_hz", 100.0)), **kw)
 
 
-ADAPTERS: dict[str, Callable[[DeviceSpec, Bus, Mapping[str, Any], dict[str, Any]], FTAdapter]] = {
-    "ft300": _ft300,
-    "modbus-ft": _modbus_ft,
-    "ft-serial-stream": _serial_stream,
-    "ft-can": _can,
+Role = Literal["ft", "arm"]
+Build = Callable[[DeviceSpec, Bus, Any, "Scene | None", dict[str, Any]], Adapter]
+
+
+@dataclass(frozen=True)
+class AdapterKind:
+    role: Role
+    build: Build  # (device, bus, endpoint, scene, overrides) -> the adapter, not opened
+
+
+def _ft(build: Callable[[DeviceSpec, Bus, Mapping[str, Any], dict[str, Any]], FTAdapter]) -> AdapterKind:
+    def make(device: DeviceSpec, bus: Bus, endpoint: Any, scene: Scene | None, overrides: dict[str, Any]) -> Adapter:
+        return build(device, bus, dict(endpoint or {}), {**_common(device, scene), **overrides})
+
+    return AdapterKind("ft", make)
+
+
+def _arm(cls: type[DynamixelArm] | type[URArm]) -> AdapterKind:
+    def make(device: DeviceSpec, bus: Bus, endpoint: Any, scene: Scene | None, overrides: dict[str, Any]) -> Adapter:
+        return cls.from_spec(device, bus, endpoint, scene=scene, **overrides)
+
+    return AdapterKind("arm", make)
+
+
+ADAPTERS: dict[str, AdapterKind] = {
+    "ft300": _ft(_ft300),
+    "modbus-ft": _ft(_modbus_ft),
+    "ft-serial-stream": _ft(_serial_stream),
+    "ft-can": _ft(_can),
+    "dynamixel": _arm(DynamixelArm),
+    "ur-rtde": _arm(URArm),
 }
 
 
-def make_adapter(device: DeviceSpec, bus: Bus, endpoint: Mapping[str, Any] | None = None, *,
-                 scene: Scene | None = None, **overrides: Any) -> FTAdapter:
+def kinds(role: Role) -> tuple[str, ...]:
+    """The device kinds of a role, in the registry's order."""
+    return tuple(k for k, a in ADAPTERS.items() if a.role == role)
+
+
+def role_of(kind: str) -> Role | None:
+    entry = ADAPTERS.get(kind)
+    return entry.role if entry is not None else None
+
+
+def make_adapter(device: DeviceSpec, bus: Bus, endpoint: Mapping[str, Any] | str | None = None, *,
+                 scene: Scene | None = None, **overrides: Any) -> Adapter:
     """The adapter of ``device`` (not opened). ``endpoint``: the device's entry of the ``ftc sim``
     line (None: use ``device.address``). ``scene``: gives the sensor range when neither the device
-    model nor ``params.range`` does. ``overrides``: keyword arguments for the adapter class."""
-    build = ADAPTERS.get(device.kind)
-    if build is None:
+    model nor ``params.range`` does, and the UR joints' torque constants. ``overrides``: keyword
+    arguments for the adapter class."""
+    entry = ADAPTERS.get(device.kind)
+    if entry is None:
         raise DeviceError(f"no adapter for device kind {device.kind!r} (known: {', '.join(ADAPTERS)})")
-    kw = {**_common(device, scene), **overrides}
-    return build(device, bus, dict(endpoint or {}), kw)
+    return entry.build(device, bus, endpoint, scene, overrides)

@@ -1,4 +1,7 @@
-"""``ftc sim``: the world in real time, with one emulator process per device the scene declares."""
+"""The world's loop: the physics world stepped (in real time, or as fast as it goes), its samples
+published to the emulators over the :class:`~ftc_hw.sim_devices.link.WorldLink`, the emulators'
+commands applied; one emulator process per device. It runs inside the world process that
+:class:`~ftc_hw.sim_devices.host.WorldHost` starts."""
 from __future__ import annotations
 
 import dataclasses
@@ -7,6 +10,7 @@ import multiprocessing as mp
 import queue
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -94,11 +98,25 @@ class EmulatorProcess:
         self.process.join(5.0)
 
 
+@dataclass(frozen=True)
+class AppliedCommand:
+    t_host_ns: int  # time.monotonic_ns() in the world process when the world applied it
+    t_sim: float  # world time (s) at that step
+    kind: str
+    q: tuple[float, ...] | None
+    on: bool | None = None
+    t_sent_ns: int = 0  # when the emulator sent it (time.monotonic_ns() in its process)
+    t_due_ns: int = 0  # host time at which t_sim is due in the real-time run: the arm's own clock
+    t_rx_ns: int = 0  # when the emulator read the request that caused it (0: not recorded)
+
+
 class SimRunner:
-    """The world and its emulators. ``start()``, then ``step()``/``run()``; ``stop()`` cleans up."""
+    """The world and the emulators of ``devices``. ``start()``, then ``step()``/``run()``; ``stop()``
+    cleans up. ``applied`` lists every command the world applied, with when."""
 
     def __init__(self, scene: Scene, scenario: str, *, duration: float, seed: int = 0, noise: bool = True,
-                 devices: bool = True, options: dict[str, dict] | None = None, payload: Payload | None = None) -> None:
+                 devices: Sequence[DeviceSpec] = (), options: dict[str, dict] | None = None,
+                 payload: Payload | None = None) -> None:
         self.scene = scene
         self.scenario = scenario
         self.duration = duration
@@ -107,23 +125,21 @@ class SimRunner:
             setup = dataclasses.replace(setup, payload=payload)
         self.world = World(scene, setup, seed=seed, noise=noise)
         self.link = WorldLink(scene.n_joints)
-        self.devices = devices
+        self.devices = tuple(devices)
         self.options = options or {}
         self.emulators: list[EmulatorProcess] = []
-        self.commands_applied = 0
+        self.applied: list[AppliedCommand] = []
         self._clock: tuple[int, float] | None = None  # (host ns, world s) at the start of run()
 
     def start(self) -> list[dict[str, Any]]:
         # joint state first, so emulators that answer at once have something to serve
         self._publish(self.world.state, with_ft=True)
-        if self.devices:
-            try:
-                for d in self.scene.devices:
-                    self.emulators.append(EmulatorProcess.start(d, self.scene, self.link.info,
-                                                                 self.options.get(d.name)))
-            except Exception:
-                self.stop()
-                raise
+        try:
+            for d in self.devices:
+                self.emulators.append(EmulatorProcess.start(d, self.scene, self.link.info, self.options.get(d.name)))
+        except Exception:
+            self.stop()
+            raise
         # after the emulators started (they take their own tier, below the world's): the world's
         # steps stand in for the arm controllers' cycles
         prefer_cpu(WORLD_NICE)
@@ -136,8 +152,26 @@ class SimRunner:
             self.link.publish_ft(state.t, reading.wrench, reading.saturated)
         self.link.publish_joints(state.t, state.q, state.qd, state.qdd, w.read_current(state), state.tau)
 
-    def _apply(self, cmd: Command) -> None:
-        self.commands_applied += 1
+    def emulator(self, name: str) -> EmulatorProcess:
+        for e in self.emulators:
+            if e.device.name == name:
+                return e
+        raise KeyError(f"no emulator of device {name!r}")
+
+    def restart_emulator(self, name: str, options: dict | None = None) -> dict[str, Any]:
+        """Stop the emulator of ``name`` and start it again (with new ``options`` if given): its endpoint."""
+        old = self.emulator(name)
+        old.stop()
+        if options is not None:
+            self.options[name] = options
+        new = EmulatorProcess.start(old.device, self.scene, self.link.info, self.options.get(name))
+        self.emulators[self.emulators.index(old)] = new
+        return new.endpoint
+
+    def apply(self, cmd: Command) -> None:
+        t = self.world.t
+        self.applied.append(AppliedCommand(time.monotonic_ns(), t, cmd.kind, cmd.q, cmd.on, cmd.t_sent_ns,
+                                           self.due_ns(t) or 0, int(cmd.extra.get("t_rx_ns", 0))))
         if cmd.kind == "goal" and cmd.q is not None:
             self.world.set_goal(np.asarray(cmd.q, dtype=float))
         elif cmd.kind == "stop":
@@ -148,7 +182,7 @@ class SimRunner:
     def apply_pending(self) -> None:
         """Apply every command that has arrived (from the world's current time on)."""
         for cmd in self.link.drain_commands():
-            self._apply(cmd)
+            self.apply(cmd)
 
     def step(self) -> WorldState:
         self.apply_pending()

@@ -10,11 +10,11 @@ import pytest
 from arm_helpers import check_kill_and_restart, collect_events, kill_and_restart, wait_event
 
 from ftc_hw.bus import Bus
-from ftc_hw.devices.arm_registry import make_arm_adapter
 from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.dynamixel import DynamixelArm
+from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import load_scene
-from ftc_hw.sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.host import WorldHost
 
 SCENE = load_scene("dxl-arm")
 DEVICE = next(d for d in SCENE.devices if d.kind == "dynamixel")
@@ -23,7 +23,7 @@ FAST = {"stale_after": 0.1, "dead_after": 0.5}
 
 @pytest.fixture(scope="module")
 def world():
-    with WorldProcess(SCENE, "sweep", devices=["arm"]) as w:
+    with WorldHost(SCENE, "sweep", devices=["arm"], noise=False) as w:
         yield w
 
 
@@ -31,7 +31,7 @@ def world():
 def arm(world):
     bus = Bus()
     events = bus.subscribe("events/", maxsize=10_000)
-    adapter = make_arm_adapter(DEVICE, bus, world.endpoint("arm"), scene=SCENE, **FAST)
+    adapter = make_adapter(DEVICE, bus, world.endpoint("arm"), scene=SCENE, **FAST)
     with adapter:
         if not adapter.wait_connected(10.0):
             pytest.fail(f"no connection: {[(e.kind, e.message) for e in events.drain()][-5:]}")

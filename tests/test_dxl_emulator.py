@@ -13,7 +13,7 @@ from dynamixel_sdk import port_handler
 from ftc_hw.codecs import dxl_table as T
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.dxl_protocol import PacketReader, packet, parse_status
-from ftc_hw.sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.host import WorldHost
 
 ARM = next(d for d in load_scene("dxl-arm").devices if d.kind == "dynamixel").params
 IDS = ARM["ids"]  # 11-14 the joints, 15 the gripper
@@ -23,7 +23,7 @@ RAD = 2 * math.pi / 4096
 
 @pytest.fixture(scope="module")
 def world():
-    with WorldProcess("dxl-arm", "hold", devices=["arm"], options={"arm": {"reboot_s": 0.5}}) as w:
+    with WorldHost("dxl-arm", "hold", devices=["arm"], options={"arm": {"reboot_s": 0.5}}, noise=False) as w:
         yield w
 
 

@@ -17,7 +17,7 @@ from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.can_ft import CanFTAdapter
 from ftc_hw.devices.ft300 import FT300Adapter
 from ftc_hw.devices.modbus_ft import ModbusFTAdapter
-from ftc_hw.devices.registry import ADAPTERS, make_adapter
+from ftc_hw.devices.registry import ADAPTERS, kinds, make_adapter
 from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 from ftc_hw.scene import DeviceSpec, load_scene
 from ftc_hw.sim_devices.faults import FaultConfig, FaultInjector
@@ -29,9 +29,10 @@ pytestmark = pytest.mark.timeout(60)
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_every_ft_kind_has_an_adapter_and_an_emulator():
-    assert set(ADAPTERS) == {"ft300", "modbus-ft", "ft-serial-stream", "ft-can"}
-    assert set(ADAPTERS) <= set(EMULATORS)
+def test_every_kind_has_an_adapter_and_an_emulator():
+    assert set(kinds("ft")) == {"ft300", "modbus-ft", "ft-serial-stream", "ft-can"}
+    assert set(kinds("arm")) == {"dynamixel", "ur-rtde"}
+    assert set(ADAPTERS) == set(EMULATORS)
 
 
 def test_builtin_scene_devices_build_the_right_adapters():
@@ -40,7 +41,7 @@ def test_builtin_scene_devices_build_the_right_adapters():
     for name in ("leng2016", "ur5e", "dxl-arm"):
         scene = load_scene(name)
         for d in scene.devices:
-            if d.kind in ADAPTERS:
+            if d.kind in kinds("ft"):
                 built[name] = make_adapter(d, bus, {"endpoint": "/tmp/x.tty", "transport": d.transport}, scene=scene)
     assert isinstance(built["leng2016"], SerialStreamFTAdapter) and built["leng2016"].fmt.name == "ftc-1k"
     assert isinstance(built["ur5e"], CanFTAdapter) and built["ur5e"].codec.base_id == 8

@@ -1,18 +1,18 @@
-"""The monitor's simulated world: nothing scripted happens in its pre-roll, however long it lasts."""
+"""The world host's pre-roll (what the monitor runs): nothing scripted happens in it, however long it lasts."""
 from __future__ import annotations
 
 import time
 
-from ftc_hw.app.simworld import SimWorld
 from ftc_hw.record.events import read_truth
 from ftc_hw.scene import load_scene
+from ftc_hw.sim_devices.host import WorldHost
 
 
 def test_a_long_pre_roll_does_not_use_up_the_scenario(tmp_path):
     # the obstacle is due to go at 4.3 s of a 3 s run: a pre-roll longer than that (a first run
     # compiling its kernels) must not withdraw it before the scenario has started
     truth = tmp_path / "truth.jsonl"
-    with SimWorld(load_scene("leng2016"), "sweep-with-collision", duration=3.0, truth=truth) as world:
+    with WorldHost(load_scene("leng2016"), "sweep-with-collision", duration=3.0, truth=truth, preroll=True) as world:
         time.sleep(5.0)
         world.go()
         deadline = time.monotonic() + 30.0

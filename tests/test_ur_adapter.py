@@ -9,11 +9,11 @@ import pytest
 from arm_helpers import check_kill_and_restart, collect_events, kill_and_restart
 
 from ftc_hw.bus import Bus, JointFlag
-from ftc_hw.devices.arm_registry import make_arm_adapter
 from ftc_hw.devices.base import DeviceError
+from ftc_hw.devices.registry import make_adapter
 from ftc_hw.devices.ur import DashboardLink, URArm, probe_rtde
 from ftc_hw.scene import load_scene
-from ftc_hw.sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.host import WorldHost
 
 ADDRESS = "127.0.0.43"
 SCENE = load_scene("ur5e")
@@ -22,7 +22,7 @@ DEVICE = next(d for d in SCENE.devices if d.kind == "ur-rtde")
 
 @pytest.fixture(scope="module")
 def world():
-    with WorldProcess(SCENE, "sweep", devices=["arm"], options={"arm": {"address": ADDRESS}}) as w:
+    with WorldHost(SCENE, "sweep", devices=["arm"], options={"arm": {"address": ADDRESS}}, noise=False) as w:
         yield w
 
 
@@ -30,7 +30,7 @@ def world():
 def arm(world):
     bus = Bus()
     events = bus.subscribe("events/", maxsize=10_000)
-    adapter = make_arm_adapter(DEVICE, bus, world.endpoint("arm"), scene=SCENE, dead_after=0.3)
+    adapter = make_adapter(DEVICE, bus, world.endpoint("arm"), scene=SCENE, dead_after=0.3)
     with adapter:
         assert adapter.wait_connected(10.0)
         yield adapter, bus, events

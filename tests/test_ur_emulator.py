@@ -16,9 +16,9 @@ import rtde_receive
 from ftc_hw.model import ArmModel
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices import ur_data as D
+from ftc_hw.sim_devices.host import WorldHost
 from ftc_hw.sim_devices.ur import Emulator
 from ftc_hw.sim_devices.ur_model import rotation_vector
-from ftc_hw.sim_devices.world_process import WorldProcess
 
 ADDRESS = "127.0.0.41"
 SCENE = load_scene("ur5e")
@@ -27,7 +27,7 @@ DEVICE = next(d for d in SCENE.devices if d.kind == "ur-rtde")
 
 @pytest.fixture(scope="module")
 def world():
-    with WorldProcess(SCENE, "sweep", devices=["arm"], options={"arm": {"address": ADDRESS}}) as w:
+    with WorldHost(SCENE, "sweep", devices=["arm"], options={"arm": {"address": ADDRESS}}, noise=False) as w:
         yield w
 
 

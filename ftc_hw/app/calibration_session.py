@@ -5,12 +5,11 @@ optional payload the clients are not told about).
 How the arm gets to a pose depends on what its protocol can do:
 - DYNAMIXEL: Goal Position, streamed along a minimum-jerk path (the servos run without profiles).
 - UR (RTDE receive only: no motion commands): a person jogs it there; with ``sim=True`` the world's
-  joint targets are set directly through the world process (:meth:`WorldProcess.goal`), which the
+  joint targets are set directly through the world process (:meth:`WorldHost.goal`), which the
   wizard says on screen.
 """
 from __future__ import annotations
 
-import contextlib
 import time
 from collections.abc import Callable
 
@@ -19,21 +18,14 @@ import numpy as np
 from ftc_hw.bus import Bus, joints_topic, wrench_topic
 from ftc_hw.calibration.samples import Window
 from ftc_hw.model import Payload
-from ftc_hw.scene import DeviceSpec, Scene
+from ftc_hw.scene import Scene
+from ftc_hw.sim_devices.host import WorldHost
 
-FT_KINDS = ("ft300", "modbus-ft", "ft-serial-stream", "ft-can")
-ARM_KINDS = ("dynamixel", "ur-rtde")
+from .rig import Rig, RigError, build_rig, require_device
 
 
 class SessionError(RuntimeError):
-    pass
-
-
-def _device(scene: Scene, kinds: tuple[str, ...], what: str) -> DeviceSpec:
-    for d in scene.devices:
-        if d.kind in kinds:
-            return d
-    raise SessionError(f"scene {scene.name!r} declares no {what} device (kinds {', '.join(kinds)})")
+    """The wizard cannot do what it asked of the devices (move the arm, reach them)."""
 
 
 class DeviceSession:
@@ -44,10 +36,14 @@ class DeviceSession:
         self.sim_payload = sim_payload
         self.seed = seed
         self.noise = noise
-        self.ft_spec = _device(scene, FT_KINDS, "F/T sensor")
-        self.arm_spec = _device(scene, ARM_KINDS, "arm")
+        try:
+            self.ft_spec = require_device(scene, "ft")
+            self.arm_spec = require_device(scene, "arm")
+        except RigError as exc:
+            raise SessionError(str(exc)) from None
         self.bus = Bus()
-        self.world = None
+        self.world: WorldHost | None = None
+        self.rig: Rig | None = None
         self.ft = None
         self.arm = None
         self._wrench = None
@@ -56,43 +52,26 @@ class DeviceSession:
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self, timeout: float = 20.0) -> None:
-        from ftc_hw.devices.arm_registry import make_arm_adapter
-        from ftc_hw.devices.registry import make_adapter
-
-        endpoints: dict[str, dict] = {}
-        if self.sim:
-            from ftc_hw.sim_devices.world_process import WorldProcess
-
-            self.world = WorldProcess(self.scene, "hold", devices=[self.ft_spec.name, self.arm_spec.name],
-                                      seed=self.seed, noise=self.noise, payload=self.sim_payload)
-            self.world.start()
-            endpoints = {e["name"]: e for e in self.world.endpoints if "name" in e}
+        """The devices (with ``sim``, the world holding still, emulating both), connected and streaming."""
         try:
+            if self.sim:
+                self.world = WorldHost(self.scene, "hold", devices=[self.ft_spec.name, self.arm_spec.name],
+                                       seed=self.seed, noise=self.noise, payload=self.sim_payload)
+                self.world.start()
             self._wrench = self.bus.subscribe(wrench_topic(self.ft_spec.name), maxsize=200_000)
             self._joints = self.bus.subscribe(joints_topic(self.arm_spec.name), maxsize=200_000)
-            self.ft = make_adapter(self.ft_spec, self.bus, endpoints.get(self.ft_spec.name), scene=self.scene)
-            self.arm = make_arm_adapter(self.arm_spec, self.bus, endpoints.get(self.arm_spec.name), scene=self.scene)
-            self.ft.open()
-            self.arm.open()
-            for a in (self.ft, self.arm):
-                if not a.wait_connected(timeout):
-                    raise SessionError(f"no connection to {a.describe()} within {timeout:g} s")
-            end = time.monotonic() + timeout
-            while (self.bus.latest(self.ft.topic) is None or self.bus.latest(self.arm.topic) is None) \
-                    and time.monotonic() < end:
-                time.sleep(0.02)
-            if self.bus.latest(self.ft.topic) is None or self.bus.latest(self.arm.topic) is None:
-                raise SessionError("connected, but no F/T or joint data arrives")
+            self.rig = build_rig(self.scene, bus=self.bus, devices=[self.ft_spec, self.arm_spec],
+                                 endpoints=self.world.endpoints if self.world is not None else None)
+            self.ft, self.arm = self.rig.ft, self.rig.arm
+            self.rig.open().wait(timeout, data=True)
         except Exception:
             self.close()
             raise
 
     def close(self) -> None:
-        for a in (self.arm, self.ft):
-            if a is not None:
-                with contextlib.suppress(Exception):  # closing everything else matters more
-                    a.close()
-        self.arm = self.ft = None
+        if self.rig is not None:
+            self.rig.close()
+        self.rig = self.arm = self.ft = None
         if self.world is not None:
             self.world.close()
             self.world = None

@@ -1,5 +1,5 @@
 """One monitor run: the scene's device adapters on a bus (with ``sim``, connected to the emulated
-devices of :class:`~ftc_hw.app.simworld.SimWorld`), the live contact monitor, optionally the MCAP
+devices of a :class:`~ftc_hw.sim_devices.host.WorldHost` with a pre-roll), the live contact monitor, optionally the MCAP
 recorder, the events file and the stop reflex; the live view while it runs; the summary (with the
 ground truth when simulated) at the end. ``ftc monitor`` and ``ftc demo`` run this.
 """
@@ -11,6 +11,7 @@ import signal
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,8 +24,17 @@ from ftc_hw import __version__
 from ftc_hw.app.evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.app.view import LiveView, evaluation_table, stream_table
 from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, joints_topic, wrench_topic
+from ftc_hw.calibration.file import load_calibration
+from ftc_hw.devices.base import frozen_heap, responsive_readers
+from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import EventWriter, event_record, read_truth
-from ftc_hw.scene import Scene, SceneError, load_scene
+from ftc_hw.record.replay import pipeline_kwargs_to_json
+from ftc_hw.record.writer import McapRecorder
+from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_scene
+from ftc_hw.sim_devices.host import WorldHost
+
+from .rig import RigError, build_rig, pick_device, require_device
+from .sim_joints import SimJointSource
 
 SETTLE_S = 0.5
 
@@ -66,15 +76,9 @@ class MonitorOutcome:
 def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any], dict[str, str]]:
     """``(pipeline kwargs, MCAP metadata)`` of a calibration file (issue 7's ``load_calibration``)."""
     try:
-        from ftc_hw.calibration.file import load_calibration
-    except ImportError as exc:
-        raise MonitorSetupError(f"--calibration: the calibration package cannot load files ({exc})") from None
-    try:
         cal = load_calibration(path, scene=scene, sensor_serial=None)
     except Exception as exc:  # noqa: BLE001 - its typed error (or an OS error): shown to the user
         raise MonitorSetupError(f"--calibration {path}: {exc}") from None
-    from ftc_hw.record.replay import pipeline_kwargs_to_json
-
     kwargs = {k: v for k, v in cal.pipeline_kwargs().items() if v is not None}
     text = Path(path).read_text(encoding="utf-8", errors="replace")
     meta = {"file": str(path), "content": text, "pipeline": pipeline_kwargs_to_json(kwargs)}
@@ -138,21 +142,17 @@ class StopReflex:
         self._thread.join(5.0)
 
 
-def _devices(scene: Scene, sim: bool):
-    from ftc_hw.devices.arm_registry import ARM_ADAPTERS
-    from ftc_hw.devices.registry import ADAPTERS
-
-    ft = next((d for d in scene.devices if d.kind in ADAPTERS), None)
-    arm = next((d for d in scene.devices if d.kind in ARM_ADAPTERS), None)
-    if ft is None:
-        raise MonitorSetupError(f"scene {scene.name!r} declares no F/T sensor device (kinds: {', '.join(ADAPTERS)})")
-    if arm is None and not sim:
-        raise MonitorSetupError(f"scene {scene.name!r} declares no arm device (kinds: {', '.join(ARM_ADAPTERS)}): "
-                                "with --sim the world's joint state is used")
-    return ft, arm
+def _devices(scene: Scene, sim: bool) -> tuple[DeviceSpec, DeviceSpec | None]:
+    """The scene's F/T sensor and arm devices; without an arm device only a simulated world will do."""
+    try:
+        ft = require_device(scene, "ft")
+        return ft, (pick_device(scene, "arm") if sim else require_device(scene, "arm"))
+    except RigError as exc:
+        hint = ": with --sim the world's joint state is used" if "arm device" in str(exc) else ""
+        raise MonitorSetupError(f"{exc}{hint}") from None
 
 
-def _wait_idle(monitor, timeout: float = 5.0) -> None:
+def _wait_idle(monitor: LiveMonitor, timeout: float = 5.0) -> None:
     end = time.monotonic() + timeout
     while time.monotonic() < end and monitor._sub is not None and monitor._sub.pending:
         time.sleep(0.01)
@@ -172,41 +172,61 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
         console.print(f"[yellow]warning[/]: {cfg.calibration} also fitted {cal_meta['unapplied']}; the pipeline "
                       "applies its bias and payload only: if these matter, correct the scene (the sensor site's "
                       "orientation, the gravity vector, the link masses)")
-    from ftc_hw.devices.base import responsive_readers
-
     with responsive_readers():  # readers that poll, and the reflex, while the pipeline computes
         return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out)
 
 
-def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, cal_kwargs: dict[str, Any],
-         cal_meta: dict[str, str] | None, out: MonitorOutcome) -> MonitorOutcome:
-    from ftc_hw.devices.arm_registry import make_arm_adapter
-    from ftc_hw.devices.base import frozen_heap
-    from ftc_hw.devices.registry import make_adapter
-    from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
+def _stop_on_sigterm(stack: contextlib.ExitStack) -> None:
+    """SIGTERM stops like Ctrl-C: adapters, recorder and emulators are closed, never orphaned."""
+    with contextlib.suppress(ValueError):  # not the main thread
+        previous = signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+        stack.callback(signal.signal, signal.SIGTERM, previous)
 
+
+def _start_world(cfg: MonitorConfig, console: Console, scene: Scene, stack: contextlib.ExitStack
+                 ) -> tuple[WorldHost, Path]:
+    """The scene's world and emulators, holding the scenario's start pose until ``go()``; the truth file."""
+    truth_path = cfg.truth
+    if truth_path is None:
+        truth_path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))) / "truth.jsonl"
+    world = WorldHost(scene, cfg.scenario, duration=cfg.duration, seed=cfg.seed, noise=cfg.noise, preroll=True,
+                      truth=truth_path)
+    console.print(f"starting the emulated devices of [cyan]{scene.name}[/] "
+                  f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)})...")
+    try:
+        world.start()
+    except Exception as exc:  # noqa: BLE001 - emulator start failures carry their reason
+        raise MonitorSetupError(str(exc)) from None
+    stack.callback(world.close)
+    return world, truth_path
+
+
+def _start_recorder(cfg: MonitorConfig, scene: Scene, bus: Bus, monitor_meta: dict[str, str],
+                    cal_meta: dict[str, str] | None) -> McapRecorder:
+    toml = Path(scene.path).read_text(encoding="utf-8")
+    meta = {"scene": {"name": scene.name, "path": str(scene.path), "toml": toml}, "monitor": monitor_meta}
+    if cal_meta is not None:
+        meta["calibration"] = cal_meta
+    return McapRecorder(bus, cfg.record, metadata=meta).start()
+
+
+def _tare_then_go(cfg: MonitorConfig, monitor: LiveMonitor, world: WorldHost) -> None:
+    """The world's pre-roll starts from a posed state: let the arm settle, tare at rest, start the scenario."""
+    time.sleep(SETTLE_S)
+    monitor.start()
+    end = time.monotonic() + cfg.connect_timeout_s
+    while not monitor.tared and time.monotonic() < end:
+        time.sleep(0.02)
+    if not monitor.tared:
+        raise MonitorSetupError(f"no tare within {cfg.connect_timeout_s:g} s: {dict(monitor.counters)}")
+    world.go()
+
+
+def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
+         cal_kwargs: dict[str, Any], cal_meta: dict[str, str] | None, out: MonitorOutcome) -> MonitorOutcome:
     with contextlib.ExitStack() as stack:
-        # SIGTERM stops like Ctrl-C: adapters, recorder and emulators are closed, never orphaned
-        with contextlib.suppress(ValueError):  # not the main thread
-            previous = signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
-            stack.callback(signal.signal, signal.SIGTERM, previous)
-        world = None
-        truth_path = cfg.truth
-        if cfg.sim:
-            from ftc_hw.app.simworld import SimJointSource, SimWorld
-
-            if truth_path is None:
-                tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))
-                truth_path = Path(tmp) / "truth.jsonl"
-            world = SimWorld(scene, cfg.scenario, duration=cfg.duration if cfg.duration else 1e9, seed=cfg.seed,
-                             noise=cfg.noise, truth=truth_path)
-            console.print(f"starting the emulated devices of [cyan]{scene.name}[/] "
-                          f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)})...")
-            try:
-                world.start()
-            except Exception as exc:  # noqa: BLE001 - emulator start failures carry their reason
-                raise MonitorSetupError(str(exc)) from None
-            stack.callback(world.close)
+        _stop_on_sigterm(stack)
+        world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.truth)
         bus = Bus()
         ft_name, arm_name = ft_dev.name, arm_dev.name if arm_dev is not None else "arm"
         topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]
@@ -216,29 +236,23 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, ca
         monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
         recorder = None
         if cfg.record:
-            from ftc_hw.record.replay import pipeline_kwargs_to_json
-            from ftc_hw.record.writer import McapRecorder
-
-            meta = {"scene": {"name": scene.name, "path": str(scene.path),
-                              "toml": Path(scene.path).read_text(encoding="utf-8")},
-                    "monitor": {"ft_source": ft_name, "arm_source": arm_name, "tare_s": str(tare_s),
-                                "pipeline": pipeline_kwargs_to_json(pipeline_kwargs), "ftc_hw": __version__,
-                                "sim": str(cfg.sim), "scenario": cfg.scenario if cfg.sim else "",
-                                "seed": str(cfg.seed), "started_host_ns": str(time.monotonic_ns())}}
-            if cal_meta is not None:
-                meta["calibration"] = cal_meta
-            recorder = McapRecorder(bus, cfg.record, metadata=meta).start()
+            recorder = _start_recorder(cfg, scene, bus, {
+                "ft_source": ft_name, "arm_source": arm_name, "tare_s": str(tare_s),
+                "pipeline": pipeline_kwargs_to_json(pipeline_kwargs), "ftc_hw": __version__, "sim": str(cfg.sim),
+                "scenario": cfg.scenario if cfg.sim else "", "seed": str(cfg.seed),
+                "started_host_ns": str(time.monotonic_ns())}, cal_meta)
             stack.callback(recorder.stop)  # on a failed start; a no-op after the final stop below
         events_file = stack.enter_context(open(cfg.events, "w", encoding="utf-8")) if cfg.events else None
         writer = EventWriter(events_file) if events_file is not None else None
         if world is None:
             monitor.start()  # on hardware the arm must be still now: the tare takes the first 0.1 s
-        ft = make_adapter(ft_dev, bus, world.endpoints.get(ft_dev.name) if world else None, scene=scene)
-        if arm_dev is not None:
-            arm = make_arm_adapter(arm_dev, bus, world.endpoints.get(arm_dev.name) if world else None, scene=scene)
-        else:
-            arm = SimJointSource(arm_name, bus, world)
-        adapters = [ft, arm]
+        try:
+            rig = build_rig(scene, bus=bus, devices=[d for d in (ft_dev, arm_dev) if d is not None],
+                            endpoints=world.endpoints if world is not None else None, timeout=cfg.connect_timeout_s)
+        except RigError as exc:
+            raise MonitorSetupError(str(exc)) from None
+        if arm_dev is None:
+            rig.add(SimJointSource(arm_name, bus, world))
         reflex = None
 
         def pump() -> None:
@@ -251,78 +265,80 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev, arm_dev, ca
 
         view = LiveView(bus, monitor, topics, ft_topic=topics[0], title=cfg.title)
         try:
-            for a in adapters:
-                a.open()
-            for a in adapters:
-                if not a.wait_connected(cfg.connect_timeout_s):
-                    raise MonitorSetupError(f"{a.name} ({a.kind}) did not connect within {cfg.connect_timeout_s:g} s: "
-                                            f"{dict(a.counters)}")
+            try:
+                rig.open().wait()
+            except RigError as exc:
+                raise MonitorSetupError(str(exc)) from None
             if cfg.reflex == "stop":
-                reflex = StopReflex(bus, arm)
+                reflex = StopReflex(bus, rig.arm)
             if world is not None:
-                # the world's pre-roll starts from a posed state: let the arm settle before the tare
-                time.sleep(SETTLE_S)
-                monitor.start()
-                end = time.monotonic() + cfg.connect_timeout_s
-                while not monitor.tared and time.monotonic() < end:  # the tare, in the pre-roll (at rest)
-                    time.sleep(0.02)
-                if not monitor.tared:
-                    raise MonitorSetupError(f"no tare within {cfg.connect_timeout_s:g} s: {dict(monitor.counters)}")
-                world.go()
+                _tare_then_go(cfg, monitor, world)
             stack.enter_context(frozen_heap())  # set up: no collector pause may stall the readers now
-            t_end = None if (cfg.sim or not cfg.duration) else time.monotonic() + cfg.duration
             view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
                            + (f", scenario {cfg.scenario} (emulated devices)" if cfg.sim else ""))
-            live = Live(console=console, refresh_per_second=4, transient=False, auto_refresh=False) \
-                if cfg.view else contextlib.nullcontext()
-            try:
-                with live:
-                    while True:
-                        pump()
-                        if cfg.view:
-                            live.update(view.render(), refresh=True)
-                        if world is not None and world.done:
-                            break
-                        if t_end is not None and time.monotonic() >= t_end:
-                            break
-                        time.sleep(0.25 if cfg.view else 0.05)
-                    _wait_idle(monitor)
-                    pump()
-                    if cfg.view:
-                        live.update(view.render(), refresh=True)
-            except KeyboardInterrupt:
-                out.problems.append("interrupted")
+            _watch(cfg, console, view, monitor, world, pump, out)
         finally:
             out.t_closed_ns = time.monotonic_ns()
-            for a in adapters:
-                a.close()
+            rig.close()
             monitor.stop()
             if reflex is not None:
                 reflex.close()
         pump()
-        out.counters = dict(monitor.counters)
-        if reflex is not None:
-            out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
-        if world is not None and world.done and "error" not in (world.result or {}):
-            out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s,
-                                      crlb=crlb_of_truth(scene), solver_rms=solver_rms_of_truth(scene))
-        elif world is not None:
-            out.problems.append(f"the simulated world did not finish: {world.result}")
-        if recorder is not None:
-            final = {"events": {"count": str(len(out.events)),
-                                "jsonl": "\n".join(json.dumps(e, separators=(",", ":")) for e in out.events)}}
-            if out.evaluation is not None:
-                final["evaluation"] = {"json": json.dumps(out.evaluation.to_dict())}
-            recorder.stop(final)
-            if recorder.drops:
-                out.problems.append(f"recorder dropped {recorder.drops} frames")
-        if monitor.counters.get("errors"):
-            out.problems.append(f"pipeline errors: {monitor.counters['errors']}")
-        if out.counters.get("frames", 0) == 0:
-            out.problems.append("no F/T frame reached the pipeline")
-            out.exit_code = 1
-        _summary(console, cfg, bus, topics, out, adapters, recorder, world)
+        _finish(cfg, scene, monitor, reflex, world, truth_path, recorder, out)
+        _summary(console, cfg, bus, topics, out, rig.adapters, recorder, world)
     return out
+
+
+def _watch(cfg: MonitorConfig, console: Console, view: LiveView, monitor: LiveMonitor, world: WorldHost | None,
+           pump: Callable[[], None], out: MonitorOutcome) -> None:
+    """The live view until the world's run ends, the duration is up, or Ctrl-C."""
+    t_end = None if (cfg.sim or not cfg.duration) else time.monotonic() + cfg.duration
+    live = Live(console=console, refresh_per_second=4, transient=False, auto_refresh=False) \
+        if cfg.view else contextlib.nullcontext()
+    try:
+        with live:
+            while True:
+                pump()
+                if cfg.view:
+                    live.update(view.render(), refresh=True)
+                if world is not None and world.done:
+                    break
+                if t_end is not None and time.monotonic() >= t_end:
+                    break
+                time.sleep(0.25 if cfg.view else 0.05)
+            _wait_idle(monitor)
+            pump()
+            if cfg.view:
+                live.update(view.render(), refresh=True)
+    except KeyboardInterrupt:
+        out.problems.append("interrupted")
+
+
+def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: StopReflex | None,
+            world: WorldHost | None, truth_path: Path | None, recorder: McapRecorder | None,
+            out: MonitorOutcome) -> None:
+    """Counters, the evaluation against the world's truth, the recording's final metadata, problems."""
+    out.counters = dict(monitor.counters)
+    if reflex is not None:
+        out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
+    if world is not None and world.done and "error" not in (world.result or {}):
+        out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s,
+                                  crlb=crlb_of_truth(scene), solver_rms=solver_rms_of_truth(scene))
+    elif world is not None:
+        out.problems.append(f"the simulated world did not finish: {world.result}")
+    if recorder is not None:
+        final = {"events": {"count": str(len(out.events)),
+                            "jsonl": "\n".join(json.dumps(e, separators=(",", ":")) for e in out.events)}}
+        if out.evaluation is not None:
+            final["evaluation"] = {"json": json.dumps(out.evaluation.to_dict())}
+        recorder.stop(final)
+        if recorder.drops:
+            out.problems.append(f"recorder dropped {recorder.drops} frames")
+    if monitor.counters.get("errors"):
+        out.problems.append(f"pipeline errors: {monitor.counters['errors']}")
+    if out.counters.get("frames", 0) == 0:
+        out.problems.append("no F/T frame reached the pipeline")
+        out.exit_code = 1
 
 
 def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], out: MonitorOutcome, adapters,

@@ -1,7 +1,7 @@
 """``ftc bench arms``: the arm adapters' acceptance numbers, measured against the emulators.
 
 Each part runs the scene's world and its arm emulator in their own processes
-(:class:`ftc_hw.sim_devices.world_process.WorldProcess`, the code ``ftc sim`` runs) and the client here:
+(:class:`ftc_hw.sim_devices.host.WorldHost`, as ``ftc sim`` runs it) and the client here:
 
 * UR: ``rtde_receive.RTDEReceiveInterface(address)`` with default arguments for ``duration`` s --
   every new packet's ``actual_q`` compared with the world's joint sample of the same time (the
@@ -16,17 +16,23 @@ Each part runs the scene's world and its arm emulator in their own processes
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
+import dynamixel_sdk as sdk
 import numpy as np
+import rtde_receive
+from rich.table import Table
 
+from ftc_hw.app.rig import build_rig
+from ftc_hw.bench.report import table_console
 from ftc_hw.bus import Bus
-from ftc_hw.devices.base import DeviceError
+from ftc_hw.devices.base import DeviceError, frozen_heap, responsive_readers
 from ftc_hw.scene import load_scene
-from ftc_hw.sim_devices.world_process import WorldProcess
+from ftc_hw.sim_devices.host import WorldHost
 
 UR_ADDRESS = "127.0.0.61"
 
@@ -41,7 +47,7 @@ def _wait_event(sub: Any, kind: str, timeout: float) -> Any:
     return None
 
 
-def _stop_latencies(world: WorldProcess, adapter: Any, n: int, between: Any = None, seed: int = 0) -> dict[str, Any]:
+def _stop_latencies(world: WorldHost, adapter: Any, n: int, between: Any = None, seed: int = 0) -> dict[str, Any]:
     """``n`` calls of ``adapter.stop()`` at random phases of the device's cycle (``between()`` before
     each, e.g. to set the arm moving). A stop's latency ends when the arm's commanded motion is frozen:
     the world has applied the halt (stop, or the Goal Position := Present Position write) *and* the
@@ -115,7 +121,7 @@ def _summary(values: list[float]) -> str:
             f"over {len(v)}")
 
 
-def _kill_restart(world: WorldProcess, adapter: Any, bus: Bus, name: str, n: int) -> dict[str, list[float]]:
+def _kill_restart(world: WorldHost, adapter: Any, bus: Bus, name: str, n: int) -> dict[str, list[float]]:
     """``n`` times: SIGKILL the emulator, time to the ``stale`` event (0 when the adapter was already
     stale); 0.3 s later restart it, time from the restarted emulator being ready to ``connect``."""
     events = bus.subscribe("events/", maxsize=100_000)
@@ -150,14 +156,11 @@ def _adapter_rate(bus: Bus, topic: str, seconds: float) -> dict[str, float]:
 
 # -- UR -------------------------------------------------------------------------------------------------
 def bench_ur(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any]:
-    import rtde_receive
-
-    from ftc_hw.devices.arm_registry import make_arm_adapter
-
     scene = load_scene("ur5e")
     device = next(d for d in scene.devices if d.kind == "ur-rtde")
     out: dict[str, Any] = {}
-    with WorldProcess(scene, "sweep", devices=[device.name], options={device.name: {"address": UR_ADDRESS}}) as w:
+    with WorldHost(scene, "sweep", devices=[device.name], options={device.name: {"address": UR_ADDRESS}},
+                   noise=False) as w:
         ring = w.joint_reader()
         world_q: dict[float, np.ndarray] = {}
         r = rtde_receive.RTDEReceiveInterface(UR_ADDRESS)  # default arguments
@@ -190,10 +193,9 @@ def bench_ur(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any
                           "matched": len(errs), "max_abs_error_rad": max(errs) if errs else float("nan"),
                           "connected": connected}
 
-        bus = Bus()
-        adapter = make_arm_adapter(device, bus, w.endpoint(device.name), scene=scene)
-        with adapter:
-            adapter.wait_connected(5.0)
+        rig = build_rig(scene, devices=[device], endpoints=w.endpoints, timeout=5.0)
+        bus, adapter = rig.bus, rig.arm
+        with rig:
             time.sleep(0.5)
             out["adapter"] = _adapter_rate(bus, adapter.topic, min(10.0, duration))
             out["adapter"]["missed_packets"] = adapter.counters["missed_packets"]
@@ -206,7 +208,7 @@ def bench_ur(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any
 
 
 # -- Dynamixel ------------------------------------------------------------------------------------------
-def _mover(world: WorldProcess, adapter: Any, scene: Any) -> Any:
+def _mover(world: WorldHost, adapter: Any, scene: Any) -> Any:
     """Before each stop: a Goal Position 0.15 rad away on every joint (alternating sides of home), once the
     world has it, so that stop() halts an arm in motion."""
     home = np.asarray(scene.robot.home, dtype=float)
@@ -224,16 +226,12 @@ def _mover(world: WorldProcess, adapter: Any, scene: Any) -> Any:
 
 
 def bench_dxl(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any]:
-    import dynamixel_sdk as sdk
-
-    from ftc_hw.devices.arm_registry import make_arm_adapter
-
     scene = load_scene("dxl-arm")
     device = next(d for d in scene.devices if d.kind == "dynamixel")
     ids = list(device.params["ids"])
     out: dict[str, Any] = {}
     seconds = min(10.0, duration)
-    with WorldProcess(scene, "sweep", devices=[device.name]) as w:
+    with WorldHost(scene, "sweep", devices=[device.name], noise=False) as w:
         port = sdk.PortHandler(w.endpoint(device.name)["endpoint"])
         port.openPort()
         port.setBaudRate(int(device.params["baudrate"]))
@@ -250,10 +248,9 @@ def bench_dxl(duration: float, stops: int = 200, kills: int = 5) -> dict[str, An
             out[label] = {"reads": n, "failures": fails, "reads_per_s": n / (time.monotonic() - t0)}
         port.closePort()
 
-        bus = Bus()
-        adapter = make_arm_adapter(device, bus, w.endpoint(device.name), scene=scene)
-        with adapter:
-            adapter.wait_connected(5.0)
+        rig = build_rig(scene, devices=[device], endpoints=w.endpoints, timeout=5.0)
+        bus, adapter = rig.bus, rig.arm
+        with rig:
             time.sleep(0.5)
             out["adapter"] = _adapter_rate(bus, adapter.topic, seconds)
             out["adapter"]["read_failures"] = adapter.counters["read_failures"]
@@ -313,18 +310,10 @@ def _stop_details(ur: dict[str, Any], dxl: dict[str, Any]) -> list[tuple[str, st
 
 def run(json_path: str | Path | None = None, duration: float = 60.0, stops: int = 200) -> dict[str, Any]:
     """Measure, print a table, optionally write JSON; returns the numbers and the acceptance rows."""
-    import os
-
-    from rich.table import Table
-
-    from ftc_hw.bench.report import table_console
-
     console = table_console()
     load = os.getloadavg()
     console.print(f"[bold]arm adapters[/bold]: UR receive for {duration:g} s, {stops} stops per arm, then the rest; "
                   f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs")
-    from ftc_hw.devices.base import frozen_heap, responsive_readers
-
     with responsive_readers(), frozen_heap():  # as the monitor runs the adapters and their reflex
         ur = bench_ur(duration, stops)
         dxl = bench_dxl(duration, stops)
@@ -350,9 +339,3 @@ def run(json_path: str | Path | None = None, duration: float = 60.0, stops: int 
         Path(json_path).write_text(json.dumps(result, indent=2, default=float))
     return result
 
-
-if __name__ == "__main__":
-    import sys
-
-    run(sys.argv[1] if len(sys.argv) > 1 else None, float(sys.argv[2]) if len(sys.argv) > 2 else 60.0,
-        int(sys.argv[3]) if len(sys.argv) > 3 else 200)

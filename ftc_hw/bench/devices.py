@@ -29,77 +29,75 @@ from typing import Any
 
 import numpy as np
 
+from ftc_hw.app.rig import Rig, build_rig
 from ftc_hw.bus import EVENTS_DEVICE, Bus, WrenchFlag
-from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
+from ftc_hw.sim_devices.emulator import sample_number
+from ftc_hw.sim_devices.host import WorldHost
 
 __all__ = ["run"]
 
 
 @dataclass
 class _World:
-    scene: Scene
-    runner: Any
+    host: WorldHost
+    tmp: Path
     samples: dict[int, np.ndarray] = field(default_factory=dict)  # world sample index -> wrench
     _stop: threading.Event = field(default_factory=threading.Event)
 
+    @property
+    def scene(self) -> Scene:
+        return self.host.scene
+
     def pace(self) -> tuple[float, float]:
         """(wall clock, world time): two of them give the world's pace, which the devices follow."""
-        return time.monotonic(), float(self.runner.world.t)
+        return time.monotonic(), self.host.sim_time()
 
     def sample_number(self, t: float) -> int:
-        from ftc_hw.sim_devices.emulator import sample_number
-
         return sample_number(t, self.scene.sensor.rate_hz)
+
+    def rig(self, *specs: DeviceSpec, bus: Bus | None = None) -> Rig:
+        """The adapters of these emulated devices (not opened; ``with`` opens them and waits 10 s)."""
+        return build_rig(self.scene, bus=bus, devices=specs, endpoints=self.host.endpoints, timeout=10.0)
+
+    def stats(self, name: str) -> dict[str, Any]:
+        p = self.tmp / f"{name}.json"
+        return json.loads(p.read_text()) if p.exists() else {}
+
+
+def _options(tmp: Path, spec: DeviceSpec, **options: Any) -> dict[str, Any]:
+    return {"path": str(tmp / f"{spec.name}.tty"), "stats_path": str(tmp / f"{spec.name}.json"), **options}
 
 
 @contextmanager
-def _world(scene_name: str, seconds: float, scenario: str = "static-pokes") -> Iterator[_World]:
-    """The scene's physics world running in real time on a thread, and a record of every sample."""
-    from ftc_hw.sim_devices.link import RingReader
-    from ftc_hw.sim_devices.runner import SimRunner
-
-    scene = load_scene(scene_name)
-    runner = SimRunner(scene, scenario, duration=seconds + 60.0, devices=False)
-    runner.start()
-    w = _World(scene, runner)
-    reader = RingReader(runner.link.ft, from_start=True)
+def _world(scene: Scene, seconds: float, tmp: Path, emulate: list[tuple[DeviceSpec, dict[str, Any]]],
+           scenario: str = "static-pokes") -> Iterator[_World]:
+    """The scene's physics world in its own process, in real time, emulating ``emulate`` ((spec,
+    emulator options) pairs), and a record of every F/T sample it produces."""
+    host = WorldHost(scene, scenario, devices=[spec for spec, _ in emulate], duration=seconds + 60.0,
+                     options={spec.name: _options(tmp, spec, **opts) for spec, opts in emulate})
+    host.start()
+    w = _World(host, tmp)
+    reader = host.ft_reader(from_start=True)
 
     def collect() -> None:
         while not w._stop.wait(0.05):
             for rec in reader.new():
                 w.samples[w.sample_number(float(rec[0]))] = rec[1:7].copy()
 
-    threads = [threading.Thread(target=runner.run, kwargs={"realtime": True}, daemon=True),
-               threading.Thread(target=collect, daemon=True)]
-    for t in threads:
-        t.start()
+    collector = threading.Thread(target=collect, daemon=True)
+    collector.start()
     try:
         yield w
     finally:
-        runner.duration = 0.0  # ends run() at its next step
         w._stop.set()
-        for t in threads:
-            t.join(10)
-        runner.stop()
+        collector.join(10)
+        host.close()
 
 
 def _spec(scene: Scene, kind: str, name: str | None = None, transport: str | None = None, **params) -> DeviceSpec:
     d = next(d for d in scene.devices if d.kind == kind)
     return DeviceSpec(name or d.name, d.kind, transport or d.transport, d.address, {**d.params, **params})
-
-
-def _start(spec: DeviceSpec, w: _World, tmp: Path, **options):
-    from ftc_hw.sim_devices.runner import EmulatorProcess
-
-    options.setdefault("path", str(tmp / f"{spec.name}.tty"))
-    options.setdefault("stats_path", str(tmp / f"{spec.name}.json"))
-    return EmulatorProcess.start(spec, w.scene, w.runner.link.info, options)
-
-
-def _read_stats(tmp: Path, name: str) -> dict[str, Any]:
-    p = tmp / f"{name}.json"
-    return json.loads(p.read_text()) if p.exists() else {}
 
 
 def _rate(frames) -> float:
@@ -115,31 +113,21 @@ def _counts(w: np.ndarray, lsb: np.ndarray) -> tuple[int, ...]:
 # -- sections ---------------------------------------------------------------------------------------
 def _ft300(duration: float, tmp: Path) -> dict[str, Any]:
     lsb = np.array([0.01] * 3 + [0.001] * 3)
-    with _world("dxl-arm", duration) as w:
-        clean = _spec(w.scene, "ft300")
-        noisy = _spec(w.scene, "ft300", name="ft_corrupt")
-        emus = [_start(clean, w, tmp), _start(noisy, w, tmp, faults={"corrupt": 0.01}, seed=1)]
-        bus = Bus()
-        adapters = [make_adapter(s, bus, e.endpoint, scene=w.scene) for s, e in zip((clean, noisy), emus, strict=True)]
-        try:
-            for a in adapters:
-                a.open()
-            for a in adapters:
-                a.wait_connected(10.0)
+    scene = load_scene("dxl-arm")
+    clean = _spec(scene, "ft300")
+    noisy = _spec(scene, "ft300", name="ft_corrupt")
+    with _world(scene, duration, tmp, [(clean, {}), (noisy, {"faults": {"corrupt": 0.01}, "seed": 1})]) as w:
+        rig = w.rig(clean, noisy)
+        with rig:
             p0 = w.pace()
             time.sleep(duration)
             p1 = w.pace()
-        finally:
-            for a in adapters:
-                a.close()
-            time.sleep(0.3)
-            stats = _read_stats(tmp, noisy.name)
-            for e in emus:
-                e.stop()
+        time.sleep(0.3)
+        stats = w.stats(noisy.name)
         known = {_counts(x, lsb) for x in dict(w.samples).values()}  # the collector is still running
     out: dict[str, Any] = {}
-    for a in adapters:
-        frames = bus.history(a.topic)
+    for a in rig.adapters:
+        frames = rig.bus.history(a.topic)
         bad = sum(_counts(f.wrench, lsb) not in known for f in frames)
         out[a.name] = {"frames": len(frames), "rate_hz": _rate(frames), "corrupted_published": bad,
                        "checksum_errors": a.counters["checksum_errors"]}
@@ -151,19 +139,13 @@ def _ft300(duration: float, tmp: Path) -> dict[str, Any]:
 
 
 def _modbus_tcp(seconds: float, tmp: Path) -> dict[str, Any]:
-    with _world("dxl-arm", seconds) as w:
-        spec = _spec(w.scene, "ft300", transport="modbus-tcp", poll_hz=0)
-        emu = _start(spec, w, tmp)
-        bus = Bus()
-        a = make_adapter(spec, bus, emu.endpoint, scene=w.scene)
-        try:
-            with a:
-                a.wait_connected(10.0)
-                n0, t0 = a.counters["polls"], time.monotonic()
-                time.sleep(seconds)
-                n1, t1 = a.counters["polls"], time.monotonic()
-        finally:
-            emu.stop()
+    scene = load_scene("dxl-arm")
+    spec = _spec(scene, "ft300", transport="modbus-tcp", poll_hz=0)
+    with _world(scene, seconds, tmp, [(spec, {})]) as w, w.rig(spec) as rig:
+        a = rig.adapter(spec.name)
+        n0, t0 = a.counters["polls"], time.monotonic()
+        time.sleep(seconds)
+        n1, t1 = a.counters["polls"], time.monotonic()
     return {"polls_per_s": (n1 - n0) / (t1 - t0), "timeouts": a.counters["timeouts"], "seconds": t1 - t0}
 
 
@@ -175,28 +157,23 @@ _STREAMS = {  # scene, kind, LSB of the device encoding
 
 def _stream(key: str, seconds: float, tmp: Path, faults: dict | None = None) -> dict[str, Any]:
     scene_name, kind, lsb = _STREAMS[key]
-    with _world(scene_name, seconds) as w:
-        spec = _spec(w.scene, kind)
-        opts: dict[str, Any] = {"faults": faults, "seed": 3} if faults else {}
-        emu = _start(spec, w, tmp, **opts)
-        bus = Bus(history=int(seconds * 1100) + 1000)  # keep every frame of the run
-        a = make_adapter(spec, bus, emu.endpoint, scene=w.scene)
-        try:
-            with a:
-                a.wait_connected(10.0)
-                p0 = w.pace()
-                time.sleep(seconds)
-                p1 = w.pace()
-            time.sleep(0.3)
-            stats = _read_stats(tmp, spec.name)
-        finally:
-            emu.stop()
-        frames = bus.history(a.topic)
+    scene = load_scene(scene_name)
+    spec = _spec(scene, kind)
+    with _world(scene, seconds, tmp, [(spec, {"faults": faults, "seed": 3} if faults else {})]) as w:
+        rig = w.rig(spec, bus=Bus(history=int(seconds * 1100) + 1000))  # keep every frame of the run
+        a = rig.adapter(spec.name)
+        with rig:
+            p0 = w.pace()
+            time.sleep(seconds)
+            p1 = w.pace()
+        time.sleep(0.3)
+        stats = w.stats(spec.name)
+        frames = rig.bus.history(a.topic)
         world = dict(w.samples)
     seqs = [f.seq for f in frames]
     missing = set(range(seqs[0], seqs[-1] + 1)) - set(seqs) if seqs else set()
     mismatched = int(sum(f.seq not in world or np.any(np.abs(f.wrench - world[f.seq]) > 0.51 * lsb) for f in frames))
-    world_hz = (p1[1] - p0[1]) / (p1[0] - p0[0]) * w.scene.sensor.rate_hz
+    world_hz = (p1[1] - p0[1]) / (p1[0] - p0[0]) * scene.sensor.rate_hz
     out = {"frames": len(frames), "seconds": seconds, "rate_hz": _rate(frames), "world_rate_hz": world_hz,
            "lost": len(missing),
            "seq_gaps": a.counters["seq_gaps"], "mismatched_values": mismatched,
@@ -221,36 +198,32 @@ _RECONNECT = {  # scene, kind, transport
 
 def _reconnect(label: str, trials: int, tmp: Path, dead_s: float = 1.0) -> dict[str, Any]:
     scene_name, kind, transport = _RECONNECT[label]
+    scene = load_scene(scene_name)
+    spec = _spec(scene, kind, transport=transport)
     stale_ms, back_ms, dead_frames = [], [], 0
-    with _world(scene_name, trials * (dead_s + 4.0)) as w:
-        spec = _spec(w.scene, kind, transport=transport)
-        emu = _start(spec, w, tmp)
-        bus = Bus()
+    with _world(scene, trials * (dead_s + 4.0), tmp, [(spec, {})]) as w:
+        endpoint = w.host.endpoint(spec.name)
+        keep = _options(tmp, spec, **({"port": endpoint["port"]} if "port" in endpoint else {}))
+        rig = w.rig(spec)
+        bus, a = rig.bus, rig.adapter(spec.name)
         events = bus.subscribe(EVENTS_DEVICE, maxsize=None)
-        a = make_adapter(spec, bus, emu.endpoint, scene=w.scene)
-        keep = {"port": emu.endpoint["port"]} if "port" in emu.endpoint else {}
-        try:
-            with a:
-                a.wait_connected(10.0)
-                for _ in range(trials):
-                    time.sleep(1.0)
-                    events.drain()
-                    t_kill = time.monotonic_ns()
-                    emu.kill()
-                    time.sleep(dead_s)
-                    t_restart = time.monotonic_ns()
-                    emu = _start(spec, w, tmp, **keep)
-                    t_back = emu.endpoint["ready_ns"]
-                    deadline = time.monotonic() + 5.0
-                    while not bus.window(a.topic, t_back, time.monotonic_ns()) and time.monotonic() < deadline:
-                        time.sleep(0.002)
-                    first = bus.window(a.topic, t_back, time.monotonic_ns())
-                    stale = [e for e in events.drain() if e.kind == "stale" and e.source == a.name]
-                    stale_ms.append((stale[0].t_host_ns - t_kill) / 1e6 if stale else float("inf"))
-                    back_ms.append((first[0].t_host_ns - t_back) / 1e6 if first else float("inf"))
-                    dead_frames += len(bus.window(a.topic, t_kill + 20_000_000, t_restart))
-        finally:
-            emu.stop()
+        with rig:
+            for _ in range(trials):
+                time.sleep(1.0)
+                events.drain()
+                t_kill = time.monotonic_ns()
+                w.host.kill(spec.name)
+                time.sleep(dead_s)
+                t_restart = time.monotonic_ns()
+                t_back = w.host.restart(spec.name, keep)["ready_ns"]
+                deadline = time.monotonic() + 5.0
+                while not bus.window(a.topic, t_back, time.monotonic_ns()) and time.monotonic() < deadline:
+                    time.sleep(0.002)
+                first = bus.window(a.topic, t_back, time.monotonic_ns())
+                stale = [e for e in events.drain() if e.kind == "stale" and e.source == a.name]
+                stale_ms.append((stale[0].t_host_ns - t_kill) / 1e6 if stale else float("inf"))
+                back_ms.append((first[0].t_host_ns - t_back) / 1e6 if first else float("inf"))
+                dead_frames += len(bus.window(a.topic, t_kill + 20_000_000, t_restart))
     return {"trials": trials, "dead_s": dead_s, "stale_ms_max": max(stale_ms), "stale_ms": stale_ms,
             "reconnect_ms_max": max(back_ms), "reconnect_ms": back_ms, "dead_period_frames": dead_frames}
 
