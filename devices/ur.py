@@ -34,6 +34,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import rtde_receive
 
 from ftc_hw.bus import Bus, JointFlag, JointFrame, joints_topic
 
@@ -172,8 +173,6 @@ class URArm(ArmAdapter):
 
     # -- link -------------------------------------------------------------------------------------------
     def _connect(self) -> None:
-        import rtde_receive
-
         probe_rtde(self.host, self.probe_timeout)
         rtde = self._rtde
         try:

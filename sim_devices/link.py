@@ -28,7 +28,7 @@ import socket
 import tempfile
 import time
 from dataclasses import dataclass, field
-from multiprocessing import shared_memory
+from multiprocessing import resource_tracker, shared_memory
 from typing import Any
 
 import numpy as np
@@ -81,8 +81,6 @@ class Ring:
             # the world's rings when this process exits: only the creator owns them. Not registering
             # (rather than unregistering afterwards) matters when the tracker is shared with the world's
             # process (spawned children share it): an unregister would drop the world's own entry.
-            from multiprocessing import resource_tracker
-
             register = resource_tracker.register
             resource_tracker.register = lambda *args, **kwargs: None
             try:

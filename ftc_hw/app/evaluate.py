@@ -38,11 +38,16 @@ time), truth by the ``t_host_ns`` at which the world published each sample to it
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.solver import ContactSolver
+from ftc_hw.solver.bound import crlb_point_cov
 
 
 @dataclass
@@ -245,9 +250,6 @@ def _reading_of_truth(scene) -> Callable[[dict[str, Any]], tuple | None]:
     """For a truth record in contact: (solver, q, its noise-free compensated reading, the solver's
     estimate of it, the true point); None when the estimate does not give back the true point (below
     the noise floor, or another link's crossing ranked first)."""
-    from ftc_hw.model import ArmModel, Contact
-    from ftc_hw.solver import ContactSolver
-
     model = ArmModel(scene)
     solver = ContactSolver(model)
 
@@ -273,10 +275,6 @@ def crlb_of_truth(scene) -> Callable[[dict[str, Any]], float | None]:
     true point (below the noise floor, or another link's crossing ranked first); a noise-free reading
     flagged only ``ambiguous`` (a neighbour within the line's noise) still has its bound: the noisy
     estimates of it that come unflagged are scored against it."""
-    import math
-
-    from ftc_hw.solver.bound import crlb_point_cov
-
     reading = _reading_of_truth(scene)
 
     def bound(rec: dict[str, Any]) -> float | None:

@@ -22,6 +22,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rich.console import Console
+from rich.table import Table
 
 from ftc_hw.bus.bus import Bus
 from ftc_hw.bus.frames import JointFrame, WrenchFrame
@@ -139,8 +141,6 @@ def run(
 
 
 def _print(result: dict) -> None:
-    from rich.console import Console
-    from rich.table import Table
 
     table = Table(title=f"bus bench ({result['frames']} frames, median of {result['repeat']})")
     table.add_column("measure")

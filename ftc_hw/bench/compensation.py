@@ -18,10 +18,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rich.table import Table
 
+from ftc_hw.bench.report import table_console
 from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import COMPENSATION_LEVELS, Scene, builtin_names, load_scene
+from ftc_hw.sim_devices.world import World
+from ftc_hw.sim_devices.world.scenarios import SCENARIOS
 
 SPEEDS = (0.5, 1.0, 2.0)
 TARE_FROM_S, TARE_S = 0.15, 0.1  # inside the sweeps' initial rest (SWEEP_REST_S = 0.3 s)
@@ -48,8 +52,6 @@ def arm_rate(scene: Scene) -> float:
 
 
 def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int) -> Recording:
-    from ftc_hw.sim_devices.world import World
-    from ftc_hw.sim_devices.world.scenarios import SCENARIOS
 
     model = ArmModel(scene)
     rng = np.random.default_rng(seed)
@@ -146,9 +148,6 @@ def _episodes(t: np.ndarray, contact: np.ndarray, merge_s: float) -> list[tuple[
 
 def run(json_path: Path | None = None, plot_path: Path | None = None, minutes: float = 1.0, seed: int = 0,
         scenes: list[str] | None = None, speeds: tuple[float, ...] = SPEEDS) -> dict:
-    from rich.table import Table
-
-    from ftc_hw.bench.report import table_console
 
     console = table_console()
     results: dict = {}
@@ -209,10 +208,10 @@ def _nanmedian(values: list[float]) -> float:
 
 
 def _plot(results: dict, path: Path) -> None:
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for --plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib only for --plot
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for name, per in results.items():

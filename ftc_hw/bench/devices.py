@@ -28,8 +28,10 @@ from tempfile import TemporaryDirectory
 from typing import Any
 
 import numpy as np
+from rich.table import Table
 
 from ftc_hw.app.rig import Rig, build_rig
+from ftc_hw.bench.report import table_console
 from ftc_hw.bus import EVENTS_DEVICE, Bus, WrenchFlag
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 from ftc_hw.sim_devices.emulator import sample_number
@@ -264,9 +266,6 @@ def run(json_path: Path | str | None = None, duration: float = 60.0, *, trials: 
 
 
 def _print(res: dict[str, Any]) -> None:
-    from rich.table import Table
-
-    from ftc_hw.bench.report import table_console
 
     ok = "[green]yes[/]"
     no = "[red]NO[/]"

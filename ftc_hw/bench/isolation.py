@@ -24,11 +24,15 @@ import math
 from pathlib import Path
 
 import numpy as np
+from rich.table import Table
 
+from ftc_hw.bench.report import table_console
 from ftc_hw.compensation.pipeline import Compensator
 from ftc_hw.compensation.residuals import JointResiduals
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import load_scene
+from ftc_hw.sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
+from ftc_hw.sim_devices.world.scenarios import sample_contacts
 from ftc_hw.solver import ContactSolver
 
 SCENES = ("ur5e", "dxl-arm")
@@ -39,8 +43,6 @@ EXACT_CHI2 = 1e-6  # a noise-free crossing fits the wrench exactly
 def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | None = None) -> dict:
     """Counts and shares over the two-link cases among ``n_cases`` sampled contacts (stopping early
     once ``max_discriminable`` discriminable ones were seen)."""
-    from ftc_hw.sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
-    from ftc_hw.sim_devices.world.scenarios import sample_contacts
 
     scene = load_scene(scene_name)
     model = ArmModel(scene)
@@ -115,9 +117,6 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
 
 
 def run(json_path: Path | None = None, cases: int = 400, seed: int = 0, scenes: list[str] | None = None) -> dict:
-    from rich.table import Table
-
-    from ftc_hw.bench.report import table_console
 
     results = {name: evaluate(name, cases, seed) for name in scenes or SCENES}
     table = Table(title=f"link isolation by motor currents, force line crossing two links ({cases} sampled contacts "

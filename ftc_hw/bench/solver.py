@@ -30,9 +30,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from rich.table import Table
 
+from ftc_hw.bench.report import table_console
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import builtin_names, load_scene
+from ftc_hw.sim_devices.world.scenarios import sample_contacts
 from ftc_hw.solver import make_solver
 from ftc_hw.solver.bound import crlb_magnitude_std, crlb_point_cov
 
@@ -42,7 +45,6 @@ FRICTION_CONE_DEG = 45.0  # forces within a friction cone of coefficient 1: what
 
 
 def _contacts(model: ArmModel, q, n: int, rng: np.random.Generator):
-    from ftc_hw.sim_devices.world.scenarios import sample_contacts
 
     return sample_contacts(model, q, n, rng, FRICTION_CONE_DEG, (5.0, 200.0))
 
@@ -174,9 +176,6 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, n: int = 2
         magnitude_cases: int = 0) -> dict:
     """``magnitude_cases`` > 0: also :func:`magnitude_check` on that many cases per scene, in the
     results as ``magnitude_vs_force_reading``."""
-    from rich.table import Table
-
-    from ftc_hw.bench.report import table_console
 
     console = table_console()
     results: dict = {"noise_free": {}, "noisy": {}}
@@ -257,7 +256,6 @@ def magnitude_check(n: int, seed: int = 0, scenes: list[str] | None = None, n_bo
 
 
 def _print_magnitude_check(console, check: dict) -> None:
-    from rich.table import Table
 
     table = Table(title="force magnitude error, median % of |f|: ours against |f_measured| (the leng2016 "
                         "method's magnitude), same noisy cases, 95 % paired bootstrap")
@@ -270,7 +268,6 @@ def _print_magnitude_check(console, check: dict) -> None:
 
 
 def _print_paired(console, noisy: dict, n: int) -> None:
-    from rich.table import Table
 
     if not any("ours_minus_this" in r for per in noisy.values() for r in per.values()):
         return
@@ -290,10 +287,10 @@ def _print_paired(console, noisy: dict, n: int) -> None:
 
 
 def _plot(results: dict, path: Path) -> None:
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for --plot
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib only for --plot
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for name, per in results["noisy"].items():

@@ -1,6 +1,11 @@
-"""The ``ftc`` command. Subcommands live in ``ftc_hw/cli``; heavy imports happen inside them."""
+"""The ``ftc`` command: options parsed here, the work done by the layers below.
+
+Each command imports its implementation when it runs (``# lazy:`` below): ``ftc --help`` and a
+mistyped option answer at once, without loading MuJoCo, numba kernels and the device stack.
+"""
 from __future__ import annotations
 
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -11,6 +16,28 @@ from ftc_hw import __version__
 app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
                   help="ftc-hw: where, in which direction and how hard a robot arm was touched, "
                        "from one 6-axis force/torque sensor.")
+
+
+class Method(StrEnum):
+    """A contact localization method."""
+
+    ours = "ours"
+    leng2016 = "leng2016"  # the reference paper's
+
+
+class Level(StrEnum):
+    """A compensation level (``scene``: the one the scene file declares)."""
+
+    dynamics = "dynamics"
+    gravity = "gravity"
+    bias = "bias"
+    scene = "scene"
+
+
+class Reflex(StrEnum):
+    stop = "stop"
+
+
 bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: print a table, --json writes the figures.")
 app.add_typer(bench_app, name="bench")
 
@@ -32,7 +59,7 @@ def main(
 @app.command()
 def scenes() -> None:
     """List the built-in scenes, one line each."""
-    from ftc_hw.cli.scenes import list_scenes
+    from ftc_hw.cli.scenes import list_scenes  # lazy: CLI start-up
 
     list_scenes()
 
@@ -51,7 +78,7 @@ def sim(
                                           help="Start the scene's device emulators.")] = True,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth."""
-    from ftc_hw.cli.sim import list_scenarios, run_sim
+    from ftc_hw.cli.sim import list_scenarios, run_sim  # lazy: CLI start-up
 
     if list_:
         list_scenarios()
@@ -64,17 +91,15 @@ def sim(
 @app.command()
 def solve(
     scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
-    method: Annotated[str, typer.Option(help="ours or leng2016 (the reference paper's method).")] = "ours",
+    method: Annotated[Method, typer.Option(help="Localization method (leng2016: the paper's).")] = Method.ours,
     input_path: Annotated[str, typer.Option("--input", help="JSON Lines file, or - for stdin.")] = "-",
     output_path: Annotated[str, typer.Option("--output", help="JSON Lines file, or - for stdout.")] = "-",
     bias: Annotated[Optional[str], typer.Option(help="Sensor bias to subtract, JSON list of 6 (N, N m).")] = None,  # noqa: UP045
 ) -> None:
     """Localize contacts: one JSON line in ({"q", "wrench", ...}), one estimate or error line out."""
-    from ftc_hw.cli.solve import run_solve
+    from ftc_hw.cli.solve import run_solve  # lazy: CLI start-up
 
-    if method not in ("ours", "leng2016"):
-        raise typer.BadParameter("ours or leng2016", param_hint="--method")
-    run_solve(scene, method, input_path, output_path, bias)
+    run_solve(scene, method.value, input_path, output_path, bias)
 
 
 @bench_app.command("bus")
@@ -83,7 +108,7 @@ def bench_bus(
     frames: Annotated[int, typer.Option(min=1000, help="Frames per throughput run.")] = 200_000,
 ) -> None:
     """Bus throughput (publish to deliver, 1 and 4 subscribers) and sample_at latency."""
-    from ftc_hw.bench.bus import run
+    from ftc_hw.bench.bus import run  # lazy: CLI start-up
 
     run(json_path=json_path, frames=frames)
 
@@ -97,7 +122,7 @@ def demo(
     record: Annotated[Optional[Path], typer.Option(help="Also record the run to this MCAP file.")] = None,  # noqa: UP045
 ) -> None:
     """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
-    from ftc_hw.cli.demo import run_demo
+    from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
 
     raise typer.Exit(run_demo(scene, scenario, duration, seed, record))
 
@@ -114,19 +139,19 @@ def monitor(
     calibration: Annotated[Optional[Path], typer.Option(help="Calibration file (ftc calibrate): bias and payload; "  # noqa: UP045
                                                         "without one the sensor is tared on the first 0.1 s.")] = None,
     record: Annotated[Optional[Path], typer.Option(help="Record every bus topic to this MCAP file.")] = None,  # noqa: UP045
-    reflex: Annotated[Optional[str], typer.Option(help="'stop': a contact onset commands the arm to stop.")] = None,  # noqa: UP045
+    reflex: Annotated[Optional[Reflex], typer.Option(help="stop: a contact onset commands the arm to stop.")] = None,  # noqa: UP045
     events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
     truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="With --sim: sensor noise.")] = True,
     view: Annotated[bool, typer.Option("--view/--no-view", help="The live view.")] = True,
-    level: Annotated[str, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
-                                       "scene (the level the scene file declares).")] = "dynamics",
+    level: Annotated[Level, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
+                                         "scene (the level the scene file declares).")] = Level.dynamics,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
-    from ftc_hw.cli.monitor import run_monitor_command
+    from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
 
-    raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record, reflex, events,
-                                         truth, noise, view, level))
+    raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
+                                         reflex.value if reflex else None, events, truth, noise, view, level.value))
 
 
 @app.command()
@@ -139,7 +164,7 @@ def replay(
     view: Annotated[bool, typer.Option("--view/--no-view", help="The live view (with --speed > 0).")] = True,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
-    from ftc_hw.cli.replay import run_replay
+    from ftc_hw.cli.replay import run_replay  # lazy: CLI start-up
 
     raise typer.Exit(run_replay(path, speed, events, calibration, check, view))
 
@@ -151,7 +176,7 @@ def bench_solver(
     cases: Annotated[int, typer.Option(min=100, help="Sampled contacts per scene.")] = 2000,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
-    method: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+    method: Annotated[Optional[list[Method]], typer.Option(  # noqa: UP045
         help="Method(s) to run (default: ours and leng2016; leng2016 takes ms to 100s of ms a frame).")] = None,
     magnitude_cases: Annotated[int, typer.Option(
         min=0, help="Also compare the force magnitude with |f_measured| (leng2016's) on this many cases per "
@@ -159,11 +184,9 @@ def bench_solver(
                     "'magnitude_vs_force_reading'.")] = 0,
 ) -> None:
     """Solver accuracy (noise-free and with the scene's noise) against latency, ours vs leng2016."""
-    from ftc_hw.bench.solver import run
+    from ftc_hw.bench.solver import run  # lazy: CLI start-up
 
-    methods = tuple(method or ("ours", "leng2016"))
-    if not set(methods) <= {"ours", "leng2016"}:
-        raise typer.BadParameter("ours or leng2016", param_hint="--method")
+    methods = tuple(m.value for m in method) if method else ("ours", "leng2016")
     if 0 < magnitude_cases < 100:
         raise typer.BadParameter("0 (off) or at least 100", param_hint="--magnitude-cases")
     run(json_path=json_path, plot_path=plot, n=cases, seed=seed, scenes=scene, methods=methods,
@@ -179,7 +202,7 @@ def bench_compensation(
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
 ) -> None:
     """Compensation levels on moving sweeps: free-motion error, false alarms, detection delay, cost."""
-    from ftc_hw.bench.compensation import run
+    from ftc_hw.bench.compensation import run  # lazy: CLI start-up
 
     run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene)
 
@@ -192,7 +215,7 @@ def bench_isolation(
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: ur5e, dxl-arm).")] = None,  # noqa: UP045
 ) -> None:
     """Link isolation by motor currents when the force line crosses two links: right, flagged, wrong."""
-    from ftc_hw.bench.isolation import run
+    from ftc_hw.bench.isolation import run  # lazy: CLI start-up
 
     run(json_path=json_path, cases=cases, seed=seed, scenes=scene)
 
@@ -203,7 +226,7 @@ def bench_devices(
     duration: Annotated[float, typer.Option(min=1.0, help="Seconds per streaming run.")] = 60.0,
 ) -> None:
     """F/T adapters against their emulators: rates, loss, corruption, reconnects."""
-    from ftc_hw.bench.devices import run
+    from ftc_hw.bench.devices import run  # lazy: CLI start-up
 
     run(json_path=json_path, duration=duration)
 
@@ -215,7 +238,7 @@ def bench_arms(
     stops: Annotated[int, typer.Option(min=1, help="stop() calls per arm.")] = 200,
 ) -> None:
     """Arm adapters against their emulators: RTDE rate and accuracy, Dynamixel reads, stop, reconnects."""
-    from ftc_hw.bench.arms import run
+    from ftc_hw.bench.arms import run  # lazy: CLI start-up
 
     run(json_path=json_path, duration=duration, stops=stops)
 
@@ -241,7 +264,7 @@ def calibrate(
     speed: Annotated[float, typer.Option(min=0.05, max=3.0, help="Peak joint speed of the moves, rad/s.")] = 1.0,
 ) -> None:
     """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
-    from .calibrate import run_calibrate_command
+    from .calibrate import run_calibrate_command  # lazy: CLI start-up
 
     raise typer.Exit(run_calibrate_command(scene, sim=sim, sim_payload=sim_payload, interactive=not non_interactive,
                                    poses=poses, out=out, json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw,

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import typer
 
+from ftc_hw.app.calibrate import run_calibrate
 from ftc_hw.model import Payload
 
 from .common import scene_or_exit
@@ -25,8 +26,6 @@ def parse_sim_payload(text: str) -> Payload:
 
 
 def run_calibrate_command(scene_name: str, *, sim: bool, sim_payload: str | None, **options) -> int:
-    from ftc_hw.app.calibrate import run_calibrate  # lazy: the wizard loads MuJoCo and the device stack
-
     scene = scene_or_exit(scene_name)
     payload = parse_sim_payload(sim_payload) if sim_payload else None
     if payload is not None and not sim:

@@ -2,12 +2,15 @@
 scenario, the monitor's live view, then the detected contacts against the world's ground truth."""
 from __future__ import annotations
 
+from pathlib import Path
 
-def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record=None) -> int:
-    from ftc_hw.app.session import MonitorConfig
-    from ftc_hw.app.view import make_console
-    from ftc_hw.cli.monitor import run_guarded
+from ftc_hw.app.session import MonitorConfig
+from ftc_hw.app.view import make_console
 
+from .monitor import run_guarded
+
+
+def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record: Path | None = None) -> int:
     console = make_console()
     console.print(f"[bold]ftc demo[/]: scene [cyan]{scene_name}[/], scenario [cyan]{scenario}[/], {duration:g} s: "
                   "emulated devices -> adapters -> bus -> compensation, detection, localization; "

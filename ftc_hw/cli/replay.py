@@ -6,17 +6,17 @@ from pathlib import Path
 import typer
 from rich.live import Live
 
+from ftc_hw.app.session import MonitorSetupError, load_pipeline_calibration
+from ftc_hw.app.view import LiveView, make_console
+from ftc_hw.bus import Bus, joints_topic, wrench_topic
+from ftc_hw.monitor import MONITOR_INPUT
+from ftc_hw.record.events import event_line
+from ftc_hw.record.reader import RecordingError, read_recording
+from ftc_hw.record.replay import ReplayError, recorded_scene, replay
+
 
 def run_replay(path: Path, speed: float, events_path: Path | None, calibration: Path | None, check: bool,
                view: bool) -> int:
-    from ftc_hw.app.session import MonitorSetupError, load_pipeline_calibration
-    from ftc_hw.app.view import LiveView, make_console
-    from ftc_hw.bus import Bus, joints_topic, wrench_topic
-    from ftc_hw.monitor import MONITOR_INPUT
-    from ftc_hw.record.events import event_line
-    from ftc_hw.record.reader import RecordingError, read_recording
-    from ftc_hw.record.replay import ReplayError, recorded_scene, replay
-
     console = make_console()
     try:
         rec = read_recording(path)

@@ -10,7 +10,9 @@ from typing import IO, Any
 import numpy as np
 
 from ftc_hw.compensation import Compensator
-from ftc_hw.solver import ContactEstimate
+from ftc_hw.solver import ContactEstimate, make_solver
+
+from .common import scene_or_exit
 
 
 class InputError(ValueError):
@@ -77,9 +79,6 @@ def solve_lines(solver, compensator: Compensator, lines: Iterable[str]) -> Itera
 
 
 def run_solve(scene_name: str, method: str, input_path: str, output_path: str, bias: str | None) -> None:
-    from ftc_hw.cli.common import scene_or_exit
-    from ftc_hw.solver import make_solver
-
     scene = scene_or_exit(scene_name)
     solver = make_solver(scene, method)
     bias_vec = None

@@ -101,7 +101,7 @@ class ArmModel:
         self._forces_applied = False
         self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
         self.surfaces = self._collect_surfaces()
-        self.sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
+        self.sign = scene.sensor.reading_sign
         self.total_mass = float(m.body_subtreemass[self.sensor_body])
 
     # -- set-up ---------------------------------------------------------------------------------------

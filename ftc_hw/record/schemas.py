@@ -12,6 +12,7 @@ import numpy as np
 
 from ftc_hw.bus import ContactEvent, DeviceEvent, JointFrame, WrenchFrame, joints_topic, wrench_topic
 from ftc_hw.bus.bus import EVENTS_CONTACT, EVENTS_DEVICE
+from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
 
 _INT = {"type": "integer"}
 _STR = {"type": "string"}
@@ -64,8 +65,6 @@ def _list(a) -> list[float]:
 
 def topic_of(frame: Any) -> str | None:
     """The bus topic a frame is published on (the bus conventions), None for an unknown type."""
-    from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
-
     if isinstance(frame, WrenchFrame):
         return wrench_topic(frame.source)
     if isinstance(frame, JointFrame):
@@ -81,8 +80,6 @@ def topic_of(frame: Any) -> str | None:
 
 def encode(frame: Any) -> tuple[str, bytes]:
     """(schema name, JSON bytes)."""
-    from ftc_hw.monitor import PipelineInput
-
     if isinstance(frame, WrenchFrame):
         name, d = "ftc_hw.WrenchFrame", {"t_host_ns": frame.t_host_ns, "t_device_ns": frame.t_device_ns,
                                          "seq": frame.seq, "source": frame.source, "wrench": _list(frame.wrench),
@@ -128,8 +125,6 @@ def decode(schema: str, data: bytes) -> Any:
     if schema == "ftc_hw.DeviceEvent":
         return DeviceEvent.make(d["t_host_ns"], d["source"], d["kind"], d["message"], d["counters"])
     if schema == "ftc_hw.PipelineInput":
-        from ftc_hw.monitor import PipelineInput
-
         def arr(k: str) -> np.ndarray:
             a = np.array(d[k], dtype=np.float64)
             if a.ndim != 1 or not np.isfinite(a).all():

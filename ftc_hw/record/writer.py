@@ -13,6 +13,7 @@ recorder's thread drains it every ``poll_s``; a full queue drops the oldest fram
 """
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections import Counter
@@ -82,8 +83,6 @@ class McapRecorder:
         if cid is None:
             sid = self._schemas.get(schema)
             if sid is None:
-                import json
-
                 sid = self._writer.register_schema(schema, "jsonschema", json.dumps(SCHEMAS[schema]).encode())
                 self._schemas[schema] = sid
             cid = self._writer.register_channel(topic, "json", sid)

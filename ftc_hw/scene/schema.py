@@ -64,6 +64,14 @@ class SensorSpec:
         """Sensor noise covariance (6x6, diagonal), including the quantization noise LSB^2/12."""
         return np.diag(self.noise_std**2 + self.quantization**2 / 12.0)
 
+    @property
+    def reading_sign(self) -> float:
+        """The one place the sign convention is decoded: +1 when the sensor reads the wrench its mount
+        exerts on the arm (``base_on_arm``, MuJoCo's force/torque sensor convention), -1 when it reads
+        the arm's on the mount (``arm_on_base``). ``reading = reading_sign * base_on_arm wrench``;
+        a contact (p, c x p) on the arm changes the reading by ``-reading_sign * (p, c x p)``."""
+        return 1.0 if self.reports == "base_on_arm" else -1.0
+
 
 @dataclass(frozen=True)
 class TouchableLink:

@@ -188,7 +188,7 @@ class ContactSolver:
         sensor_body = self.model.sensor_body
         self.sensor_moves = bool(self.link_joint[sensor_body].any())
         self.sigma_sensor = self.scene.sensor.noise_cov
-        self.ext_sign = -1.0 if self.scene.sensor.reports == "base_on_arm" else 1.0
+        self.ext_sign = -self.scene.sensor.reading_sign  # reading -> the contact wrench on the arm
         q0 = np.array(self.scene.robot.home)
         self._A0, self._WS0 = self._frame_transform(q0)
         self._W0 = self._WS0[:6]

@@ -133,7 +133,7 @@ class World:
         m.dof_solimp[dofs, 1] = 0.9999
         self._fadr = m.sensor(FORCE_SENSOR).adr[0]
         self._tadr = m.sensor(TORQUE_SENSOR).adr[0]
-        self._sign = 1.0 if scene.sensor.reports == "base_on_arm" else -1.0
+        self._sign = scene.sensor.reading_sign
         sensor_body = m.site_bodyid[m.site(scene.sensor.site).id]
         self._arm_bodies = {b for b in range(m.nbody) if descends(m, b, sensor_body)}
         self.sensor = FTSensorModel(scene.sensor, self.rng, noise=noise)
