@@ -26,7 +26,7 @@ from ftc_hw.sim_devices.registry import EMULATORS
 from ft_helpers import wait_for
 
 pytestmark = pytest.mark.timeout(60)
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_every_kind_has_an_adapter_and_an_emulator():
