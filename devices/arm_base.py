@@ -9,6 +9,7 @@ from .base import Adapter, DeviceIOError
 
 class ArmAdapter(Adapter):
     role = "arm"
+    moves_on_goals = False  # set_goal (joint targets, rad) and set_torque move this arm
     _stale = False
 
     @property

@@ -63,6 +63,7 @@ def _signed(value: int, bits: int) -> int:
 
 class DynamixelArm(ArmAdapter):
     kind = "dynamixel"
+    moves_on_goals = True
 
     def __init__(self, name: str, bus: Bus, port: str, ids: Sequence[int], *, model: str = "XM430-W350",
                  baudrate: int = 1_000_000, zero_ticks: Sequence[int] | None = None,

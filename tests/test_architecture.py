@@ -102,11 +102,9 @@ def test_a_new_package_must_be_given_a_layer(pristine, tmp_path):
 def _function_local_imports(path: Path) -> list[tuple[int, str]]:
     lines = path.read_text(encoding="utf-8").splitlines()
     tree = ast.parse("\n".join(lines))
-    out = []
-    for fn in ast.walk(tree):
-        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            out += [(n.lineno, lines[n.lineno - 1]) for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))]
-    return out
+    functions = [fn for fn in ast.walk(tree) if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    return sorted({(n.lineno, lines[n.lineno - 1]) for fn in functions for n in ast.walk(fn)
+                   if isinstance(n, (ast.Import, ast.ImportFrom))})
 
 
 def test_function_local_imports_are_lazy_on_purpose_and_say_why():

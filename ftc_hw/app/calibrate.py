@@ -167,7 +167,7 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
                               seed=seed, start=q_now)
         console.print(plan_table(plan))
         console.print(expected_table(plan, sample_s))
-        if session.arm_spec.kind == "dynamixel":
+        if session.arm.moves_on_goals:
             question = (f"Torque on and move the arm through {len(plan.q)} poses? Keep hands and objects clear "
                         "of it")
         elif sim:

@@ -91,8 +91,9 @@ class DeviceSession:
 
     @property
     def can_command(self) -> bool:
-        """True when the wizard can move the arm itself (DYNAMIXEL; UR only in simulation)."""
-        return self.arm_spec.kind == "dynamixel" or self.sim
+        """True when the wizard can move the arm itself: over its protocol (DYNAMIXEL), or in simulation
+        through the world (UR RTDE receive has no motion command)."""
+        return self.arm.moves_on_goals or self.sim
 
     @property
     def q_resolution(self) -> float:
@@ -110,7 +111,7 @@ class DeviceSession:
 
     # -- motion --------------------------------------------------------------------------------------------
     def torque_on(self) -> None:
-        if self.arm_spec.kind == "dynamixel":
+        if self.arm.moves_on_goals:
             self.arm.set_torque(True)
 
     def move_to(self, q_goal: np.ndarray, speed: float = 0.6, rate_hz: float = 50.0,
@@ -136,7 +137,7 @@ class DeviceSession:
         """One goal; if the adapter's link drops meanwhile (it reconnects by itself), wait for it and
         send again. The adapter's reader may close the port under a concurrent write, which the SDK
         reports with whatever its serial call raises, hence the broad except."""
-        if self.arm_spec.kind != "dynamixel":
+        if not self.arm.moves_on_goals:
             self.world.goal(q)
             return
         end = time.monotonic() + timeout

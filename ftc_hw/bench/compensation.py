@@ -21,6 +21,7 @@ import numpy as np
 from rich.table import Table
 
 from ftc_hw.bench.report import table_console
+from ftc_hw.devices.registry import role_of
 from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import COMPENSATION_LEVELS, Scene, builtin_names, load_scene
@@ -46,13 +47,12 @@ class Recording:
 
 def arm_rate(scene: Scene) -> float:
     for d in scene.devices:
-        if d.kind in ("ur-rtde", "dynamixel"):
+        if role_of(d.kind) == "arm":
             return float(d.params.get("frequency", 500.0 if d.kind == "ur-rtde" else 200.0))
     return scene.sensor.rate_hz
 
 
 def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int) -> Recording:
-
     model = ArmModel(scene)
     rng = np.random.default_rng(seed)
     setup = SCENARIOS[scenario].build(scene, model, rng, duration, speed=speed)

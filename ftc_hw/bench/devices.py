@@ -55,6 +55,16 @@ class _World:
         """(wall clock, world time): two of them give the world's pace, which the devices follow."""
         return time.monotonic(), self.host.sim_time()
 
+    def stream(self, rig: Rig, seconds: float) -> float:
+        """The rig connected and streaming for ``seconds``, then closed (and 0.3 s for the emulators'
+        stats files to catch up); returns the world's pace over it (world s per wall s)."""
+        with rig:
+            p0 = self.pace()
+            time.sleep(seconds)
+            p1 = self.pace()
+        time.sleep(0.3)
+        return (p1[1] - p0[1]) / (p1[0] - p0[0])
+
     def sample_number(self, t: float) -> int:
         return sample_number(t, self.scene.sensor.rate_hz)
 
@@ -120,11 +130,7 @@ def _ft300(duration: float, tmp: Path) -> dict[str, Any]:
     noisy = _spec(scene, "ft300", name="ft_corrupt")
     with _world(scene, duration, tmp, [(clean, {}), (noisy, {"faults": {"corrupt": 0.01}, "seed": 1})]) as w:
         rig = w.rig(clean, noisy)
-        with rig:
-            p0 = w.pace()
-            time.sleep(duration)
-            p1 = w.pace()
-        time.sleep(0.3)
+        pace = w.stream(rig, duration)
         stats = w.stats(noisy.name)
         known = {_counts(x, lsb) for x in dict(w.samples).values()}  # the collector is still running
     out: dict[str, Any] = {}
@@ -133,7 +139,7 @@ def _ft300(duration: float, tmp: Path) -> dict[str, Any]:
         bad = sum(_counts(f.wrench, lsb) not in known for f in frames)
         out[a.name] = {"frames": len(frames), "rate_hz": _rate(frames), "corrupted_published": bad,
                        "checksum_errors": a.counters["checksum_errors"]}
-    out["world_pace"] = (p1[1] - p0[1]) / (p1[0] - p0[0])
+    out["world_pace"] = pace
     inj = stats.get("faults", {})
     out["ft_corrupt"]["corrupted_injected"] = inj.get("stream.corrupt", 0)
     out["ft_corrupt"]["stream_frames_sent"] = stats.get("samples", 0)
@@ -164,18 +170,14 @@ def _stream(key: str, seconds: float, tmp: Path, faults: dict | None = None) -> 
     with _world(scene, seconds, tmp, [(spec, {"faults": faults, "seed": 3} if faults else {})]) as w:
         rig = w.rig(spec, bus=Bus(history=int(seconds * 1100) + 1000))  # keep every frame of the run
         a = rig.adapter(spec.name)
-        with rig:
-            p0 = w.pace()
-            time.sleep(seconds)
-            p1 = w.pace()
-        time.sleep(0.3)
+        pace = w.stream(rig, seconds)
         stats = w.stats(spec.name)
         frames = rig.bus.history(a.topic)
         world = dict(w.samples)
     seqs = [f.seq for f in frames]
     missing = set(range(seqs[0], seqs[-1] + 1)) - set(seqs) if seqs else set()
     mismatched = int(sum(f.seq not in world or np.any(np.abs(f.wrench - world[f.seq]) > 0.51 * lsb) for f in frames))
-    world_hz = (p1[1] - p0[1]) / (p1[0] - p0[0]) * scene.sensor.rate_hz
+    world_hz = pace * scene.sensor.rate_hz
     out = {"frames": len(frames), "seconds": seconds, "rate_hz": _rate(frames), "world_rate_hz": world_hz,
            "lost": len(missing),
            "seq_gaps": a.counters["seq_gaps"], "mismatched_values": mismatched,
