@@ -105,7 +105,8 @@ def _function_local_imports(path: Path) -> list[tuple[int, str]]:
     out = []
     for fn in ast.walk(tree):
         if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            out += [(n.lineno, lines[n.lineno - 1]) for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))]
+            out += [(n.lineno, lines[n.lineno - 1]) for n in ast.walk(fn)
+                    if isinstance(n, (ast.Import, ast.ImportFrom))]
     return out
 
 
