@@ -95,7 +95,7 @@ def test_each_contact_error_is_set_against_its_cramer_rao_bound():
     assert ev.worst_rms_to_crlb() == pytest.approx(c.err_rms_mm / 2.0)
 
 
-def test_the_cramer_rao_bound_of_a_truth_record():
+def test_the_cramer_rao_bound_of_a_truth_record(contacts):
     """A 50 N push on leng2016: a bound of a fraction of a millimetre to a few (the solver bench's
     scale for this scene); no contact, no bound."""
     from types import SimpleNamespace
@@ -106,8 +106,6 @@ def test_the_cramer_rao_bound_of_a_truth_record():
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
     from ftc_hw.sim_devices.world.truth import truth_record
-
-    from solver_cases import contacts
 
     scene = load_scene("leng2016")
     q = np.array(scene.robot.home)
@@ -135,7 +133,7 @@ def test_each_estimate_is_set_against_its_own_bound():
     assert ev.worst_err_over_crlb() == c.err_over_crlb_rms
 
 
-def test_the_solvers_own_error_at_a_truth_record():
+def test_the_solvers_own_error_at_a_truth_record(contacts):
     """A 50 N push on leng2016, 400 draws of the scene's noise: the solver's own RMS error is that
     point's Cramer-Rao bound (within the draws' scatter), the same on a second call (seeded by the
     record's time); no contact, no figure."""
@@ -147,8 +145,6 @@ def test_the_solvers_own_error_at_a_truth_record():
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
     from ftc_hw.sim_devices.world.truth import truth_record
-
-    from solver_cases import contacts
 
     scene = load_scene("leng2016")
     q = np.array(scene.robot.home)

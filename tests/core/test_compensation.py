@@ -13,8 +13,6 @@ from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import Hold, Probe, ScenarioSetup, Sinusoid, World, build_scenario
 
-from solver_cases import contacts
-
 
 def test_levels_compute_only_what_they_need(monkeypatch):
     model = ArmModel(load_scene("ur5e"))
@@ -132,7 +130,7 @@ def test_detector_false_alarm_rate_onset_and_hysteresis():
     assert det.update(0, np.zeros(6)).active is False
 
 
-def test_a_20_newton_step_is_detected_within_two_samples_plus_a_millisecond():
+def test_a_20_newton_step_is_detected_within_two_samples_plus_a_millisecond(contacts):
     scene = load_scene("ur5e")
     model = ArmModel(scene)
     q = np.array(scene.robot.home)

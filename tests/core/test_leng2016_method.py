@@ -16,8 +16,6 @@ from ftc_hw.solver import BatchEstimate, ContactEstimate, ContactSolver, flag_na
 from ftc_hw.solver import geometry as G
 from ftc_hw.solver.leng2016 import Leng2016Solver, _inliers
 
-from solver_cases import reading
-
 PAPER_Q = np.array([math.pi / 6, -math.pi / 6, -math.pi / 4])  # section 6
 FORCE_N = 100.0  # section 6
 PER_GEOM = 60
@@ -31,7 +29,7 @@ def setup():
 
 
 @pytest.fixture(scope="module")
-def cases(setup):
+def cases(setup, reading):
     """100 N pushes (within 60 degrees of the inward normal) at visible points of every touchable
     primitive (link 1, 2, 3 rods, their exposed caps, the tip hemisphere), with the joint torques."""
     scene, model, _ = setup

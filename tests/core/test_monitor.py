@@ -10,10 +10,9 @@ from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import World, build_scenario
-from ftc_hw.sim_devices.world.bus_feeder import WorldFeeder
 
 
-def test_monitor_detects_the_collision_and_nothing_else():
+def test_monitor_detects_the_collision_and_nothing_else(world_feeder):
     scene = load_scene("ur5e")
     world = World(scene, build_scenario("sweep-with-collision", scene, ArmModel(scene), 0, 4.0), seed=0)
     bus = Bus()
@@ -25,7 +24,7 @@ def test_monitor_detects_the_collision_and_nothing_else():
             truth.append((int(round(state.t * 1e9)), bool(state.contacts),
                           state.contacts[0].point.copy() if state.contacts else None))
 
-    feeder = WorldFeeder(world, bus, duration=4.0, on_state=on_state)
+    feeder = world_feeder(world, bus, duration=4.0, on_state=on_state)
     with LiveMonitor(bus, scene, keep_frames=True) as monitor, feeder:
         while not feeder.done:
             time.sleep(0.05)

@@ -12,8 +12,6 @@ from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import builtin_names, load_scene
 from ftc_hw.solver import ContactSolver
 
-from solver_cases import contacts, custom_scene, reading
-
 
 @pytest.fixture(scope="module", params=builtin_names())
 def scene_setup(request):
@@ -22,7 +20,7 @@ def scene_setup(request):
     return scene, model, ContactSolver(scene)
 
 
-def test_noise_free_exact_or_flagged(scene_setup):
+def test_noise_free_exact_or_flagged(scene_setup, contacts, reading):
     scene, model, solver = scene_setup
     q = np.array(scene.robot.home)
     cases = contacts(model, q, 400, seed=11)
@@ -39,7 +37,7 @@ def test_noise_free_exact_or_flagged(scene_setup):
     assert accurate >= 0.75 * len(cases), (accurate, flagged)
 
 
-def test_batch_gives_the_same_answers(scene_setup):
+def test_batch_gives_the_same_answers(scene_setup, contacts, reading):
     scene, model, solver = scene_setup
     rng = np.random.default_rng(5)
     qs, ws = [], []
@@ -79,7 +77,7 @@ def test_nan_and_inf_are_flagged_never_propagated():
         assert "invalid_input" in e.flags
 
 
-def test_float32_input_is_as_accurate_as_float32_allows():
+def test_float32_input_is_as_accurate_as_float32_allows(contacts, reading):
     scene = load_scene("leng2016")
     model = ArmModel(scene)
     solver = ContactSolver(scene)
@@ -168,7 +166,7 @@ def test_force_through_the_sensor_origin():
     assert line_dist < 1e-12  # on the line through the origin
 
 
-def test_line_through_two_links_is_ambiguous_without_torques_and_resolved_with_them():
+def test_line_through_two_links_is_ambiguous_without_torques_and_resolved_with_them(contacts, reading):
     scene = load_scene("leng2016")
     model = ArmModel(scene)
     solver = ContactSolver(scene)
@@ -190,7 +188,7 @@ def test_line_through_two_links_is_ambiguous_without_torques_and_resolved_with_t
     assert resolved >= 0.95 * ambiguous
 
 
-def test_low_force_is_flagged_not_called_contact():
+def test_low_force_is_flagged_not_called_contact(contacts, reading):
     scene = load_scene("leng2016")
     model = ArmModel(scene)
     solver = ContactSolver(scene)
@@ -201,7 +199,7 @@ def test_low_force_is_flagged_not_called_contact():
     assert "low_force" in e.flags and not e.contact
 
 
-def test_saturated_input_is_flagged():
+def test_saturated_input_is_flagged(contacts, reading):
     scene = load_scene("leng2016")
     model = ArmModel(scene)
     solver = ContactSolver(scene)
@@ -214,7 +212,7 @@ def test_saturated_input_is_flagged():
 @pytest.mark.parametrize("reports", ["base_on_arm", "arm_on_base"])
 @settings(max_examples=40, deadline=None)
 @given(aspect=st.floats(-3.0, 3.0), seed=st.integers(0, 10_000))
-def test_ellipsoids_from_needles_to_plates(tmp_path_factory, reports, aspect, seed):
+def test_ellipsoids_from_needles_to_plates(tmp_path_factory, reports, aspect, seed, contacts, reading, custom_scene):
     ratio = 10.0 ** aspect  # 1e-3 .. 1e3
     a = 0.05
     c = a * ratio
@@ -234,7 +232,7 @@ def test_ellipsoids_from_needles_to_plates(tmp_path_factory, reports, aspect, se
 
 @pytest.mark.parametrize("kinds", [("box", "0.05 0.08 0.2", "capsule", "0.04 0.2"),
                                    ("cylinder", "0.05 0.2", "box", "0.03 0.04 0.2")])
-def test_boxes_capsules_cylinders(tmp_path, kinds):
+def test_boxes_capsules_cylinders(tmp_path, kinds, contacts, reading, custom_scene):
     scene = custom_scene(tmp_path, "prims", *kinds)
     model = ArmModel(scene)
     solver = ContactSolver(scene)
@@ -245,7 +243,7 @@ def test_boxes_capsules_cylinders(tmp_path, kinds):
             assert np.linalg.norm(e.point - sp.point) < 1e-9
 
 
-def test_points_far_from_the_origin(tmp_path):
+def test_points_far_from_the_origin(tmp_path, contacts, reading, custom_scene):
     scene = custom_scene(tmp_path, "far", "capsule", "0.05 0.2", "sphere", "0.06", offset="1000 -2000 500")
     model = ArmModel(scene)
     solver = ContactSolver(scene)
@@ -280,7 +278,7 @@ def test_a_fit_without_a_covariance_reports_it_unbounded_not_nan():
     assert not np.isnan(b.cov).any() and np.isinf(np.diagonal(b.cov, axis1=1, axis2=2)).all()
 
 
-def test_the_compensation_uncertainty_weighs_on_the_fit_and_its_covariance():
+def test_the_compensation_uncertainty_weighs_on_the_fit_and_its_covariance(contacts, reading):
     """An extra covariance equal to the sensor's doubles the wrench covariance: on a noise-free
     reading the point stays and the reported covariance doubles; a broken one is invalid input."""
     scene = load_scene("ur5e")

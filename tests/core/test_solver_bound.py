@@ -14,7 +14,6 @@ from ftc_hw.model import ArmModel
 from ftc_hw.scene import load_scene
 from ftc_hw.solver import make_solver
 from ftc_hw.solver.bound import crlb_magnitude_std
-from tests.solver_cases import contacts, reading
 
 
 def _setup(name: str):
@@ -24,7 +23,7 @@ def _setup(name: str):
     return scene, model, q, make_solver(scene, "ours")
 
 
-def _informative_case(model, q, solver, n=200):
+def _informative_case(model, q, solver, contacts, reading, n=200):
     """The well-posed contact where the moment tells the most about the force's magnitude."""
     best = None
     for sp, f in contacts(model, q, n, seed=3, max_angle_deg=45.0):
@@ -46,7 +45,7 @@ def test_median_abs_normal_matches_the_half_normal_median():
     assert (erf(m / sqrt(2)) + erf(m / (3 * sqrt(2)))) / 2 == pytest.approx(0.5, abs=1e-12)
 
 
-def test_isotropic_force_noise_leaves_the_magnitude_to_the_force_reading():
+def test_isotropic_force_noise_leaves_the_magnitude_to_the_force_reading(contacts, reading):
     _scene, model, q, solver = _setup("dxl-arm")  # force noise 0.1 N on every axis
     for sp, f in contacts(model, q, 30, seed=1, max_angle_deg=45.0):
         e = solver.solve(reading(model, q, sp, f), q)
@@ -55,9 +54,9 @@ def test_isotropic_force_noise_leaves_the_magnitude_to_the_force_reading():
             assert bound == pytest.approx(force_only, rel=1e-6)
 
 
-def test_our_magnitude_reaches_the_bound_where_the_moment_informs_it():
+def test_our_magnitude_reaches_the_bound_where_the_moment_informs_it(contacts, reading):
     scene, model, q, solver = _setup("ur5e")
-    ratio, sp, f, bound, force_only = _informative_case(model, q, solver)
+    ratio, sp, f, bound, force_only = _informative_case(model, q, solver, contacts, reading)
     assert ratio < 0.92  # the moment carries real information on the scale here
     clean = reading(model, q, sp, f)
     rng = np.random.default_rng(7)
@@ -76,7 +75,7 @@ def test_our_magnitude_reaches_the_bound_where_the_moment_informs_it():
     assert ours_std < measured_std * (1 - 0.5 * (1 - ratio))
 
 
-def test_the_leng2016_method_reports_the_measured_force_s_magnitude():
+def test_the_leng2016_method_reports_the_measured_force_s_magnitude(contacts, reading):
     """What lets ``ftc bench solver --magnitude-cases`` compare with |f_measured| instead of running
     the (slow) leng2016 solver on 100 000 cases."""
     scene, model, q, _ = _setup("leng2016")

@@ -7,7 +7,6 @@ import time
 
 import numpy as np
 import pytest
-from arm_helpers import check_kill_and_restart, collect_events, kill_and_restart, wait_event
 
 from ftc_hw.bus import Bus
 from ftc_hw.devices.base import DeviceError
@@ -62,7 +61,7 @@ def test_frames_are_si_and_match_the_world(world, arm):
     assert np.all(np.abs(f.q - np.round(f.q / (2 * math.pi / 4096)) * (2 * math.pi / 4096)) < 1e-12)
 
 
-def test_fast_sync_read_and_hardware_error_events(world):
+def test_fast_sync_read_and_hardware_error_events(world, wait_event):
     world.restart("arm", {"hardware_error": {"13": 32}})
     bus = Bus()
     events = bus.subscribe("events/", maxsize=1000)
@@ -120,7 +119,7 @@ def test_goal_positions_move_the_arm(arm):
     assert bus.latest("joints/arm").q == pytest.approx(target, abs=0.01)
 
 
-def test_killed_then_restarted_emulator(world, arm):
+def test_killed_then_restarted_emulator(world, arm, kill_and_restart, check_kill_and_restart):
     adapter, bus, events = arm
     r = kill_and_restart(world, adapter, bus, events)
     # a killed emulator closes the pty: the next transfer fails at once (not dead_after later)
@@ -128,7 +127,7 @@ def test_killed_then_restarted_emulator(world, arm):
     assert adapter.counters["disconnects"] >= 1
 
 
-def test_hung_emulator_goes_stale_then_reconnects(world, arm):
+def test_hung_emulator_goes_stale_then_reconnects(world, arm, collect_events):
     adapter, _, events = arm
     events.drain()
     was_stale = adapter.stale  # a load-induced blip may have declared it already

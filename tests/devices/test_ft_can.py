@@ -11,66 +11,42 @@ from ftc_hw.codecs.netft_can import OP_START, NetFTCodec
 from ftc_hw.devices.can_ft import CanFTAdapter
 from ftc_hw.devices.registry import make_adapter
 
-from ft_helpers import (
-    SyntheticWorld,
-    device,
-    device_events,
-    settle,
-    start_emulator,
-    wait_done,
-    wait_for,
-    wrench_of,
-)
-
 pytestmark = pytest.mark.timeout(60)
 
 
-def _run(tmp_path, frames: int, *, saturated=None, **options):
-    scene, spec = device("ur5e", "ft-can")
-    with SyntheticWorld(1000.0, n_joints=6, saturated=saturated) as world:
-        emu = start_emulator(spec, scene, world, tmp_path, max_frames=frames, **options)
-        try:
-            bus = Bus()
-            events = device_events(bus)
-            adapter = make_adapter(spec, bus, emu.endpoint, scene=scene)
-            with adapter:
-                assert adapter.wait_connected(5.0)
-                stats = wait_done(emu, tmp_path)
-                settle(adapter)
-            return adapter, bus.history(adapter.topic), stats, events.drain()
-        finally:
-            emu.stop()
+def _run(ft_sim, frames: int, *, saturated=None, **options):
+    return ft_sim.run_until_done("ur5e", "ft-can", 1000.0, 6, frames, saturated=saturated, **options)
 
 
-def _check(frames, offset: int = 0) -> None:
+def _check(frames, wrench_of, offset: int = 0) -> None:
     for f in frames:
         assert np.allclose(f.wrench, wrench_of(f.seq - offset), atol=1e-9), f.seq
         assert f.t_device_ns == f.seq * 1_000_000
 
 
-def test_stream_every_sample_in_order(tmp_path):
+def test_stream_every_sample_in_order(ft_sim, wrench_of):
     def sat(k: int) -> np.ndarray:
         return np.array([False, False, k % 10 == 0, False, False, False])
 
-    adapter, frames, stats, _ = _run(tmp_path, 1200, saturated=sat)
+    adapter, frames, stats, _ = _run(ft_sim, 1200, saturated=sat)
     # streaming starts on the adapter's request; the first sample only establishes the counter
     undelivered = len(stats["damaged"])  # none, unless the machine stalled the client for 0.3 s
     assert len(frames) == stats["samples"] - 1 - undelivered and adapter.counters["unverified"] == 1
     seqs = [f.seq for f in frames]
     assert set(range(seqs[0], seqs[-1] + 1)) - set(seqs) == set(stats["damaged"])
-    _check(frames)
+    _check(frames, wrench_of)
     assert all(bool(f.flags & WrenchFlag.SATURATED) == (f.seq % 10 == 0) for f in frames)
     c = adapter.counters
     assert c["incomplete"] == c["seq_gaps"] == c["checksum_errors"] == c["framing_errors"] == 0
 
 
-def test_every_fault_counted_nothing_corrupted_nothing_else_lost(tmp_path):
+def test_every_fault_counted_nothing_corrupted_nothing_else_lost(ft_sim, wrench_of):
     faults = {"drop": 0.004, "corrupt": 0.004, "truncate": 0.004, "duplicate": 0.004, "garbage": 0.004,
               "delay": 0.002, "delay_ms": 3}
-    adapter, frames, stats, _ = _run(tmp_path, 2500, faults=faults, seed=3)
+    adapter, frames, stats, _ = _run(ft_sim, 2500, faults=faults, seed=3)
     injected = stats["faults"]
     assert all(injected.get(k, 0) > 10 for k in ("drop", "corrupt", "truncate", "duplicate", "garbage"))
-    _check(frames)
+    _check(frames, wrench_of)
     c = adapter.counters
     assert c["checksum_errors"] == injected["corrupt"]  # error frames
     assert c["format_errors"] == injected["truncate"]  # short DLC
@@ -88,23 +64,21 @@ def test_every_fault_counted_nothing_corrupted_nothing_else_lost(tmp_path):
     assert flagged == {n + 1 for n in missing if n + 1 not in missing}
 
 
-def test_poll_mode_requests_samples(tmp_path):
-    scene, spec = device("ur5e", "ft-can", mode="poll", poll_hz=200.0)
-    with SyntheticWorld(1000.0, n_joints=6) as world:
-        emu = start_emulator(spec, scene, world, tmp_path)
-        try:
-            bus = Bus()
-            with make_adapter(spec, bus, emu.endpoint) as adapter:
-                assert adapter.wait_connected(5.0)
-                assert wait_for(lambda: len(bus.history(adapter.topic)) >= 100, 5.0)
-        finally:
-            emu.stop()
+def test_poll_mode_requests_samples(ft_sim, wait_for, wrench_of):
+    scene, spec = ft_sim.device("ur5e", "ft-can", mode="poll", poll_hz=200.0)
+    world = ft_sim.world(1000.0, n_joints=6)
+    emu = ft_sim.start_emulator(spec, scene, world)
+    bus = Bus()
+    with make_adapter(spec, bus, emu.endpoint) as adapter:
+        assert adapter.wait_connected(5.0)
+        assert wait_for(lambda: len(bus.history(adapter.topic)) >= 100, 5.0)
+    ft_sim.stop()
     frames = bus.history(adapter.topic)
-    _check(frames)
+    _check(frames, wrench_of)
     assert 2.0 <= np.median(np.diff([f.seq for f in frames])) <= 15.0  # 1 kHz samples read at ~200 Hz
 
 
-def test_virtual_interface_in_process():
+def test_virtual_interface_in_process(wait_for, wrench_of):
     """The adapter against a sensor played by the test on python-can's virtual bus."""
     codec = NetFTCodec(base_id=0x30)
     sensor = can.Bus(interface="virtual", channel="ftc-test-can")
@@ -128,4 +102,4 @@ def test_virtual_interface_in_process():
     frames = bus.history("wrench/ft")
     assert [f.seq for f in frames] == [1, 3, 4]  # 0 only establishes the counter
     assert frames[1].flags & WrenchFlag.SEQ_GAP and adapter.counters["incomplete"] == 1
-    _check(frames)
+    _check(frames, wrench_of)

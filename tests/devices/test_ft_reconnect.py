@@ -7,10 +7,8 @@ import time
 
 import pytest
 
-from ftc_hw.bus import Bus
+from ftc_hw.bus import EVENTS_DEVICE, Bus
 from ftc_hw.devices.registry import make_adapter
-
-from ft_helpers import SyntheticWorld, device, device_events, start_emulator, wait_for
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -23,32 +21,30 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", list(CASES))
-def test_kill_and_restart(tmp_path, case):
+def test_kill_and_restart(ft_sim, wait_for, case):
     scene_name, kind, transport, rate, n_joints = CASES[case]
-    scene, spec = device(scene_name, kind, transport)
-    with SyntheticWorld(rate, n_joints=n_joints) as world:
-        emu = start_emulator(spec, scene, world, tmp_path)
-        bus = Bus()
-        events = device_events(bus)
-        adapter = make_adapter(spec, bus, emu.endpoint, scene=scene)
-        try:
-            with adapter:
-                assert adapter.wait_connected(5.0)
-                assert wait_for(lambda: len(bus.history(adapter.topic)) > 20, 3.0)
-                events.drain()
-                t_kill = time.monotonic_ns()
-                emu.kill()
-                assert wait_for(lambda: adapter.stale, 1.0)
-                time.sleep(0.4)
-                assert not adapter.connected.is_set()
-                keep = {"port": emu.endpoint["port"]} if "port" in emu.endpoint else {}
-                t_restart = time.monotonic_ns()
-                emu = start_emulator(spec, scene, world, tmp_path, **keep)
-                t_back = emu.endpoint["ready_ns"]
-                assert wait_for(lambda: bool(bus.window(adapter.topic, t_back, time.monotonic_ns())), 3.0)
-                time.sleep(0.2)
-        finally:
-            emu.stop()
+    scene, spec = ft_sim.device(scene_name, kind, transport)
+    world = ft_sim.world(rate, n_joints=n_joints)
+    emu = ft_sim.start_emulator(spec, scene, world)
+    bus = Bus()
+    events = bus.subscribe(EVENTS_DEVICE, maxsize=None)
+    adapter = make_adapter(spec, bus, emu.endpoint, scene=scene)
+    with adapter:
+        assert adapter.wait_connected(5.0)
+        assert wait_for(lambda: len(bus.history(adapter.topic)) > 20, 3.0)
+        events.drain()
+        t_kill = time.monotonic_ns()
+        emu.kill()
+        assert wait_for(lambda: adapter.stale, 1.0)
+        time.sleep(0.4)
+        assert not adapter.connected.is_set()
+        keep = {"port": emu.endpoint["port"]} if "port" in emu.endpoint else {}
+        t_restart = time.monotonic_ns()
+        emu = ft_sim.start_emulator(spec, scene, world, **keep)
+        t_back = emu.endpoint["ready_ns"]
+        assert wait_for(lambda: bool(bus.window(adapter.topic, t_back, time.monotonic_ns())), 3.0)
+        time.sleep(0.2)
+    ft_sim.stop()
     evs = [e for e in events.drain() if e.source == adapter.name]
     stale = next(e for e in evs if e.kind == "stale")
     assert stale.t_host_ns - t_kill < 300_000_000

@@ -23,8 +23,6 @@ from ftc_hw.scene import DeviceSpec, load_scene
 from ftc_hw.sim_devices.faults import FaultConfig, FaultInjector
 from ftc_hw.sim_devices.registry import EMULATORS
 
-from ft_helpers import wait_for
-
 pytestmark = pytest.mark.timeout(60)
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -114,7 +112,7 @@ def test_device_bench_runs_and_reports(tmp_path, capsys):
     assert out["serial_1k_gaps"]["gaps_exact"]
 
 
-def test_emulator_exits_when_its_runner_dies():
+def test_emulator_exits_when_its_runner_dies(wait_for):
     """A runner killed outright (no cleanup) leaves no emulator behind."""
     proc = subprocess.Popen([sys.executable, "-m", "ftc_hw", "sim", "leng2016", "--duration", "30"], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)

@@ -7,51 +7,27 @@ import numpy as np
 import pytest
 import serial
 
-from ftc_hw.bus import Bus, WrenchFlag
+from ftc_hw.bus import EVENTS_DEVICE, Bus, WrenchFlag
 from ftc_hw.codecs import FTC_1K, StreamParser
 from ftc_hw.devices.registry import make_adapter
 from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 
-from ft_helpers import (
-    SyntheticWorld,
-    device,
-    device_events,
-    settle,
-    start_emulator,
-    wait_done,
-    wait_for,
-    wrench_of,
-)
-
 pytestmark = pytest.mark.timeout(60)
 
 
-def _run(tmp_path, frames: int, *, saturated=None, **options):
-    scene, spec = device("leng2016", "ft-serial-stream")
-    with SyntheticWorld(1000.0, saturated=saturated) as world:
-        emu = start_emulator(spec, scene, world, tmp_path, max_frames=frames, **options)
-        try:
-            bus = Bus()
-            events = device_events(bus)
-            adapter = make_adapter(spec, bus, emu.endpoint, scene=scene)
-            with adapter:
-                assert adapter.wait_connected(5.0)
-                stats = wait_done(emu, tmp_path)
-                settle(adapter)
-            return adapter, bus.history(adapter.topic), stats, events.drain()
-        finally:
-            emu.stop()
+def _run(ft_sim, frames: int, *, saturated=None, **options):
+    return ft_sim.run_until_done("leng2016", "ft-serial-stream", 1000.0, 3, frames, saturated=saturated, **options)
 
 
-def _check_values(frames, stats) -> None:
+def _check_values(frames, stats, wrench_of) -> None:
     for f in frames:
         k = f.seq - stats["seq_offset"]
         assert np.allclose(f.wrench, wrench_of(k), atol=1e-9), (f.seq, f.wrench)
         assert f.t_device_ns == k * 1_000_000 + stats["t_offset_ns"]
 
 
-def test_clean_stream_delivers_every_sample_with_device_time(tmp_path):
-    adapter, frames, stats, _ = _run(tmp_path, 1500)
+def test_clean_stream_delivers_every_sample_with_device_time(ft_sim, wrench_of):
+    adapter, frames, stats, _ = _run(ft_sim, 1500)
     assert stats["samples"] == 1500 and stats["faults"] == {}
     seqs = [f.seq for f in frames]
     # in order, to the last sample sent (the first ones may precede the adapter's input flush), and
@@ -59,7 +35,7 @@ def test_clean_stream_delivers_every_sample_with_device_time(tmp_path):
     missing = set(range(seqs[0], stats["last_seq"] + 1)) - set(seqs)
     assert seqs == sorted(seqs) and missing == set(stats["damaged"]), (dict(adapter.counters), stats)
     assert set(stats["faults"]) <= {"overflow", "skipped"}
-    _check_values(frames, stats)
+    _check_values(frames, stats, wrench_of)
     c = adapter.counters
     assert c["seq_gaps"] == c["checksum_errors"] == c["resyncs"] == c["duplicates"] == 0
     assert all(f.flags & WrenchFlag.CLOCK_SUSPECT for f in frames[:adapter.clock.min_samples - 1])
@@ -69,13 +45,13 @@ def test_clean_stream_delivers_every_sample_with_device_time(tmp_path):
     assert 0 <= last.t_host_ns - adapter.clock.to_host(last.t_device_ns) < 50_000_000
 
 
-def test_every_fault_counted_nothing_corrupted_nothing_else_lost(tmp_path):
+def test_every_fault_counted_nothing_corrupted_nothing_else_lost(ft_sim, wrench_of):
     faults = {"drop": 0.01, "corrupt": 0.01, "truncate": 0.01, "duplicate": 0.01, "garbage": 0.01, "delay": 0.005,
               "delay_ms": 5}
-    adapter, frames, stats, _ = _run(tmp_path, 3000, faults=faults, seed=7)
+    adapter, frames, stats, _ = _run(ft_sim, 3000, faults=faults, seed=7)
     injected = stats["faults"]
     assert all(injected.get(k, 0) > 5 for k in ("drop", "corrupt", "truncate", "duplicate", "garbage"))
-    _check_values(frames, stats)  # no corrupted frame reached the bus
+    _check_values(frames, stats, wrench_of)  # no corrupted frame reached the bus
     c = adapter.counters
     assert c["checksum_errors"] == injected["corrupt"] + injected["truncate"]
     assert c["resyncs"] == injected["garbage"]
@@ -90,12 +66,12 @@ def test_every_fault_counted_nothing_corrupted_nothing_else_lost(tmp_path):
     assert sum(n for _, n in adapter.gaps) == len(missing)
 
 
-def test_counters_wrap_and_saturation_bits(tmp_path):
+def test_counters_wrap_and_saturation_bits(ft_sim, wrench_of):
     def sat(k: int) -> np.ndarray:
         return np.array([k % 100 == 0, False, False, False, False, k % 100 == 50])
 
     # the 16-bit sequence and the 32-bit microsecond clock both wrap during the run
-    adapter, frames, stats, _ = _run(tmp_path, 1200, saturated=sat, seq_start=65_536 - 600,
+    adapter, frames, stats, _ = _run(ft_sim, 1200, saturated=sat, seq_start=65_536 - 600,
                                      t_device_start_s=(2**32 - 500_000) / 1e6)
     seqs = [f.seq for f in frames]
     assert set(range(seqs[0], seqs[-1] + 1)) - set(seqs) == set(stats["damaged"]), (dict(adapter.counters), stats)
@@ -103,14 +79,14 @@ def test_counters_wrap_and_saturation_bits(tmp_path):
     t_dev = np.array([f.t_device_ns for f in frames])
     assert np.all(np.diff(t_dev) == 1_000_000 * np.diff(seqs)) and t_dev[-1] > 2**32 * 1000
     assert adapter.counters["seq_resets"] == 0 and adapter.clock.resets == 0
-    _check_values(frames, stats)
+    _check_values(frames, stats, wrench_of)
     for f in frames:
         k = f.seq - stats["seq_offset"]
         assert bool(f.flags & WrenchFlag.SATURATED) == (k % 50 == 0)
 
 
-def test_stall_reports_stale_then_recovered(tmp_path):
-    adapter, frames, stats, events = _run(tmp_path, 1500, faults={"stall_s": [[0.6, 0.3]]})
+def test_stall_reports_stale_then_recovered(ft_sim):
+    adapter, frames, stats, events = _run(ft_sim, 1500, faults={"stall_s": [[0.6, 0.3]]})
     kinds = [e.kind for e in events if e.source == "ft"]
     assert "stale" in kinds and "recovered" in kinds[kinds.index("stale"):]
     assert adapter.counters["lost"] == stats["faults"]["stalled"] >= 250
@@ -118,11 +94,11 @@ def test_stall_reports_stale_then_recovered(tmp_path):
     assert 0.25e9 < gap < 0.5e9
 
 
-def test_unplug_and_replug_of_the_pty(tmp_path):
-    adapter, frames, stats, events = _run(tmp_path, 2500, faults={"disconnect_at_s": 0.8, "reconnect_after_s": 0.3})
+def test_unplug_and_replug_of_the_pty(ft_sim, wrench_of):
+    adapter, frames, stats, events = _run(ft_sim, 2500, faults={"disconnect_at_s": 0.8, "reconnect_after_s": 0.3})
     kinds = [e.kind for e in events if e.source == "ft"]
     assert kinds.count("connect") == 2 and "disconnect" in kinds
-    _check_values(frames, stats)
+    _check_values(frames, stats, wrench_of)
     seqs = [f.seq for f in frames]
     unplugged = set(stats["damaged"])
     assert len(unplugged) == stats["faults"]["unplugged"] >= 250
@@ -131,25 +107,23 @@ def test_unplug_and_replug_of_the_pty(tmp_path):
     assert late == list(range(max(unplugged) + 1, max(unplugged) + 1 + len(late))) and len(late) < 400
 
 
-def test_plain_pyserial_reader_decodes_the_stream(tmp_path):
-    scene, spec = device("leng2016", "ft-serial-stream")
-    with SyntheticWorld(1000.0) as world:
-        emu = start_emulator(spec, scene, world, tmp_path)
-        try:
-            with serial.Serial(emu.endpoint["endpoint"], 1_000_000, timeout=0.05) as s:
-                s.reset_input_buffer()
-                parser = StreamParser(FTC_1K)
-                got = []
-                assert wait_for(lambda: bool(got.extend(parser.feed(s.read(512))) or len(got) > 200), 5.0)
-        finally:
-            emu.stop()
+def test_plain_pyserial_reader_decodes_the_stream(ft_sim, wait_for, wrench_of):
+    scene, spec = ft_sim.device("leng2016", "ft-serial-stream")
+    world = ft_sim.world(1000.0)
+    emu = ft_sim.start_emulator(spec, scene, world)
+    with serial.Serial(emu.endpoint["endpoint"], 1_000_000, timeout=0.05) as s:
+        s.reset_input_buffer()
+        parser = StreamParser(FTC_1K)
+        got = []
+        assert wait_for(lambda: bool(got.extend(parser.feed(s.read(512))) or len(got) > 200), 5.0)
+    ft_sim.stop()
     for sample in got:
         assert np.allclose(sample.wrench, wrench_of(sample.seq), atol=1e-9)
 
 
-def test_lifecycle_idempotent_and_never_silent(tmp_path):
+def test_lifecycle_idempotent_and_never_silent(tmp_path, ft_sim, wait_for):
     bus = Bus()
-    events = device_events(bus)
+    events = bus.subscribe(EVENTS_DEVICE, maxsize=None)
     a = SerialStreamFTAdapter("ft", bus, str(tmp_path / "missing.tty"))
     a.close()  # before open: nothing to do
     with a:
@@ -160,25 +134,22 @@ def test_lifecycle_idempotent_and_never_silent(tmp_path):
     msgs = events.drain()
     assert {"reconnecting", "stale"} <= {e.kind for e in msgs}
     # an unexpected exception in the reader becomes an event, and the reader goes on
-    scene, spec = device("leng2016", "ft-serial-stream")
-    with SyntheticWorld(1000.0) as world:
-        emu = start_emulator(spec, scene, world, tmp_path)
-        try:
-            adapter = make_adapter(spec, bus, emu.endpoint)
-            original = adapter._read_once
-            calls = {"n": 0}
+    scene, spec = ft_sim.device("leng2016", "ft-serial-stream")
+    world = ft_sim.world(1000.0)
+    emu = ft_sim.start_emulator(spec, scene, world)
+    adapter = make_adapter(spec, bus, emu.endpoint)
+    original = adapter._read_once
+    calls = {"n": 0}
 
-            def flaky() -> None:
-                calls["n"] += 1
-                if calls["n"] == 50:
-                    raise RuntimeError("boom")
-                original()
+    def flaky() -> None:
+        calls["n"] += 1
+        if calls["n"] == 50:
+            raise RuntimeError("boom")
+        original()
 
-            adapter._read_once = flaky  # type: ignore[method-assign]
-            with adapter:
-                assert wait_for(lambda: adapter.counters["event_connect"] >= 2, 3.0)
-                time.sleep(0.1)
-            assert adapter.counters["errors"] == 1
-            assert any(e.kind == "error" and "boom" in e.message for e in events.drain())
-        finally:
-            emu.stop()
+    adapter._read_once = flaky  # type: ignore[method-assign]
+    with adapter:
+        assert wait_for(lambda: adapter.counters["event_connect"] >= 2, 3.0)
+        time.sleep(0.1)
+    assert adapter.counters["errors"] == 1
+    assert any(e.kind == "error" and "boom" in e.message for e in events.drain())

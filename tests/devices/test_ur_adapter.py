@@ -6,7 +6,6 @@ import time
 
 import numpy as np
 import pytest
-from arm_helpers import check_kill_and_restart, collect_events, kill_and_restart
 
 from ftc_hw.bus import Bus, JointFlag
 from ftc_hw.devices.base import DeviceError
@@ -74,7 +73,7 @@ def test_stop_and_pause_through_the_dashboard(world, arm):
     assert adapter.counters["stops"] == 2 and adapter.counters["pauses"] == 1
 
 
-def test_killed_then_restarted_controller(world, arm):
+def test_killed_then_restarted_controller(world, arm, kill_and_restart, check_kill_and_restart):
     adapter, bus, events = arm
     r = kill_and_restart(world, adapter, bus, events)
     before, after = check_kill_and_restart(r)
@@ -84,7 +83,7 @@ def test_killed_then_restarted_controller(world, arm):
     adapter.stop()  # the dashboard link was re-opened too
 
 
-def test_hung_controller_goes_stale_then_reconnects(world, arm):
+def test_hung_controller_goes_stale_then_reconnects(world, arm, collect_events):
     adapter, _, events = arm
     events.drain()
     was_stale = adapter.stale

@@ -8,8 +8,6 @@ from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import load_scene
 from ftc_hw.solver import ContactSolver
 
-from solver_cases import custom_scene
-
 
 def test_wrench_is_force_then_torque_in_n_and_nm():
     """A pure force along +x applied at +z on the sensor axis gives a torque about y, in slots 3..5."""
@@ -22,7 +20,7 @@ def test_wrench_is_force_then_torque_in_n_and_nm():
 
 
 @pytest.mark.parametrize("reports,sign", [("base_on_arm", -1.0), ("arm_on_base", 1.0)])
-def test_sign_conventions(tmp_path, reports, sign):
+def test_sign_conventions(tmp_path, reports, sign, custom_scene):
     scene = custom_scene(tmp_path, "conv", "capsule", "0.05 0.2", "sphere", "0.06", reports=reports)
     model = ArmModel(scene)
     q = np.array(scene.robot.home)

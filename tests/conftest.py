@@ -1,25 +1,15 @@
-"""Shared helpers for solver tests: sampled contacts and small custom scenes."""
+"""Fixtures that several layers' tests use: sampled contacts (core, app) and small custom scenes
+(core, model). Each layer's own fixtures are in its folder's ``conftest.py``."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from ftc_hw.model import ArmModel, Contact
-from ftc_hw.model.sampling import SurfacePoint
-from ftc_hw.scene import load_scene
+from ftc_hw.model import ArmModel
+from ftc_hw.scene import Scene, load_scene
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
-
-
-def contacts(model: ArmModel, q, n: int, seed: int, max_angle_deg: float = 80.0, f_range=(5.0, 200.0)):
-    """(surface point, force applied to the arm) pairs: uniform on the touchable surfaces, pushing in."""
-    return sample_contacts(model, q, n, np.random.default_rng(seed), max_angle_deg, f_range)
-
-
-def reading(model: ArmModel, q, sp: SurfacePoint, force) -> np.ndarray:
-    """The compensated sensor reading (sensor frame, scene convention) of one contact."""
-    return model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, force)])
-
 
 SCENE = """schema = 1
 name = "{name}"
@@ -64,10 +54,28 @@ MJCF = """<mujoco>
 """
 
 
-def custom_scene(tmp: Path, name: str, kind1: str, size1: str, kind2: str, size2: str, pos2: str = "0.3 0 0",
-                 offset: str = "0 0 0", reports: str = "base_on_arm"):
+def _contacts(model: ArmModel, q, n: int, seed: int, max_angle_deg: float = 80.0, f_range=(5.0, 200.0)):
+    """(surface point, force applied to the arm) pairs: uniform on the touchable surfaces, pushing in."""
+    return sample_contacts(model, q, n, np.random.default_rng(seed), max_angle_deg, f_range)
+
+
+def _custom_scene(tmp: Path, name: str, kind1: str, size1: str, kind2: str, size2: str, pos2: str = "0.3 0 0",
+                  offset: str = "0 0 0", reports: str = "base_on_arm") -> Scene:
+    """A two-link arm (geoms ``kind1``/``kind2`` of MuJoCo sizes ``size1``/``size2``) written to ``tmp``."""
     (tmp / f"{name}.xml").write_text(MJCF.format(kind1=kind1, size1=size1, kind2=kind2, size2=size2, pos2=pos2,
                                                  offset=offset))
     path = tmp / f"{name}.toml"
     path.write_text(SCENE.format(name=name, reports=reports))
     return load_scene(path)
+
+
+@pytest.fixture(scope="session")
+def contacts():
+    """``contacts(model, q, n, seed)``: n seeded (surface point, force) pairs pushing into the touchable surfaces."""
+    return _contacts
+
+
+@pytest.fixture(scope="session")
+def custom_scene():
+    """``custom_scene(tmp, name, kind1, size1, kind2, size2)``: a two-link scene with those geoms, written to tmp."""
+    return _custom_scene

@@ -1,21 +1,36 @@
-"""Runs a world in real time on a thread and publishes its signals straight onto a bus.
-
-This is the in-process path (no wire protocol): the protocol emulators replace it for device
-tests and the demo once they exist. Device timestamps are the world's time in ns.
-"""
+"""Fixtures of the core tests (solver, compensation, detection, tracking, pipeline, monitor): the sensor
+reading of a contact, and a world fed straight onto a bus (``world_feeder``)."""
 from __future__ import annotations
 
 import threading
 import time
 from collections.abc import Callable
 
-from ftc_hw.bus import Bus, DeviceEvent, JointFrame, WrenchFlag, WrenchFrame, joints_topic, wrench_topic
+import numpy as np
+import pytest
 
-from .world import World, WorldState
+from ftc_hw.bus import Bus, DeviceEvent, JointFrame, WrenchFlag, WrenchFrame, joints_topic, wrench_topic
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.model.sampling import SurfacePoint
+from ftc_hw.sim_devices.world import World, WorldState
+
+
+def _reading(model: ArmModel, q, sp: SurfacePoint, force) -> np.ndarray:
+    """The compensated sensor reading (sensor frame, scene convention) of one contact."""
+    return model.predicted_wrench(q, level="bias", contacts=[Contact(sp.link, sp.point, force)])
+
+
+@pytest.fixture(scope="session")
+def reading():
+    """``reading(model, q, sp, force)``: the compensated sensor reading of one contact."""
+    return _reading
 
 
 class WorldFeeder:
-    """Publishes ``wrench/<ft_source>`` at the sensor rate and ``joints/<arm_source>`` at ``joint_rate_hz``."""
+    """Runs a world in real time on a thread and publishes its signals straight onto a bus: the
+    in-process path of the core tests (no emulator, no wire protocol; the product hosts a world with
+    :class:`~ftc_hw.sim_devices.host.WorldHost`). ``wrench/<ft_source>`` at the sensor rate,
+    ``joints/<arm_source>`` at ``joint_rate_hz``; device timestamps are the world's time in ns."""
 
     def __init__(self, world: World, bus: Bus, *, ft_source: str = "ft", arm_source: str = "arm",
                  joint_rate_hz: float = 500.0, duration: float | None = None,
@@ -90,3 +105,17 @@ class WorldFeeder:
         finally:
             bus.publish("events/device", DeviceEvent.make(time.monotonic_ns(), self.ft_source, "disconnect",
                                                           "world stopped"))
+
+
+@pytest.fixture
+def world_feeder():
+    """``world_feeder(world, bus, **options)``: a :class:`WorldFeeder`, not started; stopped at teardown."""
+    feeders: list[WorldFeeder] = []
+
+    def make(world: World, bus: Bus, **options) -> WorldFeeder:
+        feeders.append(WorldFeeder(world, bus, **options))
+        return feeders[-1]
+
+    yield make
+    for feeder in feeders:
+        feeder.stop()
