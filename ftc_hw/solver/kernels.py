@@ -1,12 +1,13 @@
-"""The contact solver's compiled core (numba): line/primitive crossings, surface projection,
-Gauss-Newton on the surface, candidate scoring, and a tree forward kinematics for the batch path.
+"""The contact solver's compiled core (numba): candidates from the force line's crossings and near
+misses, Gauss-Newton on the surface, candidate scoring, and a tree forward kinematics for the batch
+path. The line/primitive geometry is the engine's (ftc_hw.geometry).
 
 Why numba: the live path must turn one wrench into an estimate in tens of microseconds and the
 batch path must do 300k frames/s; numpy pays a microsecond per call on 3-vectors. One compiled
 implementation serves both paths, so the batch gives exactly the single-frame answers.
 
 Everything is in metres, newtons and the base frame unless a name says ``_local`` (a primitive's
-frame: MuJoCo geom conventions, capsules and cylinders along local z). Kind codes: KINDS below.
+frame: MuJoCo geom conventions, capsules and cylinders along local z). Kind codes: ftc_hw.geometry.kinds.
 """
 from __future__ import annotations
 
@@ -15,9 +16,13 @@ import math
 import numpy as np
 from numba import njit, prange
 
-SPHERE, CAPSULE, CYLINDER, ELLIPSOID, BOX, PLANE = 0, 1, 2, 3, 4, 5
-KINDS = {"sphere": SPHERE, "capsule": CAPSULE, "cylinder": CYLINDER, "ellipsoid": ELLIPSOID, "box": BOX,
-         "plane": PLANE}
+from ..geometry.crossings import crossings_local
+from ..geometry.frames import dir_to_base, dir_to_local, to_base, to_base_s, to_local, to_local_s
+from ..geometry.jit import JIT, JIT_ALLOC
+from ..geometry.kinds import BOX, CAPSULE, CYLINDER, PLANE
+from ..geometry.solid import depth_s, inside_s
+from ..geometry.surface import normal_local, project_s, surface_normal_local
+from ..geometry.vec import cross3, dot3, line_dist2, tangent_basis
 
 # flag bits (names in ftc_hw.solver.types.FLAG_NAMES)
 F_INVALID = 1
@@ -33,301 +38,6 @@ F_NOT_CONVERGED = 512
 
 JNT_SLIDE = 2  # MuJoCo's mjJNT_SLIDE and mjJNT_HINGE
 JNT_HINGE = 3
-MAX_CROSS = 6  # crossings collected per primitive before reduction to entry/exit
-# No reference counting (numba's NRT) in kernels that allocate nothing: every slice would otherwise
-# bump an atomic counter, which was half of a frame's time and, shared between the batch's threads,
-# made them wait on each other. Only kernels that allocate (JIT_ALLOC) keep it.
-JIT = {"cache": True, "nogil": True, "fastmath": False, "_nrt": False}
-JIT_ALLOC = {"cache": True, "nogil": True, "fastmath": False}
-
-
-# -- small vector helpers ------------------------------------------------------------------------------
-@njit(inline="always", **JIT)
-def _cross(a, b, out):
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
-
-
-@njit(inline="always", **JIT)
-def _dot3(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(inline="always", **JIT)
-def _tangent_basis(n, t1, t2):
-    """Orthonormal t1, t2 with t1 x t2 = n (n unit)."""
-    ax, ay, az = abs(n[0]), abs(n[1]), abs(n[2])
-    if ax <= ay and ax <= az:
-        e0, e1, e2 = 1.0, 0.0, 0.0
-    elif ay <= az:
-        e0, e1, e2 = 0.0, 1.0, 0.0
-    else:
-        e0, e1, e2 = 0.0, 0.0, 1.0
-    t1[0] = n[1] * e2 - n[2] * e1
-    t1[1] = n[2] * e0 - n[0] * e2
-    t1[2] = n[0] * e1 - n[1] * e0
-    k = 1.0 / math.sqrt(_dot3(t1, t1))
-    t1[0] *= k
-    t1[1] *= k
-    t1[2] *= k
-    t2[0] = n[1] * t1[2] - n[2] * t1[1]
-    t2[1] = n[2] * t1[0] - n[0] * t1[2]
-    t2[2] = n[0] * t1[1] - n[1] * t1[0]
-
-
-# -- line / primitive crossings (local frame) -----------------------------------------------------------
-# Scalar helpers return tuples: numba keeps them on the stack (no heap allocation per call).
-@njit(inline="always", **JIT)
-def _ball(cz, r, o, d):
-    """Crossings of the line o + s d (|d| = 1) with the sphere of radius r at (0, 0, cz), solved about
-    the closest approach s0 so the root offset never suffers cancellation: (hit, s_lo, s_hi)."""
-    s0 = -(o[0] * d[0] + o[1] * d[1] + (o[2] - cz) * d[2])
-    mx = o[0] + s0 * d[0]
-    my = o[1] + s0 * d[1]
-    mz = o[2] - cz + s0 * d[2]
-    m = math.sqrt(mx * mx + my * my + mz * mz)
-    disc = (r - m) * (r + m)
-    if disc < 0.0:
-        if disc < -1e-14 * r * r:
-            return False, 0.0, 0.0
-        disc = 0.0
-    h = math.sqrt(disc)
-    return True, s0 - h, s0 + h
-
-
-@njit(inline="always", **JIT)
-def _side(r, o, d):
-    """Crossings with the infinite cylinder x^2 + y^2 = r^2 (about the xy closest approach)."""
-    a = d[0] * d[0] + d[1] * d[1]
-    if a < 1e-300:
-        return False, 0.0, 0.0
-    s0 = -(o[0] * d[0] + o[1] * d[1]) / a
-    mx = o[0] + s0 * d[0]
-    my = o[1] + s0 * d[1]
-    m = math.sqrt(mx * mx + my * my)
-    disc = (r - m) * (r + m)
-    if disc < 0.0:
-        if disc < -1e-14 * r * r:
-            return False, 0.0, 0.0
-        disc = 0.0
-    h = math.sqrt(disc / a)
-    return True, s0 - h, s0 + h
-
-
-@njit(inline="always", **JIT)
-def normal_local(kind, size, x0, x1, x2):
-    """Outward unit normal at the surface point (x0, x1, x2) of a primitive (local frame)."""
-    r = size[0]
-    if kind == SPHERE:
-        n0, n1, n2 = x0, x1, x2
-    elif kind == CAPSULE:
-        z = min(max(x2, -size[1]), size[1])
-        n0, n1, n2 = x0, x1, x2 - z
-    elif kind == CYLINDER:
-        rho = math.sqrt(x0 * x0 + x1 * x1)
-        # the nearest face decides: the side when |rho - r| < | |z| - h |
-        if abs(rho - r) <= abs(abs(x2) - size[1]) and rho > 0.0:
-            n0, n1, n2 = x0, x1, 0.0
-        else:
-            n0, n1, n2 = 0.0, 0.0, 1.0 if x2 >= 0 else -1.0
-    elif kind == ELLIPSOID:
-        n0, n1, n2 = x0 / (size[0] * size[0]), x1 / (size[1] * size[1]), x2 / (size[2] * size[2])
-    elif kind == BOX:
-        g0, g1, g2 = abs(abs(x0) - size[0]), abs(abs(x1) - size[1]), abs(abs(x2) - size[2])
-        if g0 <= g1 and g0 <= g2:
-            n0, n1, n2 = 1.0 if x0 >= 0 else -1.0, 0.0, 0.0
-        elif g1 <= g2:
-            n0, n1, n2 = 0.0, 1.0 if x1 >= 0 else -1.0, 0.0
-        else:
-            n0, n1, n2 = 0.0, 0.0, 1.0 if x2 >= 0 else -1.0
-    else:
-        n0, n1, n2 = 0.0, 0.0, 1.0
-    k = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-    if k == 0.0:
-        return 0.0, 0.0, 1.0
-    return n0 / k, n1 / k, n2 / k
-
-
-@njit(**JIT)
-def surface_normal_local(kind, size, x, n):
-    n[0], n[1], n[2] = normal_local(kind, size, x[0], x[1], x[2])
-
-
-@njit(**JIT)
-def crossings_local(kind, size, o, d, s_out):
-    """Entry and exit of the line o + s d (d unit) through a closed primitive: returns the count
-    (0, 1 for a plane, 2 otherwise; a tangent line gives a double root) and the s values, sorted."""
-    r = size[0]
-    h = size[1]
-    lo, hi = math.inf, -math.inf
-    if kind == SPHERE:
-        ok, a, b = _ball(0.0, r, o, d)
-        if ok:
-            lo, hi = a, b
-    elif kind == ELLIPSOID:
-        # the unit sphere in coordinates scaled by the semi-axes; s keeps its metric meaning
-        o0, o1, o2 = o[0] / size[0], o[1] / size[1], o[2] / size[2]
-        d0, d1, d2 = d[0] / size[0], d[1] / size[1], d[2] / size[2]
-        a = d0 * d0 + d1 * d1 + d2 * d2
-        s0 = -(o0 * d0 + o1 * d1 + o2 * d2) / a
-        m0, m1, m2 = o0 + s0 * d0, o1 + s0 * d1, o2 + s0 * d2
-        m = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
-        disc = (1.0 - m) * (1.0 + m)
-        if disc >= -1e-14:
-            hh = math.sqrt(max(disc, 0.0) / a)
-            lo, hi = s0 - hh, s0 + hh
-    elif kind == CAPSULE or kind == CYLINDER:  # noqa: SIM109 (numba)
-        ok, a, b = _side(r, o, d)
-        if ok:
-            for t in (a, b):
-                if abs(o[2] + t * d[2]) <= h * (1.0 + 1e-15) + 1e-15:
-                    lo, hi = min(lo, t), max(hi, t)
-        if kind == CAPSULE:
-            for sign in (-1.0, 1.0):
-                ok, a, b = _ball(sign * h, r, o, d)
-                if ok:
-                    for t in (a, b):
-                        if sign * (o[2] + t * d[2]) >= h * (1.0 - 1e-15) - 1e-15:
-                            lo, hi = min(lo, t), max(hi, t)
-        elif abs(d[2]) > 1e-300:
-            for sign in (-1.0, 1.0):
-                t = (sign * h - o[2]) / d[2]
-                x = o[0] + t * d[0]
-                y = o[1] + t * d[1]
-                if x * x + y * y <= r * r * (1.0 + 1e-14):
-                    lo, hi = min(lo, t), max(hi, t)
-    elif kind == BOX:
-        lo, hi = -1e300, 1e300
-        for i in range(3):
-            if abs(d[i]) < 1e-300:
-                if abs(o[i]) > size[i]:
-                    return 0
-                continue
-            t1 = (-size[i] - o[i]) / d[i]
-            t2 = (size[i] - o[i]) / d[i]
-            if t1 > t2:
-                t1, t2 = t2, t1
-            lo = max(lo, t1)
-            hi = min(hi, t2)
-        if lo > hi + 1e-15 * (abs(lo) + abs(hi)):
-            return 0
-        hi = max(lo, hi)
-    elif kind == PLANE:
-        if abs(d[2]) < 1e-300:
-            return 0
-        s_out[0] = -o[2] / d[2]
-        return 1
-    if lo > hi:
-        return 0
-    s_out[0] = lo
-    s_out[1] = hi
-    return 2
-
-
-@njit(inline="always", **JIT)
-def inside_s(kind, size, x0, x1, x2, tol):
-    """(x0, x1, x2) strictly inside the solid by more than tol (m), local frame."""
-    r = size[0]
-    if kind == SPHERE:
-        return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) < r - tol
-    if kind == CAPSULE:
-        z = min(max(x2, -size[1]), size[1])
-        return math.sqrt(x0 * x0 + x1 * x1 + (x2 - z) ** 2) < r - tol
-    if kind == CYLINDER:
-        return math.sqrt(x0 * x0 + x1 * x1) < r - tol and abs(x2) < size[1] - tol
-    if kind == ELLIPSOID:
-        q = math.sqrt((x0 / size[0]) ** 2 + (x1 / size[1]) ** 2 + (x2 / size[2]) ** 2)
-        return q < 1.0 - tol / max(size[0], max(size[1], size[2]))
-    if kind == BOX:
-        return abs(x0) < size[0] - tol and abs(x1) < size[1] - tol and abs(x2) < size[2] - tol
-    return x2 < -tol
-
-
-@njit(**JIT)
-def inside_local(kind, size, x, tol):
-    return inside_s(kind, size, x[0], x[1], x[2], tol)
-
-
-@njit(inline="always", **JIT)
-def project_s(kind, size, x0, x1, x2):
-    """A point of the primitive's surface near (x0, x1, x2) (the closest one except for ellipsoids,
-    where it is the radial retraction): the Gauss-Newton retraction and the miss initialisation."""
-    r = size[0]
-    if kind == SPHERE or kind == CAPSULE:  # noqa: SIM109 (numba)
-        cz = min(max(x2, -size[1]), size[1]) if kind == CAPSULE else 0.0
-        vx, vy, vz = x0, x1, x2 - cz
-        k = math.sqrt(vx * vx + vy * vy + vz * vz)
-        if k == 0.0:
-            vx, vy, vz, k = 1.0, 0.0, 0.0, 1.0
-        return r * vx / k, r * vy / k, cz + r * vz / k
-    if kind == CYLINDER:
-        h = size[1]
-        rho = math.sqrt(x0 * x0 + x1 * x1)
-        ux, uy = (x0 / rho, x1 / rho) if rho > 0.0 else (1.0, 0.0)
-        sz = min(max(x2, -h), h)
-        d_side = (rho - r) ** 2 + (x2 - sz) ** 2
-        cz = h if x2 >= 0 else -h
-        cr = min(rho, r)
-        d_cap = (rho - cr) ** 2 + (x2 - cz) ** 2
-        if d_side <= d_cap:
-            return r * ux, r * uy, sz
-        return cr * ux, cr * uy, cz
-    if kind == ELLIPSOID:
-        q = math.sqrt((x0 / size[0]) ** 2 + (x1 / size[1]) ** 2 + (x2 / size[2]) ** 2)
-        if q == 0.0:
-            return size[0], 0.0, 0.0
-        return x0 / q, x1 / q, x2 / q
-    if kind == BOX:
-        c0 = min(max(x0, -size[0]), size[0])
-        c1 = min(max(x1, -size[1]), size[1])
-        c2 = min(max(x2, -size[2]), size[2])
-        if abs(x0) > size[0] or abs(x1) > size[1] or abs(x2) > size[2]:
-            return c0, c1, c2
-        g0, g1, g2 = size[0] - abs(x0), size[1] - abs(x1), size[2] - abs(x2)  # inside: nearest face
-        if g0 <= g1 and g0 <= g2:
-            return (size[0] if x0 >= 0 else -size[0]), c1, c2
-        if g1 <= g2:
-            return c0, (size[1] if x1 >= 0 else -size[1]), c2
-        return c0, c1, (size[2] if x2 >= 0 else -size[2])
-    return x0, x1, 0.0
-
-
-@njit(inline="always", **JIT)
-def _local_s(pos, mat, x0, x1, x2):
-    """mat^T (x - pos) with mat row-major 3x3 as MuJoCo stores geom_xmat."""
-    dx, dy, dz = x0 - pos[0], x1 - pos[1], x2 - pos[2]
-    return (mat[0] * dx + mat[3] * dy + mat[6] * dz, mat[1] * dx + mat[4] * dy + mat[7] * dz,
-            mat[2] * dx + mat[5] * dy + mat[8] * dz)
-
-
-@njit(**JIT)
-def _to_local(pos, mat, x, out):
-    out[0], out[1], out[2] = _local_s(pos, mat, x[0], x[1], x[2])
-
-
-@njit(**JIT)
-def _dir_local(mat, v, out):
-    out[0] = mat[0] * v[0] + mat[3] * v[1] + mat[6] * v[2]
-    out[1] = mat[1] * v[0] + mat[4] * v[1] + mat[7] * v[2]
-    out[2] = mat[2] * v[0] + mat[5] * v[1] + mat[8] * v[2]
-
-
-@njit(inline="always", **JIT)
-def _base_s(pos, mat, x0, x1, x2):
-    return (pos[0] + mat[0] * x0 + mat[1] * x1 + mat[2] * x2, pos[1] + mat[3] * x0 + mat[4] * x1 + mat[5] * x2,
-            pos[2] + mat[6] * x0 + mat[7] * x1 + mat[8] * x2)
-
-
-@njit(**JIT)
-def _to_base(pos, mat, x, out):
-    out[0], out[1], out[2] = _base_s(pos, mat, x[0], x[1], x[2])
-
-
-@njit(**JIT)
-def _dir_base(mat, v, out):
-    for i in range(3):
-        out[i] = mat[3 * i] * v[0] + mat[3 * i + 1] * v[1] + mat[3 * i + 2] * v[2]
 
 
 @njit(**JIT)
@@ -343,7 +53,7 @@ def _hidden(x, n, skip, kinds, sizes, gpos, gmat, eps):
         dx, dy, dz = y0 - gpos[g, 0], y1 - gpos[g, 1], y2 - gpos[g, 2]
         if dx * dx + dy * dy + dz * dz > b * b:
             continue
-        l0, l1, l2 = _local_s(gpos[g], gmat[g], y0, y1, y2)
+        l0, l1, l2 = to_local_s(gpos[g], gmat[g], y0, y1, y2)
         if inside_s(kinds[g], sizes[g], l0, l1, l2, 0.0):
             return True
     return False
@@ -354,7 +64,7 @@ def _line_sigma(S, x, u, fn, t1, t2):
     """The largest standard deviation (m) of the force line's position across it near the point x,
     from the covariance S of the wrench: the line moves by u x dm_x / |f|, where dm_x = dm - x x df
     is the moment about x, and dm_x . e = (x x e, e) . (df, dm)."""
-    _tangent_basis(u, t1, t2)
+    tangent_basis(u, t1, t2)
     k11 = k12 = k22 = 0.0
     g1 = (x[1] * t1[2] - x[2] * t1[1], x[2] * t1[0] - x[0] * t1[2], x[0] * t1[1] - x[1] * t1[0], t1[0], t1[1], t1[2])
     g2 = (x[1] * t2[2] - x[2] * t2[1], x[2] * t2[0] - x[0] * t2[2], x[0] * t2[1] - x[1] * t2[0], t2[0], t2[1], t2[2])
@@ -372,25 +82,6 @@ def _line_sigma(S, x, u, fn, t1, t2):
     return math.sqrt(max(lam, 0.0)) / fn
 
 
-@njit(inline="always", **JIT)
-def _depth_s(kind, size, x0, x1, x2):
-    """How far (m) the local point lies inside the solid (negative outside; ellipsoids approximately)."""
-    r = size[0]
-    if kind == SPHERE:
-        return r - math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-    if kind == CAPSULE:
-        z = min(max(x2, -size[1]), size[1])
-        return r - math.sqrt(x0 * x0 + x1 * x1 + (x2 - z) ** 2)
-    if kind == CYLINDER:
-        return min(r - math.sqrt(x0 * x0 + x1 * x1), size[1] - abs(x2))
-    if kind == ELLIPSOID:
-        q = math.sqrt((x0 / size[0]) ** 2 + (x1 / size[1]) ** 2 + (x2 / size[2]) ** 2)
-        return (1.0 - q) * min(size[0], min(size[1], size[2]))
-    if kind == BOX:
-        return min(size[0] - abs(x0), min(size[1] - abs(x1), size[2] - abs(x2)))
-    return -x2
-
-
 @njit(**JIT)
 def _off_outline(x, n, skip, kinds, sizes, gpos, gmat, depth, eps):
     """A fitted point that is not on the arm's outline: more than ``depth`` (m) inside a primitive
@@ -404,13 +95,13 @@ def _off_outline(x, n, skip, kinds, sizes, gpos, gmat, depth, eps):
         dx, dy, dz = x[0] - gpos[g, 0], x[1] - gpos[g, 1], x[2] - gpos[g, 2]
         if dx * dx + dy * dy + dz * dz > b * b:
             continue
-        l0, l1, l2 = _local_s(gpos[g], gmat[g], x[0], x[1], x[2])
-        d = _depth_s(kinds[g], sizes[g], l0, l1, l2)
+        l0, l1, l2 = to_local_s(gpos[g], gmat[g], x[0], x[1], x[2])
+        d = depth_s(kinds[g], sizes[g], l0, l1, l2)
         if d > depth:
             return True
         if abs(d) <= eps:
-            l0, l1, l2 = _local_s(gpos[g], gmat[g], y0, y1, y2)
-            if _depth_s(kinds[g], sizes[g], l0, l1, l2) > 0.0:
+            l0, l1, l2 = to_local_s(gpos[g], gmat[g], y0, y1, y2)
+            if depth_s(kinds[g], sizes[g], l0, l1, l2) > 0.0:
                 return True
     return False
 
@@ -451,14 +142,6 @@ def _chol_solve(L, b, x):
         x[i] = acc / L[i, i]
 
 
-@njit(inline="always", **JIT)
-def _line_dist2(x, r0, u):
-    """Squared distance of x from the line r0 + s u (u unit)."""
-    d0, d1, d2 = x[0] - r0[0], x[1] - r0[1], x[2] - r0[2]
-    along = d0 * u[0] + d1 * u[1] + d2 * u[2]
-    return d0 * d0 + d1 * d1 + d2 * d2 - along * along
-
-
 @njit(**JIT)
 def _surface_near_line(kind, size, pos, mat, r0, u, point, normal):
     """The surface point below the line's closest approach to the primitive's centre (and its
@@ -468,7 +151,7 @@ def _surface_near_line(kind, size, pos, mat, r0, u, point, normal):
     for i in range(3):
         point[i] = r0[i] + along * u[i]
     _project_base(kind, size, pos, mat, point, point, normal)
-    return _line_dist2(point, r0, u)
+    return line_dist2(point, r0, u)
 
 
 @njit(**JIT)
@@ -481,8 +164,8 @@ def _near_start(kind, size, pos, mat, r0, u, grow, pulls, grown, s, o, d, xl, po
     Returns the point's squared distance from the line, or -1 when the line passes farther away."""
     if kind == PLANE:
         return -1.0  # an infinite plane is crossed or parallel: nothing to grow into
-    _to_local(pos, mat, r0, o)
-    _dir_local(mat, u, d)
+    to_local(pos, mat, r0, o)
+    dir_to_local(mat, u, d)
     for i in range(4):
         grown[i] = size[i]
     grown[0] += grow
@@ -499,8 +182,8 @@ def _near_start(kind, size, pos, mat, r0, u, grow, pulls, grown, s, o, d, xl, po
             n0, n1, n2 = normal_local(kind, grown, x0, x1, x2)
         else:
             n0, n1, n2 = normal_local(kind, size, p0, p1, p2)
-        xl[0], xl[1], xl[2] = _base_s(pos, mat, p0, p1, p2)
-        dist2 = _line_dist2(xl, r0, u)
+        xl[0], xl[1], xl[2] = to_base_s(pos, mat, p0, p1, p2)
+        dist2 = line_dist2(xl, r0, u)
         if best < 0.0 or dist2 < best:
             best = dist2
             point[0], point[1], point[2] = xl[0], xl[1], xl[2]
@@ -515,7 +198,7 @@ def _project_base(kind, size, pos, mat, x, out_point, out_normal):
     """x brought onto the surface, with the normal there. For a point outside a box or a cylinder the
     normal points from the surface point to x: a point past an edge takes the face it overhangs, so
     Gauss-Newton can walk around an edge instead of sticking to the first face."""
-    l0, l1, l2 = _local_s(pos, mat, x[0], x[1], x[2])
+    l0, l1, l2 = to_local_s(pos, mat, x[0], x[1], x[2])
     p0, p1, p2 = project_s(kind, size, l0, l1, l2)
     n0, n1, n2 = normal_local(kind, size, p0, p1, p2)
     if kind == BOX or kind == CYLINDER:  # noqa: SIM109 (numba); the others' normals are radial already
@@ -524,7 +207,7 @@ def _project_base(kind, size, pos, mat, x, out_point, out_normal):
         if out2 > 1e-24 and not inside_s(kind, size, l0, l1, l2, 0.0):  # outside by more than rounding
             k = math.sqrt(out2)
             n0, n1, n2 = e0 / k, e1 / k, e2 / k
-    out_point[0], out_point[1], out_point[2] = _base_s(pos, mat, p0, p1, p2)
+    out_point[0], out_point[1], out_point[2] = to_base_s(pos, mat, p0, p1, p2)
     for i in range(3):
         out_normal[i] = mat[3 * i] * n0 + mat[3 * i + 1] * n1 + mat[3 * i + 2] * n2
 
@@ -716,7 +399,7 @@ def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov, ws, want_
     it = 0
     while it < max_iter:
         it += 1
-        _tangent_basis(n, t1, t2)
+        tangent_basis(n, t1, t2)
         # Kaufman: J_k = -P (0, t_k x p), P = I - A (A^T W A)^-1 A^T W projects out what a change
         # of force absorbs
         for k in range(2):
@@ -775,7 +458,7 @@ def refine(kind, size, pos, mat, w, W, c0, p0, max_iter, c, p, n, cov, ws, want_
             fac[i] = tfac[i]
         old = chi2
         chi2 = chi2_new
-        if step_len <= 1e-7 * (1.0 + math.sqrt(_dot3(c, c))) or old - chi2 <= 1e-14 * (1.0 + old):
+        if step_len <= 1e-7 * (1.0 + math.sqrt(dot3(c, c))) or old - chi2 <= 1e-14 * (1.0 + old):
             converged = True
             break
     cond = _fit_cov(w, W, c, p, n, cov, ws) if want_cov else math.inf
@@ -797,7 +480,7 @@ def _fit_cov(w, W, c, p, n, cov, ws):
     e = ws[141:146]
     col = ws[146:151]
     _residual(w, c, p, r)
-    _tangent_basis(n, t1, t2)
+    tangent_basis(n, t1, t2)
     _jacobian(c, p, t1, t2, J)
     _normal_matrix(J, W, r, H, g, WJ)
     cond = math.inf
@@ -849,8 +532,8 @@ def _refine_box_faces(size, pos, mat, w, W, r0, u, f, max_iter, pulls, chi2, con
     c2 = ws[54:57]
     p2 = ws[57:60]
     n2 = ws[60:63]
-    _to_local(pos, mat, r0, o)
-    _dir_local(mat, u, d)
+    to_local(pos, mat, r0, o)
+    dir_to_local(mat, u, d)
     for a in range(3):
         if d[a] == 0.0:
             continue
@@ -861,7 +544,7 @@ def _refine_box_faces(size, pos, mat, w, W, r0, u, f, max_iter, pulls, chi2, con
             for i in range(3):
                 xl[i] = min(max(o[i] + t * d[i], -size[i]), size[i])
             xl[a] = sgn * size[a]
-            _to_base(pos, mat, xl, start)
+            to_base(pos, mat, xl, start)
             chi2b, _, convb, _ = refine(BOX, size, pos, mat, w, W, start, f, max_iter, c2, p2, n2, cov, rws, False)
             if chi2b < chi2:
                 chi2 = chi2b
@@ -924,7 +607,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
             return 0
     f = w[0:3]
     m = w[3:6]
-    fn = math.sqrt(_dot3(f, f))
+    fn = math.sqrt(dot3(f, f))
     if fn == 0.0:
         out_scalars[0] = F_LOW_FORCE | F_NO_CANDIDATE
         return 0
@@ -937,10 +620,10 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
     for i in range(3):
         u[i] = f[i] / fn
     r0 = ws[3:6]
-    _cross(f, m, r0)
+    cross3(f, m, r0)
     for i in range(3):
         r0[i] /= fn * fn
-    out_scalars[4] = _dot3(m, u)
+    out_scalars[4] = dot3(m, u)
 
     o_loc = ws[6:9]
     d_loc = ws[9:12]
@@ -957,18 +640,18 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
         if not prim_touch[g]:
             continue
         # the line's distance to the primitive's centre against its bounding radius
-        if _line_dist2(gpos[g], r0, u) > sizes[g, 3] ** 2:
+        if line_dist2(gpos[g], r0, u) > sizes[g, 3] ** 2:
             continue
-        _to_local(gpos[g], gmat[g], r0, o_loc)
-        _dir_local(gmat[g], u, d_loc)
+        to_local(gpos[g], gmat[g], r0, o_loc)
+        dir_to_local(gmat[g], u, d_loc)
         k = crossings_local(kinds[g], sizes[g], o_loc, d_loc, s)
         for j in range(k):
             for i in range(3):
                 x_loc[i] = o_loc[i] + s[j] * d_loc[i]
             surface_normal_local(kinds[g], sizes[g], x_loc, n_loc)
-            _to_base(gpos[g], gmat[g], x_loc, x)
-            _dir_base(gmat[g], n_loc, nb)
-            cosi = _dot3(u, nb)
+            to_base(gpos[g], gmat[g], x_loc, x)
+            dir_to_base(gmat[g], n_loc, nb)
+            cosi = dot3(u, nb)
             if cosi > 0.0 and not prim_pulls[g]:
                 continue
             if _hidden(x, nb, g, kinds, sizes, gpos, gmat, hide_tol):
@@ -979,7 +662,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
                     d2 = 0.0
                     for i in range(3):
                         d2 += (raw_point[kk, i] - x[i]) ** 2
-                    if d2 <= (1e-9 * (1.0 + math.sqrt(_dot3(x, x)))) ** 2:
+                    if d2 <= (1e-9 * (1.0 + math.sqrt(dot3(x, x)))) ** 2:
                         dup = True
             if not dup and n_raw < max_cand:
                 raw_prim[n_raw] = g
@@ -1000,9 +683,9 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
                     crossed = True
             if crossed:
                 continue
-            tol = (miss_t + miss_f * (math.sqrt(_dot3(gpos[g], gpos[g])) + sizes[g, 3])) / fn
+            tol = (miss_t + miss_f * (math.sqrt(dot3(gpos[g], gpos[g])) + sizes[g, 3])) / fn
             b = sizes[g, 3] + tol
-            if _line_dist2(gpos[g], r0, u) > b * b:
+            if line_dist2(gpos[g], r0, u) > b * b:
                 continue
             # the line's own 3 sigma where it passes the primitive (plus how much that can grow across it)
             along = (gpos[g, 0] - r0[0]) * u[0] + (gpos[g, 1] - r0[1]) * u[1] + (gpos[g, 2] - r0[2]) * u[2]
@@ -1011,11 +694,11 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
             tol = min(tol, miss_sigma * _line_sigma(S, tmp, u, fn, ws[35:38], ws[38:41])
                       + miss_f * sizes[g, 3] / fn)
             b = sizes[g, 3] + tol
-            if _line_dist2(gpos[g], r0, u) > b * b:
+            if line_dist2(gpos[g], r0, u) > b * b:
                 continue
             miss2 = _near_start(kinds[g], sizes[g], gpos[g], gmat[g], r0, u, tol, prim_pulls[g] != 0,
                                 ws[50:54], s, o_loc, d_loc, x_loc, x, nb)
-            if miss2 < 0.0 or abs(_dot3(u, nb)) < grazing_cos:
+            if miss2 < 0.0 or abs(dot3(u, nb)) < grazing_cos:
                 continue  # too far, or grazing: no evidence of a touch there
             # no hidden test here: a touch next to a seam moves behind it when noise shifts the line,
             # so the fit decides, and a fit deep inside another part is dropped after it (_off_outline)
@@ -1024,7 +707,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
                 if prim_link[raw_prim[kk]] == prim_link[g]:
                     slot = kk
             if slot >= 0:
-                if _line_dist2(raw_point[slot], r0, u) <= miss2:
+                if line_dist2(raw_point[slot], r0, u) <= miss2:
                     continue
             elif n_raw < max_cand:
                 slot = n_raw
@@ -1090,19 +773,19 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
                     if jnt_i[j, 0] != s or not link_joint[link, j]:
                         continue
                     if jnt_i[j, 1] == JNT_SLIDE:
-                        pred += jnt_ratio[j] * _dot3(joint_axis[j], p)
+                        pred += jnt_ratio[j] * dot3(joint_axis[j], p)
                     else:
                         for i in range(3):
                             tmp[i] = c[i] - joint_anchor[j, i]
-                        _cross(tmp, p, x)
-                        pred += jnt_ratio[j] * _dot3(joint_axis[j], x)
+                        cross3(tmp, p, x)
+                        pred += jnt_ratio[j] * dot3(joint_axis[j], x)
                 e = tau_ext[s] - pred
                 logl -= 0.5 * e * e / tau_var[s]
         # a faint preference for the first crossing along the force (the most exposed point):
         # it only orders candidates the data cannot tell apart
         for i in range(3):
             tmp[i] = c[i] - r0[i]
-        logl -= 1e-12 * _dot3(tmp, u)
+        logl -= 1e-12 * dot3(tmp, u)
         cand_prim[n_keep] = g
         cand_score[n_keep] = logl
         cand_chi2[n_keep] = chi2
@@ -1136,8 +819,8 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
         out_point[i] = cand_point[best, i]
         out_force[i] = cand_force[best, i]
         out_normal[i] = cand_normal[best, i]
-    pn = math.sqrt(_dot3(out_force, out_force))
-    cosi = _dot3(out_force, out_normal) / pn if pn > 0 else 0.0
+    pn = math.sqrt(dot3(out_force, out_force))
+    cosi = dot3(out_force, out_normal) / pn if pn > 0 else 0.0
     if cosi > 0.0:
         flags |= F_PULL
     if abs(cosi) < grazing_cos:
@@ -1145,7 +828,7 @@ def solve_frame(w, WS, prim_i, sizes, gpos, gmat, joint_axis, joint_anchor, link
     # covariance in the base frame: point (3x3) from the tangent block, force (3x3)
     cb = cand_cov[best]
     cond = _fit_cov(w, W, out_point, out_force, out_normal, cb, rws)
-    _tangent_basis(out_normal, t1, t2)
+    tangent_basis(out_normal, t1, t2)
     for i in range(3):
         T[i, 0] = t1[i]
         T[i, 1] = t2[i]
