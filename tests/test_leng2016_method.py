@@ -13,9 +13,9 @@ from ftc_hw.model.sampling import SurfacePoint, sample_local
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import _cone, visible_filter
 from ftc_hw.solver import BatchEstimate, ContactEstimate, ContactSolver, flag_names, make_solver
-from ftc_hw.solver import geometry as G
 from ftc_hw.solver.leng2016 import Leng2016Solver, _inliers
 
+import geometry_reference as G
 from solver_cases import reading
 
 PAPER_Q = np.array([math.pi / 6, -math.pi / 6, -math.pi / 4])  # section 6

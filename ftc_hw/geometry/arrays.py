@@ -2,8 +2,8 @@
 tests, benches): arrays of points or lines in, arrays out, one compiled loop per call.
 
 Points and lines are (N, 3) or (3,) arrays in the primitive's local frame (metres); a line is
-``o + s d`` with d a unit vector. ``kind`` is a name or a code (kinds.py); ``size`` a MuJoCo
-``geom_size`` row (shorter rows are padded with zeros).
+``o + s d`` with d a unit vector (one of o, d may be a single row for all). ``kind`` is a name or a
+code (kinds.py); ``size`` a MuJoCo ``geom_size`` row (shorter rows are padded with zeros).
 """
 from __future__ import annotations
 
@@ -24,6 +24,12 @@ FloatArray = NDArray[np.float64]
 
 def _rows(x: ArrayLike) -> FloatArray:
     return np.ascontiguousarray(np.asarray(x, dtype=np.float64).reshape(-1, 3))
+
+
+def _line_rows(o: ArrayLike, d: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Lines' origins and directions as (N, 3) rows, one broadcast against the other."""
+    o_b, d_b = np.broadcast_arrays(_rows(o), _rows(d))
+    return np.ascontiguousarray(o_b), np.ascontiguousarray(d_b)
 
 
 def _size_row(size: ArrayLike) -> FloatArray:
@@ -72,7 +78,7 @@ def _quadric_closest_rows(k, y, x, dist):
 def crossings(kind: int | str, size: ArrayLike, o: ArrayLike, d: ArrayLike) -> tuple[NDArray[np.int64], FloatArray]:
     """Entry and exit of lines through a closed primitive: the count per line (0, 1 for a plane, 2
     otherwise; a tangent line gives a double root) and s (N, 2), sorted, NaN in unused slots."""
-    o, d = _rows(o), _rows(d)
+    o, d = _line_rows(o, d)
     count = np.zeros(len(o), dtype=np.int64)
     s = np.full((len(o), 2), np.nan)
     _crossings_rows(kind_code(kind), _size_row(size), o, d, count, s)
@@ -82,7 +88,7 @@ def crossings(kind: int | str, size: ArrayLike, o: ArrayLike, d: ArrayLike) -> t
 def quadric_crossings(k: ArrayLike, o: ArrayLike, d: ArrayLike) -> tuple[NDArray[np.int64], FloatArray]:
     """Crossings of lines with the quadric ``|k * x| = 1`` (k: inverse semi-axes, 0 for an infinite
     axis): the count per line (0 or 2) and s (N, 2), sorted, NaN when missed."""
-    o, d = _rows(o), _rows(d)
+    o, d = _line_rows(o, d)
     count = np.zeros(len(o), dtype=np.int64)
     s = np.full((len(o), 2), np.nan)
     _quadric_crossings_rows(_size_row(k), o, d, count, s)

@@ -35,13 +35,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from ..geometry import inside, quadric_closest, quadric_crossings
 from ..model import ArmModel
 from ..model.arm import GEOM_KINDS, SURFACE_GROUP
 from ..scene import Scene
-from . import geometry as G
 from .solver import FLAG_NAMES, BatchEstimate, ContactEstimate, ContactSolver, flag_names
 
 FLAG_BITS = {name: bit for bit, name in FLAG_NAMES.items()}
@@ -78,9 +79,10 @@ class _Quadric:
 
     def crossings(self, o: np.ndarray, d: np.ndarray, tol: float) -> list[np.ndarray]:
         """Crossings of the line ``o + s d`` (unit d) with the bounded patch."""
-        hits = G.intersect_quadric(o - self.centre, d, self.k)
-        return [hits.points[j] + self.centre for j in range(2)
-                if hits.hit[j] and self.in_bounds(hits.points[j] + self.centre, tol)]
+        v = o - self.centre
+        count, s = quadric_crossings(self.k, v, d)
+        points = [v + s[0, j] * d + self.centre for j in range(count[0])]
+        return [x for x in points if self.in_bounds(x, tol)]
 
     def project(self, x: np.ndarray) -> np.ndarray:
         """The patch point nearest to ``x`` (bounds included)."""
@@ -101,8 +103,7 @@ class _Quadric:
             out = self.centre + rho * _radial(v)
             out[2] = zb
             return out
-        semi = np.where(self.k > 0, 1.0 / np.where(self.k > 0, self.k, 1.0), np.inf)  # ellipsoid: unbounded
-        return G.signed_distance("ellipsoid", semi, v).closest + self.centre
+        return quadric_closest(self.k, v)[0][0] + self.centre  # an ellipsoid: unbounded
 
 
 @dataclass(frozen=True)
@@ -209,6 +210,17 @@ class _Prim:
     patches: tuple[_Patch, ...]
     scale: float
     bound: float  # m, radius of a sphere about the geom origin that holds the primitive (inf: plane)
+
+
+class _Frame(NamedTuple):
+    """One frame's data for the candidate searches (base frame)."""
+
+    f: np.ndarray  # the force (eq. 25: p = f)
+    tau: np.ndarray  # the moment about the base origin
+    u: np.ndarray  # the force's direction
+    r0: np.ndarray  # the force line's point nearest the origin
+    poses: dict[int, tuple[np.ndarray, np.ndarray]]  # geom -> (rotation, centre)
+    sigma: np.ndarray  # covariance of (f, tau)
 
 
 @dataclass
@@ -325,12 +337,13 @@ class Leng2016Solver:
         r0 = np.cross(f, tau) / (fn * fn)  # the force line's point nearest the origin
         m_par = float(tau @ u)  # moment along the force line: 0 for a consistent wrench
         consistent = abs(m_par) <= self.rank_tol * (float(np.linalg.norm(tau)) + fn * self.extent)
+        fr = _Frame(f, tau, u, r0, poses, sigma)
         if consistent:  # rank(M) = 5: exact crossings
-            cands = self._exact(f, tau, u, r0, poses, sigma)
+            cands = self._exact(fr)
             same = 1e-9 * (1.0 + float(np.linalg.norm(r0)))
         else:  # rank(M) = 6: compatibility solution (5.5)
             sig_line = self._line_sigma(fn, r0, sigma)
-            cands = self._compatible(f, tau, u, r0, poses, sigma, 0.005 + 5.0 * sig_line)
+            cands = self._compatible(fr, 0.005 + 5.0 * sig_line)
             same = max(1e-6, 10.0 * sig_line)
         cands = _dedup(cands, same)
         if tau_arr is not None:
@@ -349,23 +362,34 @@ class Leng2016Solver:
                                flag_names(bits), tuple(c.prim.link for c in cands), data)
 
     # -- 5.1-5.3 noise-free: the force line crossed with the outline --------------------------------------
-    def _exact(self, f, tau, u, r0, poses, sigma) -> list[_Cand]:
+    def _exact(self, fr: _Frame) -> list[_Cand]:
         out = []
-        for prim in self._prims:
-            if not prim.touch:
-                continue
-            rot, org = poses[prim.geom]
-            o_loc, d_loc = rot.T @ (r0 - org), rot.T @ u
+        for prim, o_loc, d_loc in self._touchable(fr):
             for patch in prim.patches:
                 for x_loc in patch.crossings(o_loc, d_loc, self.bound_tol):
-                    n = rot @ patch.normal(x_loc)
-                    if not float(f @ n) < 0.0:  # eq. 28, p = f (eq. 25)
-                        continue
-                    x = rot @ x_loc + org
-                    if self._hidden(x[None], n[None], prim, poses)[0]:
-                        continue
-                    out.append(_Cand(prim, x, f.copy(), n, self._chi2(x, f, tau, sigma), float((x - r0) @ u)))
+                    cand = self._candidate(prim, patch, x_loc, fr)
+                    if cand is not None:
+                        out.append(cand)
         return out
+
+    def _touchable(self, fr: _Frame):
+        """Every touchable primitive with the force line in its frame (o_loc, d_loc)."""
+        for prim in self._prims:
+            if prim.touch:
+                rot, org = fr.poses[prim.geom]
+                yield prim, rot.T @ (fr.r0 - org), rot.T @ fr.u
+
+    def _candidate(self, prim: _Prim, patch: _Patch, x_loc: np.ndarray, fr: _Frame) -> _Cand | None:
+        """The contact at a patch point (geom frame) with p = f (eq. 25), if it pushes (eq. 28) and lies
+        on the outline (eq. 27)."""
+        rot, org = fr.poses[prim.geom]
+        n = rot @ patch.normal(x_loc)
+        if not float(fr.f @ n) < 0.0:
+            return None
+        x = rot @ x_loc + org
+        if self._hidden(x[None], n[None], prim, fr.poses)[0]:
+            return None
+        return _Cand(prim, x, fr.f.copy(), n, self._chi2(x, fr.f, fr.tau, fr.sigma), float((x - fr.r0) @ fr.u))
 
     # -- 5.5 compatibility solution -----------------------------------------------------------------------
     def _line_sigma(self, fn: float, r0: np.ndarray, sigma: np.ndarray) -> float:
@@ -374,64 +398,62 @@ class Leng2016Solver:
         st = math.sqrt(max(np.linalg.eigvalsh(sigma[3:, 3:]).max(), 0.0))
         return (st + 2.0 * sf * (float(np.linalg.norm(r0)) + self.extent)) / fn
 
-    def _compatible(self, f, tau, u, r0, poses, sigma, margin: float) -> list[_Cand]:
+    def _compatible(self, fr: _Frame, margin: float) -> list[_Cand]:
         out = []
-        for prim in self._prims:
-            if not prim.touch:
-                continue
-            rot, org = poses[prim.geom]
-            o_loc, d_loc = rot.T @ (r0 - org), rot.T @ u
+        for prim, o_loc, d_loc in self._touchable(fr):
             if float(np.linalg.norm(o_loc - (o_loc @ d_loc) * d_loc)) > prim.bound + margin:
                 continue  # the line passes far from this primitive
-            pts, nrms = [], []
-            for patch in prim.patches:
-                # start: the patch's push crossing of the least-squares line, else its point nearest the line
-                start = None
-                for x_loc in patch.crossings(o_loc, d_loc, self.bound_tol):
-                    if float(d_loc @ patch.normal(x_loc)) < 0.0:
-                        start = x_loc
-                        break
-                if start is None:
-                    start, dist = _nearest_to_line(patch, o_loc, d_loc)
-                    if dist > margin:
-                        continue
-                c0 = rot @ start + org
-                cs, ps, ok = self._newton(patch, rot, org, f, tau, c0)
-                for k in np.flatnonzero(ok):
-                    x_loc = rot.T @ (cs[k] - org)
-                    if not patch.in_bounds(x_loc, self.bound_tol):  # eqs. 29-32
-                        continue
-                    n = rot @ patch.normal(x_loc)
-                    if not float(ps[k] @ n) < 0.0:  # eq. 28
-                        continue
-                    pts.append(cs[k])
-                    nrms.append(n)
+            pts, nrms = self._solutions(prim, o_loc, d_loc, fr, margin)
             if not pts:
                 continue
             pts_a, nrm_a = np.array(pts), np.array(nrms)
-            keep = ~self._hidden(pts_a, nrm_a, prim, poses)  # eq. 27: on the outline
+            keep = ~self._hidden(pts_a, nrm_a, prim, fr.poses)  # eq. 27: on the outline
             pts_a, nrm_a = pts_a[keep], nrm_a[keep]
             if len(pts_a) == 0:
                 continue
             keep = _inliers(pts_a, nrm_a, self.outlier_k)  # "remove singular solutions"
-            mean = pts_a[keep].mean(axis=0)
             # the closest point of the outline (this primitive's patches) to the average
-            m_loc = rot.T @ (mean - org)
+            rot, org = fr.poses[prim.geom]
+            m_loc = rot.T @ (pts_a[keep].mean(axis=0) - org)
             best, best_d = None, math.inf
             for patch in prim.patches:
                 x_loc = patch.project(m_loc)
                 dist = float(np.linalg.norm(x_loc - m_loc))
                 if dist < best_d:
                     best, best_d = (patch, x_loc), dist
-            patch, x_loc = best
-            x = rot @ x_loc + org
-            n = rot @ patch.normal(x_loc)
-            if not float(f @ n) < 0.0:  # eq. 28 with p = f (eq. 25)
-                continue
-            if self._hidden(x[None], n[None], prim, poses)[0]:
-                continue
-            out.append(_Cand(prim, x, f.copy(), n, self._chi2(x, f, tau, sigma), float((x - r0) @ u)))
+            cand = self._candidate(prim, *best, fr)
+            if cand is not None:
+                out.append(cand)
         return out
+
+    def _solutions(self, prim: _Prim, o_loc: np.ndarray, d_loc: np.ndarray, fr: _Frame,
+                   margin: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """The converged subsystem solutions (points, normals; base frame) on each patch of ``prim``
+        within the patch's bounds (eqs. 29-32) that push (eq. 28)."""
+        rot, org = fr.poses[prim.geom]
+        pts, nrms = [], []
+        for patch in prim.patches:
+            # start: the patch's push crossing of the least-squares line, else its point nearest the line
+            start = None
+            for x_loc in patch.crossings(o_loc, d_loc, self.bound_tol):
+                if float(d_loc @ patch.normal(x_loc)) < 0.0:
+                    start = x_loc
+                    break
+            if start is None:
+                start, dist = _nearest_to_line(patch, o_loc, d_loc)
+                if dist > margin:
+                    continue
+            cs, ps, ok = self._newton(patch, rot, org, fr.f, fr.tau, rot @ start + org)
+            for k in np.flatnonzero(ok):
+                x_loc = rot.T @ (cs[k] - org)
+                if not patch.in_bounds(x_loc, self.bound_tol):
+                    continue
+                n = rot @ patch.normal(x_loc)
+                if not float(ps[k] @ n) < 0.0:
+                    continue
+                pts.append(cs[k])
+                nrms.append(n)
+        return pts, nrms
 
     def _newton(self, patch: _Patch, rot: np.ndarray, org: np.ndarray, f: np.ndarray, tau: np.ndarray,
                 c0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -516,7 +538,7 @@ class Leng2016Solver:
             if other.geom == prim.geom:
                 continue
             rot, org = poses[other.geom]
-            hid |= G.inside(other.kind, other.size, (y - org) @ rot)
+            hid |= inside(other.kind, other.size, (y - org) @ rot)
         return hid
 
     def _mutation_links(self, tau_ext: np.ndarray) -> set[int] | None:
