@@ -99,6 +99,12 @@ def _cand_views(ws, max_cand):
 
 
 @njit(inline="always", **JIT)
+def _line_and_raw(ws, raw_prim):
+    """The force line (direction u, point r0 nearest the origin) and the raw candidates' points."""
+    return ws[WS_U:WS_U + 3], ws[WS_R0:WS_R0 + 3], _cand_views(ws, raw_prim.shape[0])[0]
+
+
+@njit(inline="always", **JIT)
 def _prim(prims, g):
     """(kind, size, pos, mat) of primitive g."""
     prim_i, sizes, gpos, gmat = prims
@@ -194,6 +200,18 @@ def _cholesky(A, L):
         for j in range(i + 1, n):
             L[i, j] = 0.0
     return True
+
+
+@njit(**JIT)
+def _chol_inverse(L, e, col, inv):
+    """inv = (L L^T)^-1, column by column; e, col: scratch of L's size."""
+    n = L.shape[0]
+    for b in range(n):
+        e[:] = 0.0
+        e[b] = 1.0
+        _chol_solve(L, e, col)
+        for a in range(n):
+            inv[a, b] = col[a]
 
 
 @njit(**JIT)
@@ -568,12 +586,7 @@ def _fit_cov(w, W, c, p, n, cov, ws):
     for b in range(5):
         lo = min(lo, Lc[b, b])
         hi = max(hi, Lc[b, b])
-    for b in range(5):
-        e[:] = 0.0
-        e[b] = 1.0
-        _chol_solve(Lc, e, col)
-        for a in range(5):
-            cov[a, b] = col[a]
+    _chol_inverse(Lc, e, col, cov)
     return (hi / lo) ** 2  # from the Cholesky pivots: a cheap lower bound of the condition number
 
 
@@ -655,11 +668,10 @@ def _crossing_candidates(prims, hide_tol, ws, raw_prim):
     allows pulls), on the arm's outline, one per seam point. Fills raw_prim and the raw points;
     returns their count."""
     prim_i, sizes, gpos, gmat = prims
-    u, r0 = ws[WS_U:WS_U + 3], ws[WS_R0:WS_R0 + 3]
+    u, r0, raw_point = _line_and_raw(ws, raw_prim)
     o_loc, d_loc, s = ws[WS_O_LOC:WS_O_LOC + 3], ws[WS_D_LOC:WS_D_LOC + 3], ws[WS_S:WS_S + 2]
     x_loc, n_loc = ws[WS_X_LOC:WS_X_LOC + 3], ws[WS_N_LOC:WS_N_LOC + 3]
     x, nb = ws[WS_X:WS_X + 3], ws[WS_NB:WS_NB + 3]
-    raw_point = _cand_views(ws, raw_prim.shape[0])[0]
     n_raw = 0
     for g in range(prim_i.shape[0]):
         if not prim_i[g, PI_TOUCH]:
@@ -708,10 +720,9 @@ def _near_miss_candidates(S, fn, prims, cfg, n_crossed, ws, raw_prim):
     the touched link. One per link that has no crossing, the closest; the fit decides. No hidden test
     here: a touch next to a seam moves behind it when noise shifts the line, so the fit decides, and a
     fit deep inside another part is dropped after it (_off_outline). Returns the candidate count."""
-    prim_i, sizes, gpos, gmat = prims
-    u, r0 = ws[WS_U:WS_U + 3], ws[WS_R0:WS_R0 + 3]
+    prim_i = prims[0]
+    u, r0, raw_point = _line_and_raw(ws, raw_prim)
     x, nb = ws[WS_X:WS_X + 3], ws[WS_NB:WS_NB + 3]
-    raw_point = _cand_views(ws, raw_prim.shape[0])[0]
     n_raw = n_crossed
     for g in range(prim_i.shape[0]):
         if not prim_i[g, PI_TOUCH] or _link_crossed(g, prim_i, raw_prim, n_crossed):
@@ -778,9 +789,8 @@ def _nearest_surface_candidate(prims, ws, raw_prim):
     """The surface point nearest the force line on the closest touchable primitive (_surface_near_line)
     as the only candidate; False when there is no touchable primitive."""
     prim_i = prims[0]
-    u, r0 = ws[WS_U:WS_U + 3], ws[WS_R0:WS_R0 + 3]
+    u, r0, raw_point = _line_and_raw(ws, raw_prim)
     point, normal = ws[WS_NB:WS_NB + 3], ws[WS_N_LOC:WS_N_LOC + 3]
-    raw_point = _cand_views(ws, raw_prim.shape[0])[0]
     best = 1e300
     for g in range(prim_i.shape[0]):
         if not prim_i[g, PI_TOUCH]:
@@ -1125,12 +1135,5 @@ def weight_stack(a, sigma_sensor, out):
     low = np.empty((6, 6))
     if not _cholesky(sigma, low):
         return False
-    e = np.empty(6)
-    col = np.empty(6)
-    for b in range(6):
-        e[:] = 0.0
-        e[b] = 1.0
-        _chol_solve(low, e, col)
-        for i in range(6):
-            out[i, b] = col[i]
+    _chol_inverse(low, np.empty(6), np.empty(6), out[:6])
     return True
