@@ -5,12 +5,13 @@ from typing import Literal
 
 from ..model import ArmModel
 from ..scene import Scene
+from .protocol import BodyPoses, Solver
 from .solver import BatchEstimate, Candidate, ContactEstimate, ContactSolver, flag_names
 
 Method = Literal["ours", "leng2016"]
 
 
-def make_solver(scene: Scene | ArmModel, method: Method = "ours"):
+def make_solver(scene: Scene | ArmModel, method: Method = "ours") -> Solver:
     """``ours`` (ContactSolver) or ``leng2016`` (the reference paper's method, section 5.5)."""
     if method == "ours":
         return ContactSolver(scene)
@@ -21,4 +22,5 @@ def make_solver(scene: Scene | ArmModel, method: Method = "ours"):
     raise ValueError(f"unknown method {method!r} (ours, leng2016)")
 
 
-__all__ = ["BatchEstimate", "Candidate", "ContactEstimate", "ContactSolver", "Method", "flag_names", "make_solver"]
+__all__ = ["BatchEstimate", "BodyPoses", "Candidate", "ContactEstimate", "ContactSolver", "Method", "Solver",
+           "flag_names", "make_solver"]

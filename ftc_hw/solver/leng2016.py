@@ -43,6 +43,7 @@ from ..geometry import inside, quadric_closest, quadric_crossings
 from ..model import ArmModel
 from ..model.arm import GEOM_KINDS, SURFACE_GROUP
 from ..scene import Scene
+from .protocol import BodyPoses
 from .solver import FLAG_NAMES, BatchEstimate, ContactEstimate, ContactSolver, flag_names
 
 FLAG_BITS = {name: bit for bit, name in FLAG_NAMES.items()}
@@ -292,10 +293,12 @@ class Leng2016Solver:
         self._sigma0 = self._sigma(np.array(self.scene.robot.home))
 
     # -- noise --------------------------------------------------------------------------------------------
-    def _sigma(self, q: np.ndarray) -> np.ndarray:
-        """Covariance of the external wrench (base frame, about the base origin) from the sensor noise."""
+    def _sigma(self, q: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
+        """Covariance of the external wrench (base frame, about the base origin) from the sensor noise
+        (plus ``extra``, sensor frame)."""
         a = np.column_stack([self._ours.external_wrench_base(e, q) for e in np.eye(6)])
-        return a @ self.scene.sensor.noise_cov @ a.T
+        cov = self.scene.sensor.noise_cov if extra is None else self.scene.sensor.noise_cov + extra
+        return a @ cov @ a.T
 
     def _chi2(self, c: np.ndarray, f: np.ndarray, tau: np.ndarray, sigma: np.ndarray) -> float:
         """Moment mismatch ``c x f - tau`` (eq. 25 with p = f) normalised by its noise covariance."""
@@ -306,52 +309,64 @@ class Leng2016Solver:
         return float(r @ np.linalg.solve(cov, r))
 
     # -- single frame -------------------------------------------------------------------------------------
-    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False) -> ContactEstimate:
+    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False, tau_std=None,
+              extra_cov=None) -> ContactEstimate:
         """Estimate the contact from the compensated wrench (sensor frame, the scene's sign convention:
         the external contact wrench only) at joint angles q (rad), by the paper's section 5.
 
         ``tau_ext``: optional per-joint external torques (N m, the scene's joint order); they drive the
-        current-mutation constraint (5.4).
+        current-mutation constraint (5.4), whose thresholds are fixed (``tau_std`` is not used).
+        ``extra_cov``: the compensation's own uncertainty (6x6, sensor frame), added to the sensor
+        noise that normalises the ranking residual.
         """
         bits = FLAG_BITS["saturated"] if saturated else 0
         w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
         tau_arr = None if tau_ext is None else np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
-        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(q))
-                and (tau_arr is None or np.all(np.isfinite(tau_arr)))):
+        extra = None if extra_cov is None else np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(q)) and (tau_arr is None or np.all(np.isfinite(tau_arr)))
+                and (extra is None or np.all(np.isfinite(extra)))):
             return _empty(bits | FLAG_BITS["invalid_input"], 0.0)
         ext = self._ours.external_wrench_base(w, q)  # (f, tau) = (p, c x p), eq. 25
-        sigma = self._sigma(q) if self._ours.sensor_moves else self._sigma0
+        sigma = self._sigma(q, extra) if (self._ours.sensor_moves or extra is not None) else self._sigma0
         if not np.all(np.isfinite(ext)):
             return _empty(bits | FLAG_BITS["invalid_input"], 0.0)
-        self.model.kinematics(q)
-        d = self.model.data
-        poses = {p.geom: (d.geom_xmat[p.geom].reshape(3, 3).copy(), d.geom_xpos[p.geom].copy()) for p in self._prims}
+        poses = self._poses(q)
         f, tau = ext[:3], ext[3:]
         fn = float(np.linalg.norm(f))
         if fn == 0.0:
             return _empty(bits | FLAG_BITS["low_force"] | FLAG_BITS["no_candidate"], 0.0)
         if fn < self.low_force:
             bits |= FLAG_BITS["low_force"]
-        u = f / fn
-        r0 = np.cross(f, tau) / (fn * fn)  # the force line's point nearest the origin
-        m_par = float(tau @ u)  # moment along the force line: 0 for a consistent wrench
-        consistent = abs(m_par) <= self.rank_tol * (float(np.linalg.norm(tau)) + fn * self.extent)
-        fr = _Frame(f, tau, u, r0, poses, sigma)
-        if consistent:  # rank(M) = 5: exact crossings
-            cands = self._exact(fr)
-            same = 1e-9 * (1.0 + float(np.linalg.norm(r0)))
-        else:  # rank(M) = 6: compatibility solution (5.5)
-            sig_line = self._line_sigma(fn, r0, sigma)
-            cands = self._compatible(fr, 0.005 + 5.0 * sig_line)
-            same = max(1e-6, 10.0 * sig_line)
-        cands = _dedup(cands, same)
+        cands, m_par = self._search(_Frame(f, tau, f / fn, np.cross(f, tau) / (fn * fn), poses, sigma))
         if tau_arr is not None:
             allowed = self._mutation_links(tau_arr)
             if allowed is not None:
                 cands = [c for c in cands if c.prim.body in allowed]
         if not cands:
             return _empty(bits | FLAG_BITS["no_candidate"], m_par)
+        return self._estimate(cands, bits, m_par)
+
+    def _poses(self, q: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Every primitive's (rotation, centre) at q."""
+        self.model.kinematics(q)
+        d = self.model.data
+        return {p.geom: (d.geom_xmat[p.geom].reshape(3, 3).copy(), d.geom_xpos[p.geom].copy()) for p in self._prims}
+
+    def _search(self, fr: _Frame) -> tuple[list[_Cand], float]:
+        """The candidates, one per contact, and the moment along the force line (N m)."""
+        fn = float(np.linalg.norm(fr.f))
+        m_par = float(fr.tau @ fr.u)  # moment along the force line: 0 for a consistent wrench
+        if abs(m_par) <= self.rank_tol * (float(np.linalg.norm(fr.tau)) + fn * self.extent):
+            # rank(M) = 5: exact crossings
+            return _dedup(self._exact(fr), 1e-9 * (1.0 + float(np.linalg.norm(fr.r0)))), m_par
+        # rank(M) = 6: compatibility solution (5.5)
+        sig_line = self._line_sigma(fn, fr.r0, fr.sigma)
+        return _dedup(self._compatible(fr, 0.005 + 5.0 * sig_line), max(1e-6, 10.0 * sig_line)), m_par
+
+    def _estimate(self, cands: list[_Cand], bits: int, m_par: float) -> ContactEstimate:
+        """Candidates ranked by their residual (the first along the force line on a tie), the best
+        reported."""
         cands.sort(key=lambda c: (c.chi2 + 1e-12 * c.s))
         if len(cands) > 1 and cands[1].chi2 - cands[0].chi2 < self.ambiguity_dchi2:
             bits |= FLAG_BITS["ambiguous"]
@@ -527,6 +542,15 @@ class Leng2016Solver:
             active &= ~conv
         ok = conv & np.all(np.isfinite(x), axis=1)
         return x[:, :3], x[:, 3:], ok
+
+    # -- kinematics (the Solver protocol) -------------------------------------------------------------------
+    def body_poses(self, q) -> BodyPoses:
+        """Every body's position and quaternion at q: the model's own kinematics."""
+        return self.model.body_poses(q)
+
+    def solved_body_poses(self) -> None:
+        """None: a solve leaves no body poses of its own to reuse."""
+        return None
 
     # -- constraints --------------------------------------------------------------------------------------
     def _hidden(self, points: np.ndarray, normals: np.ndarray, prim: _Prim, poses) -> np.ndarray:
