@@ -99,9 +99,9 @@ def _cand_views(ws, max_cand):
 
 
 @njit(inline="always", **JIT)
-def _line_and_raw(ws, raw_prim):
-    """The force line (direction u, point r0 nearest the origin) and the raw candidates' points."""
-    return ws[WS_U:WS_U + 3], ws[WS_R0:WS_R0 + 3], _cand_views(ws, raw_prim.shape[0])[0]
+def _line(ws):
+    """The force line: direction u, point r0 nearest the origin."""
+    return ws[WS_U:WS_U + 3], ws[WS_R0:WS_R0 + 3]
 
 
 @njit(inline="always", **JIT)
@@ -462,6 +462,10 @@ def refine(prim, w, W, c0, p0, max_iter, fit, cov, ws, want_cov=True):
     singular. ``ws``: REFINE_WS floats of scratch."""
     c, p, n = fit
     r, fac = ws[RW_R:RW_R + 6], ws[RW_FAC:RW_FAC + 15]
+    basis = (ws[RW_T1:RW_T1 + 3], ws[RW_T2:RW_T2 + 3])
+    jac = (ws[RW_J:RW_J + 12].reshape((6, 2)), ws[RW_WJ:RW_WJ + 12].reshape((6, 2)))
+    trial = (ws[RW_TRIAL_C:RW_TRIAL_C + 3], ws[RW_TRIAL_P:RW_TRIAL_P + 3], ws[RW_TRIAL_N:RW_TRIAL_N + 3],
+             ws[RW_TRIAL_R:RW_TRIAL_R + 6], ws[RW_TFAC:RW_TFAC + 15])
     _project_base(prim, c0, c, n)
     chi2 = _best_force(w, W, c, p, r, fac)
     if chi2 == math.inf:
@@ -473,15 +477,15 @@ def refine(prim, w, W, c0, p0, max_iter, fit, cov, ws, want_cov=True):
     it = 0
     while it < max_iter:
         it += 1
-        ok, s0, s1 = _gauss_newton_step(W, c, p, n, r, fac, ws)
+        ok, s0, s1 = _gauss_newton_step(W, c, p, n, r, fac, basis, jac)
         if not ok:  # singular: the force is too small to locate anything
             break
-        lam, chi2_new = _backtrack(prim, w, W, c, s0, s1, chi2, ws)
+        lam, chi2_new = _backtrack(prim, w, W, c, s0, s1, chi2, basis, trial)
         if lam == 0.0:
             converged = True  # no descent left at rounding level
             break
         step_len = lam * math.sqrt(s0 * s0 + s1 * s1)
-        _take_trial(fit, r, fac, ws)
+        _take_trial(trial, fit, r, fac)
         old = chi2
         chi2 = chi2_new
         if step_len <= 1e-7 * (1.0 + math.sqrt(dot3(c, c))) or old - chi2 <= 1e-14 * (1.0 + old):
@@ -492,12 +496,13 @@ def refine(prim, w, W, c0, p0, max_iter, fit, cov, ws, want_cov=True):
 
 
 @njit(inline="always", **JIT)
-def _gauss_newton_step(W, c, p, n, r, fac, ws):
-    """The Gauss-Newton step (s0, s1) in the tangent basis at c (left at RW_T1, RW_T2) with Kaufman's
+def _gauss_newton_step(W, c, p, n, r, fac, basis, jac):
+    """The Gauss-Newton step (s0, s1) in the tangent basis at c (left in ``basis``) with Kaufman's
     Jacobian J_k = -P (0, t_k x p), P = I - A (A^T W A)^-1 A^T W projecting out what a change of force
-    absorbs. (False, 0, 0) when the normal equations are singular."""
-    t1, t2 = ws[RW_T1:RW_T1 + 3], ws[RW_T2:RW_T2 + 3]
-    J, WJ = ws[RW_J:RW_J + 12].reshape((6, 2)), ws[RW_WJ:RW_WJ + 12].reshape((6, 2))
+    absorbs; ``jac``: scratch for J and W J (6x2 each). (False, 0, 0) when the normal equations are
+    singular."""
+    t1, t2 = basis
+    J, WJ = jac
     tangent_basis(n, t1, t2)
     for k in range(2):
         tk = t1 if k == 0 else t2
@@ -531,13 +536,12 @@ def _gauss_newton_step(W, c, p, n, r, fac, ws):
 
 
 @njit(inline="always", **JIT)
-def _backtrack(prim, w, W, c, s0, s1, chi2, ws):
-    """The step (s0, s1) from c, halved until chi2 does not grow (8 tries): its fit is left in the
-    trial views (RW_TRIAL_*). Returns (the step's fraction, 0 when none descends; its chi2)."""
-    t1, t2 = ws[RW_T1:RW_T1 + 3], ws[RW_T2:RW_T2 + 3]
-    trial_c, trial_n = ws[RW_TRIAL_C:RW_TRIAL_C + 3], ws[RW_TRIAL_N:RW_TRIAL_N + 3]
-    trial_p, trial_r = ws[RW_TRIAL_P:RW_TRIAL_P + 3], ws[RW_TRIAL_R:RW_TRIAL_R + 6]
-    tfac = ws[RW_TFAC:RW_TFAC + 15]
+def _backtrack(prim, w, W, c, s0, s1, chi2, basis, trial):
+    """The step (s0, s1) in ``basis`` from c, halved until chi2 does not grow (8 tries): its fit is left
+    in ``trial`` (point, force, normal, residual, factors). Returns (the step's fraction, 0 when none
+    descends; its chi2)."""
+    t1, t2 = basis
+    trial_c, trial_p, trial_n, trial_r, tfac = trial
     lam = 1.0
     for _ in range(8):
         for i in range(3):
@@ -551,17 +555,18 @@ def _backtrack(prim, w, W, c, s0, s1, chi2, ws):
 
 
 @njit(inline="always", **JIT)
-def _take_trial(fit, r, fac, ws):
-    """The trial step's fit (RW_TRIAL_*) becomes the current one."""
+def _take_trial(trial, fit, r, fac):
+    """The trial step's fit becomes the current one."""
     c, p, n = fit
+    trial_c, trial_p, trial_n, trial_r, tfac = trial
     for i in range(3):
-        c[i] = ws[RW_TRIAL_C + i]
-        p[i] = ws[RW_TRIAL_P + i]
-        n[i] = ws[RW_TRIAL_N + i]
+        c[i] = trial_c[i]
+        p[i] = trial_p[i]
+        n[i] = trial_n[i]
     for i in range(6):
-        r[i] = ws[RW_TRIAL_R + i]
+        r[i] = trial_r[i]
     for i in range(15):
-        fac[i] = ws[RW_TFAC + i]
+        fac[i] = tfac[i]
 
 
 @njit(**JIT)
@@ -610,24 +615,27 @@ def solve_frame(w, WS, prims, joints, torques, cfg, out, cands, ws, raw_prim):
     flags, fn = _force_line(w, cfg, out, ws)
     if fn == 0.0:
         return 0  # invalid, or no force: the flags say which
+    raw_point, normal, iters, conv, cov = _cand_views(ws, raw_prim.shape[0])
+    raw = (raw_prim, raw_point)  # the candidates before their fit: primitive, point
+    cands = (cands[0], cands[1], normal, iters, conv)  # and after: cand_prim, cand_f and the rest
     miss_tol = cfg[CFG_MISS_TOL] / fn  # the line position's uncertainty (m)
-    n_crossed = _crossing_candidates(prims, cfg[CFG_HIDE_TOL], ws, raw_prim)
+    n_crossed = _crossing_candidates(prims, cfg[CFG_HIDE_TOL], ws, raw)
     n_raw = n_crossed
     if miss_tol > 0.0:
-        n_raw = _near_miss_candidates(WS[6:12], fn, prims, cfg, n_crossed, ws, raw_prim)
+        n_raw = _near_miss_candidates(WS[6:12], fn, prims, cfg, n_crossed, ws, raw)
     near_from = n_crossed  # candidates from here on are near misses
     if n_raw == 0:
         # the line misses (noise, or not a contact on the arm): start from the surface point
         # nearest the line on the closest touchable primitive; kept wherever it lands (off_line)
         flags |= F_OFF_LINE
-        if _nearest_surface_candidate(prims, ws, raw_prim):
+        if _nearest_surface_candidate(prims, ws, raw):
             n_raw = near_from = 1
-    n = _fit_candidates(w, WS[0:6], prims, joints, torques, cfg, miss_tol, n_raw, near_from, cands, ws, raw_prim)
+    n = _fit_candidates(w, WS[0:6], prims, joints, torques, cfg, miss_tol, n_raw, near_from, raw, cands, cov, ws)
     if n == 0:
         out[O_SCALARS + S_FLAGS] = flags | F_NO_CANDIDATE
         return 0
-    _sort_candidates(n, cands, ws)
-    _report_best(w, WS[0:6], cfg, flags, n, cands, out, ws)
+    _sort_candidates(n, cands)
+    _report_best(w, WS[0:6], cfg, flags, n, cands, cov, out, ws)
     return n
 
 
@@ -663,12 +671,13 @@ def _force_line(w, cfg, out, ws):
 
 
 @njit(**JIT)
-def _crossing_candidates(prims, hide_tol, ws, raw_prim):
+def _crossing_candidates(prims, hide_tol, ws, raw):
     """The force line's admissible crossings of the touchable primitives: pushing (or where the link
     allows pulls), on the arm's outline, one per seam point. Fills raw_prim and the raw points;
     returns their count."""
     prim_i, sizes, gpos, gmat = prims
-    u, r0, raw_point = _line_and_raw(ws, raw_prim)
+    raw_prim, raw_point = raw
+    u, r0 = _line(ws)
     o_loc, d_loc, s = ws[WS_O_LOC:WS_O_LOC + 3], ws[WS_D_LOC:WS_D_LOC + 3], ws[WS_S:WS_S + 2]
     x_loc, n_loc = ws[WS_X_LOC:WS_X_LOC + 3], ws[WS_N_LOC:WS_N_LOC + 3]
     x, nb = ws[WS_X:WS_X + 3], ws[WS_NB:WS_NB + 3]
@@ -715,13 +724,14 @@ def _seam_twin(x, g, prim_i, raw_prim, raw_point, n_raw):
 
 
 @njit(**JIT)
-def _near_miss_candidates(S, fn, prims, cfg, n_crossed, ws, raw_prim):
+def _near_miss_candidates(S, fn, prims, cfg, n_crossed, ws, raw):
     """Near misses within the line's own uncertainty are candidates too: noise can push the line off
     the touched link. One per link that has no crossing, the closest; the fit decides. No hidden test
     here: a touch next to a seam moves behind it when noise shifts the line, so the fit decides, and a
     fit deep inside another part is dropped after it (_off_outline). Returns the candidate count."""
     prim_i = prims[0]
-    u, r0, raw_point = _line_and_raw(ws, raw_prim)
+    raw_prim, raw_point = raw
+    u, r0 = _line(ws)
     x, nb = ws[WS_X:WS_X + 3], ws[WS_NB:WS_NB + 3]
     n_raw = n_crossed
     for g in range(prim_i.shape[0]):
@@ -785,11 +795,12 @@ def _miss_tolerance(S, fn, g, prims, cfg, ws):
 
 
 @njit(**JIT)
-def _nearest_surface_candidate(prims, ws, raw_prim):
+def _nearest_surface_candidate(prims, ws, raw):
     """The surface point nearest the force line on the closest touchable primitive (_surface_near_line)
     as the only candidate; False when there is no touchable primitive."""
     prim_i = prims[0]
-    u, r0, raw_point = _line_and_raw(ws, raw_prim)
+    raw_prim, raw_point = raw
+    u, r0 = _line(ws)
     point, normal = ws[WS_NB:WS_NB + 3], ws[WS_N_LOC:WS_N_LOC + 3]
     best = 1e300
     for g in range(prim_i.shape[0]):
@@ -805,19 +816,19 @@ def _nearest_surface_candidate(prims, ws, raw_prim):
 
 
 @njit(**JIT)
-def _fit_candidates(w, W, prims, joints, torques, cfg, miss_tol, n_raw, near_from, cands, ws, raw_prim):
+def _fit_candidates(w, W, prims, joints, torques, cfg, miss_tol, n_raw, near_from, raw, cands, cov, ws):
     """Fits every raw candidate on its surface (refine; across a box's faces after a poor fit from a near
     miss), drops near misses whose fit leaves the arm's outline, scores the rest (log-likelihood, with
     the joint torques when given). Fills the candidates; returns their count."""
     prim_i = prims[0]
-    cand_prim, cand_f = cands
+    raw_prim, raw_point = raw
+    cand_prim, cand_f, cand_normal, cand_iter, cand_conv = cands
     max_iter = int(cfg[CFG_MAX_ITER])
     f = w[0:3]
-    u, r0 = ws[WS_U:WS_U + 3], ws[WS_R0:WS_R0 + 3]
+    u, r0 = _line(ws)
     fit = (ws[WS_C:WS_C + 3], ws[WS_P:WS_P + 3], ws[WS_NRM:WS_NRM + 3])
     c, p, nrm = fit
     tmp, rws = ws[WS_TMP:WS_TMP + 3], ws[WS_REFINE:WS_REFINE + REFINE_WS]
-    raw_point, cand_normal, cand_iter, cand_conv, cov = _cand_views(ws, raw_prim.shape[0])
     n_keep = 0
     for k in range(n_raw):
         g = raw_prim[k]
@@ -908,11 +919,10 @@ def _refine_box_faces(prim, w, W, f, max_iter, pulls, chi2, conv, fit, cov, ws):
 
 
 @njit(**JIT)
-def _sort_candidates(n, cands, ws):
+def _sort_candidates(n, cands):
     """Candidates by score, best first, in place (a stable insertion sort: a handful of entries, and
     nothing allocated)."""
-    cand_prim, cand_f = cands
-    _, cand_normal, cand_iter, cand_conv, _ = _cand_views(ws, cand_prim.shape[0])
+    cand_prim, cand_f, cand_normal, cand_iter, cand_conv = cands
     for k in range(1, n):
         j = k
         while j > 0 and cand_f[j - 1, C_SCORE] < cand_f[j, C_SCORE]:
@@ -927,10 +937,9 @@ def _sort_candidates(n, cands, ws):
 
 
 @njit(**JIT)
-def _report_best(w, W, cfg, flags, n, cands, out, ws):
-    """The best candidate (the first) into ``out``, with its flags and covariance."""
-    cand_prim, cand_f = cands
-    _, cand_normal, cand_iter, cand_conv, cov = _cand_views(ws, cand_prim.shape[0])
+def _report_best(w, W, cfg, flags, n, cands, cov, out, ws):
+    """The best candidate (the first) into ``out``, with its flags and covariance (``cov``: scratch)."""
+    _, cand_f, cand_normal, cand_iter, cand_conv = cands
     out_point, out_force = out[O_POINT:O_POINT + 3], out[O_FORCE:O_FORCE + 3]
     out_normal, sc = out[O_NORMAL:O_NORMAL + 3], out[O_SCALARS:O_SCALARS + 8]
     best = 0
