@@ -13,7 +13,9 @@ frame: MuJoCo geom conventions, capsules and cylinders along local z). Kind code
 Inside the kernels, arrays travel in tuples (free in compiled code): ``prims`` = (prim_i, sizes, gpos,
 gmat), the primitives and their poses at the frame's q; ``prim`` = (kind, size, pos, mat), one of them;
 ``joints`` = (joint_axis, joint_anchor, link_joint, jnt_i, jnt_ratio); ``torques`` = (tau_ext, tau_var,
-use_tau); ``cands`` = (cand_prim, cand_f). Scratch lives in one float array ``ws`` at named offsets (WS_*).
+use_tau); ``cands`` = (cand_prim, cand_f), with the fitted normals, iterations and convergence from the
+scratch once fitted. Scratch lives in one float array ``ws`` at named offsets (WS_*), its views made
+once per frame or per fit (a reshape is a C call).
 """
 from __future__ import annotations
 
@@ -617,7 +619,7 @@ def solve_frame(w, WS, prims, joints, torques, cfg, out, cands, ws, raw_prim):
         return 0  # invalid, or no force: the flags say which
     raw_point, normal, iters, conv, cov = _cand_views(ws, raw_prim.shape[0])
     raw = (raw_prim, raw_point)  # the candidates before their fit: primitive, point
-    cands = (cands[0], cands[1], normal, iters, conv)  # and after: cand_prim, cand_f and the rest
+    fitted = (cands[0], cands[1], normal, iters, conv)  # and after it: cand_prim, cand_f and the rest
     miss_tol = cfg[CFG_MISS_TOL] / fn  # the line position's uncertainty (m)
     n_crossed = _crossing_candidates(prims, cfg[CFG_HIDE_TOL], ws, raw)
     n_raw = n_crossed
@@ -630,12 +632,12 @@ def solve_frame(w, WS, prims, joints, torques, cfg, out, cands, ws, raw_prim):
         flags |= F_OFF_LINE
         if _nearest_surface_candidate(prims, ws, raw):
             n_raw = near_from = 1
-    n = _fit_candidates(w, WS[0:6], prims, joints, torques, cfg, miss_tol, n_raw, near_from, raw, cands, cov, ws)
+    n = _fit_candidates(w, WS[0:6], prims, joints, torques, cfg, miss_tol, n_raw, near_from, raw, fitted, cov, ws)
     if n == 0:
         out[O_SCALARS + S_FLAGS] = flags | F_NO_CANDIDATE
         return 0
-    _sort_candidates(n, cands)
-    _report_best(w, WS[0:6], cfg, flags, n, cands, cov, out, ws)
+    _sort_candidates(n, fitted)
+    _report_best(w, WS[0:6], cfg, flags, n, fitted, cov, out, ws)
     return n
 
 
