@@ -4,9 +4,9 @@ path. The line/primitive geometry is the engine's (ftc_hw.geometry).
 
 Why numba: the live path must turn one wrench into an estimate in tens of microseconds and the
 batch path must do 300k frames/s; numpy pays a microsecond per call on 3-vectors. One compiled
-implementation serves both paths, so the batch gives exactly the single-frame answers. The solver's
-kernels stay in this one file: numba checks a cached kernel against its own file only (the engine's
-files are watched by ftc_hw.geometry.jit).
+implementation serves both paths, so the batch gives exactly the single-frame answers. numba checks a
+cached kernel against its own file only, so this module drops its caches when an engine source
+changes (drop_stale_caches).
 
 Everything is in metres, newtons and the base frame unless a name says ``_local`` (a primitive's
 frame: MuJoCo geom conventions, capsules and cylinders along local z). Kind codes: ftc_hw.geometry.kinds.
@@ -20,17 +20,20 @@ once per frame or per fit (a reshape is a C call).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
 
 from ..geometry.crossings import crossings_local
 from ..geometry.frames import dir_to_base, dir_to_local, to_base, to_base_s, to_local, to_local_s
-from ..geometry.jit import JIT, JIT_ALLOC
+from ..geometry.jit import ENGINE_SOURCES, JIT, JIT_ALLOC, drop_stale_caches
 from ..geometry.kinds import BOX, CAPSULE, CYLINDER, PLANE
 from ..geometry.solid import depth_s, inside_s
 from ..geometry.surface import normal_local, project_s, surface_normal_local
 from ..geometry.vec import cross3, dot3, line_dist2, tangent_basis
+
+drop_stale_caches(Path(__file__).resolve().parent / "__pycache__", ENGINE_SOURCES)
 
 # flag bits (names in ftc_hw.solver.solver.FLAG_NAMES)
 F_INVALID = 1
