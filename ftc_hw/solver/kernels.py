@@ -208,6 +208,18 @@ def _cholesky(A, L):
 
 
 @njit(**JIT)
+def _congruence(A, S, out):
+    """out = A S A^T."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[0]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                for m in range(A.shape[1]):
+                    acc += A[i, k] * S[k, m] * A[j, m]
+            out[i, j] = acc
+
+
+@njit(**JIT)
 def _chol_inverse(L, e, col, inv):
     """inv = (L L^T)^-1, column by column; e, col: scratch of L's size."""
     n = L.shape[0]
@@ -985,13 +997,9 @@ def _base_cov(cov, normal, out_cov, ws):
     for i in range(3):
         T[i, 0] = t1[i]
         T[i, 1] = t2[i]
+    _congruence(T, cov[0:2, 0:2], out_cov[0:3, 0:3])
     for a in range(3):
         for b in range(3):
-            acc = 0.0
-            for i in range(2):
-                for j in range(2):
-                    acc += T[a, i] * cov[i, j] * T[b, j]
-            out_cov[a, b] = acc
             out_cov[3 + a, 3 + b] = cov[2 + a, 2 + b]
             acc = 0.0
             for i in range(2):
@@ -1139,13 +1147,7 @@ def weight_stack(a, sigma_sensor, out):
     (the solver's weight; no LAPACK call for a 6x6). False when the covariance is not positive
     definite."""
     sigma = out[6:]
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for k in range(6):
-                for m in range(6):
-                    acc += a[i, k] * sigma_sensor[k, m] * a[j, m]
-            sigma[i, j] = acc
+    _congruence(a, sigma_sensor, sigma)
     low = np.empty((6, 6))
     if not _cholesky(sigma, low):
         return False
