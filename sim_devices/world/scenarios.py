@@ -11,6 +11,7 @@ import numpy as np
 from ftc_hw.geometry.kinds import KINDS
 from ftc_hw.geometry.solid import inside_local
 from ftc_hw.model import ArmModel, Payload
+from ftc_hw.model.arm import GEOM_KINDS, SURFACE_GROUP, pose
 from ftc_hw.model.sampling import SurfacePoint, sample_surface_points
 from ftc_hw.scene import Scene
 
@@ -74,8 +75,6 @@ def visible_filter(model: ArmModel, q, eps: float = 1e-8):
 
 def _all_arm_geoms(model: ArmModel, q):
     """Every group-1 primitive of the arm (touchable or not) with its pose: what can hide a point."""
-    from ftc_hw.model.arm import GEOM_KINDS, SURFACE_GROUP, pose
-
     model.kinematics(q)
     m, d = model.model, model.data
     out = []
