@@ -16,7 +16,7 @@ from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
 from .model.arm import link_reach
 from .scene import CompensationLevel, Scene
-from .solver import ContactEstimate, make_solver
+from .solver import ContactEstimate, Solver, make_solver
 from .tracking import ContactTrack, fuse_point, link_pose, report
 
 G_REFRESH_NS = 10_000_000
@@ -49,7 +49,7 @@ class ContactPipeline:
         model = ArmModel(scene, payload)
         self.compensator = Compensator(model, level, bias)
         self.level = self.compensator.level
-        self.solver = make_solver(model if method == "ours" else scene, method)
+        self.solver: Solver = make_solver(model, method)
         self.residuals = JointResiduals(scene) if use_currents else None
         self.qdd = QddEstimator(scene.n_joints, qdd_tau)
         self.extra_cov = None if extra_cov is None else np.asarray(extra_cov, dtype=float).reshape(6, 6)
@@ -60,9 +60,8 @@ class ContactPipeline:
         self._last_estimate: ContactEstimate | None = None
         # events carry the contact's point fused over its frames (None: each frame's own estimate)
         self.track = (None if track_slide is None else
-                      ContactTrack(model, slide=track_slide, body_poses=getattr(self.solver, "body_poses", None)))
-        # the solver's kinematics of the frame it just solved (the leng2016 method has none)
-        self._solved_poses = getattr(self.solver, "solved_body_poses", lambda: None)
+                      ContactTrack(model, slide=track_slide, body_poses=self.solver.body_poses))
+        self._solved_poses = self.solver.solved_body_poses  # the kinematics of the frame just solved, if any
         self._prev: tuple | None = None  # the last frame's (t_ns, external, q, model_error, saturated)
         if self.track is not None:
             # a bias given (calibration file, scene) is taken as known to a tenth of one sample's noise

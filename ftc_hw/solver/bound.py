@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from ..geometry.vec import tangent_basis
 from . import kernels as K
 
 
@@ -13,7 +14,7 @@ def _crlb(solver, point, normal, force) -> tuple[np.ndarray, np.ndarray]:
     """Cramer-Rao bound (J^T W J)^-1 at the truth for the 6-D wrench measurement with the point
     constrained to the surface, over (two tangent coordinates, force); and the tangent basis."""
     t1, t2 = np.empty(3), np.empty(3)
-    K._tangent_basis(np.asarray(normal, dtype=float), t1, t2)
+    tangent_basis(np.asarray(normal, dtype=float), t1, t2)
     jac = np.empty((6, 5))
     K._jacobian(np.asarray(point, dtype=float), np.asarray(force, dtype=float), t1, t2, jac)
     return np.linalg.inv(jac.T @ solver._W0 @ jac), np.stack([t1, t2], axis=1)

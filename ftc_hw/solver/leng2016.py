@@ -35,13 +35,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from ..geometry import inside, quadric_closest, quadric_crossings
 from ..model import ArmModel
 from ..model.arm import GEOM_KINDS, SURFACE_GROUP
 from ..scene import Scene
-from . import geometry as G
+from .protocol import BodyPoses
 from .solver import FLAG_NAMES, BatchEstimate, ContactEstimate, ContactSolver, flag_names
 
 FLAG_BITS = {name: bit for bit, name in FLAG_NAMES.items()}
@@ -78,9 +80,10 @@ class _Quadric:
 
     def crossings(self, o: np.ndarray, d: np.ndarray, tol: float) -> list[np.ndarray]:
         """Crossings of the line ``o + s d`` (unit d) with the bounded patch."""
-        hits = G.intersect_quadric(o - self.centre, d, self.k)
-        return [hits.points[j] + self.centre for j in range(2)
-                if hits.hit[j] and self.in_bounds(hits.points[j] + self.centre, tol)]
+        v = o - self.centre
+        count, s = quadric_crossings(self.k, v, d)
+        points = [v + s[0, j] * d + self.centre for j in range(count[0])]
+        return [x for x in points if self.in_bounds(x, tol)]
 
     def project(self, x: np.ndarray) -> np.ndarray:
         """The patch point nearest to ``x`` (bounds included)."""
@@ -101,8 +104,7 @@ class _Quadric:
             out = self.centre + rho * _radial(v)
             out[2] = zb
             return out
-        semi = np.where(self.k > 0, 1.0 / np.where(self.k > 0, self.k, 1.0), np.inf)  # ellipsoid: unbounded
-        return G.signed_distance("ellipsoid", semi, v).closest + self.centre
+        return quadric_closest(self.k, v)[0][0] + self.centre  # an ellipsoid: unbounded
 
 
 @dataclass(frozen=True)
@@ -211,6 +213,17 @@ class _Prim:
     bound: float  # m, radius of a sphere about the geom origin that holds the primitive (inf: plane)
 
 
+class _Frame(NamedTuple):
+    """One frame's data for the candidate searches (base frame)."""
+
+    f: np.ndarray  # the force (eq. 25: p = f)
+    tau: np.ndarray  # the moment about the base origin
+    u: np.ndarray  # the force's direction
+    r0: np.ndarray  # the force line's point nearest the origin
+    poses: dict[int, tuple[np.ndarray, np.ndarray]]  # geom -> (rotation, centre)
+    sigma: np.ndarray  # covariance of (f, tau)
+
+
 @dataclass
 class _Cand:
     prim: _Prim
@@ -280,10 +293,12 @@ class Leng2016Solver:
         self._sigma0 = self._sigma(np.array(self.scene.robot.home))
 
     # -- noise --------------------------------------------------------------------------------------------
-    def _sigma(self, q: np.ndarray) -> np.ndarray:
-        """Covariance of the external wrench (base frame, about the base origin) from the sensor noise."""
+    def _sigma(self, q: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
+        """Covariance of the external wrench (base frame, about the base origin) from the sensor noise
+        (plus ``extra``, sensor frame)."""
         a = np.column_stack([self._ours.external_wrench_base(e, q) for e in np.eye(6)])
-        return a @ self.scene.sensor.noise_cov @ a.T
+        cov = self.scene.sensor.noise_cov if extra is None else self.scene.sensor.noise_cov + extra
+        return a @ cov @ a.T
 
     def _chi2(self, c: np.ndarray, f: np.ndarray, tau: np.ndarray, sigma: np.ndarray) -> float:
         """Moment mismatch ``c x f - tau`` (eq. 25 with p = f) normalised by its noise covariance."""
@@ -294,51 +309,64 @@ class Leng2016Solver:
         return float(r @ np.linalg.solve(cov, r))
 
     # -- single frame -------------------------------------------------------------------------------------
-    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False) -> ContactEstimate:
+    def solve(self, wrench_sensor, q, tau_ext=None, saturated: bool = False, tau_std=None,
+              extra_cov=None) -> ContactEstimate:
         """Estimate the contact from the compensated wrench (sensor frame, the scene's sign convention:
         the external contact wrench only) at joint angles q (rad), by the paper's section 5.
 
         ``tau_ext``: optional per-joint external torques (N m, the scene's joint order); they drive the
-        current-mutation constraint (5.4).
+        current-mutation constraint (5.4), whose thresholds are fixed (``tau_std`` is not used).
+        ``extra_cov``: the compensation's own uncertainty (6x6, sensor frame), added to the sensor
+        noise that normalises the ranking residual.
         """
         bits = FLAG_BITS["saturated"] if saturated else 0
         w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
         tau_arr = None if tau_ext is None else np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
-        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(q))
-                and (tau_arr is None or np.all(np.isfinite(tau_arr)))):
+        extra = None if extra_cov is None else np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(q)) and (tau_arr is None or np.all(np.isfinite(tau_arr)))
+                and (extra is None or np.all(np.isfinite(extra)))):
             return _empty(bits | FLAG_BITS["invalid_input"], 0.0)
         ext = self._ours.external_wrench_base(w, q)  # (f, tau) = (p, c x p), eq. 25
-        sigma = self._sigma(q) if self._ours.sensor_moves else self._sigma0
+        sigma = self._sigma(q, extra) if (self._ours.sensor_moves or extra is not None) else self._sigma0
         if not np.all(np.isfinite(ext)):
             return _empty(bits | FLAG_BITS["invalid_input"], 0.0)
-        self.model.kinematics(q)
-        d = self.model.data
-        poses = {p.geom: (d.geom_xmat[p.geom].reshape(3, 3).copy(), d.geom_xpos[p.geom].copy()) for p in self._prims}
+        poses = self._poses(q)
         f, tau = ext[:3], ext[3:]
         fn = float(np.linalg.norm(f))
         if fn == 0.0:
             return _empty(bits | FLAG_BITS["low_force"] | FLAG_BITS["no_candidate"], 0.0)
         if fn < self.low_force:
             bits |= FLAG_BITS["low_force"]
-        u = f / fn
-        r0 = np.cross(f, tau) / (fn * fn)  # the force line's point nearest the origin
-        m_par = float(tau @ u)  # moment along the force line: 0 for a consistent wrench
-        consistent = abs(m_par) <= self.rank_tol * (float(np.linalg.norm(tau)) + fn * self.extent)
-        if consistent:  # rank(M) = 5: exact crossings
-            cands = self._exact(f, tau, u, r0, poses, sigma)
-            same = 1e-9 * (1.0 + float(np.linalg.norm(r0)))
-        else:  # rank(M) = 6: compatibility solution (5.5)
-            sig_line = self._line_sigma(fn, r0, sigma)
-            cands = self._compatible(f, tau, u, r0, poses, sigma, 0.005 + 5.0 * sig_line)
-            same = max(1e-6, 10.0 * sig_line)
-        cands = _dedup(cands, same)
+        cands, m_par = self._search(_Frame(f, tau, f / fn, np.cross(f, tau) / (fn * fn), poses, sigma))
         if tau_arr is not None:
             allowed = self._mutation_links(tau_arr)
             if allowed is not None:
                 cands = [c for c in cands if c.prim.body in allowed]
         if not cands:
             return _empty(bits | FLAG_BITS["no_candidate"], m_par)
+        return self._estimate(cands, bits, m_par)
+
+    def _poses(self, q: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Every primitive's (rotation, centre) at q."""
+        self.model.kinematics(q)
+        d = self.model.data
+        return {p.geom: (d.geom_xmat[p.geom].reshape(3, 3).copy(), d.geom_xpos[p.geom].copy()) for p in self._prims}
+
+    def _search(self, fr: _Frame) -> tuple[list[_Cand], float]:
+        """The candidates, one per contact, and the moment along the force line (N m)."""
+        fn = float(np.linalg.norm(fr.f))
+        m_par = float(fr.tau @ fr.u)  # moment along the force line: 0 for a consistent wrench
+        if abs(m_par) <= self.rank_tol * (float(np.linalg.norm(fr.tau)) + fn * self.extent):
+            # rank(M) = 5: exact crossings
+            return _dedup(self._exact(fr), 1e-9 * (1.0 + float(np.linalg.norm(fr.r0)))), m_par
+        # rank(M) = 6: compatibility solution (5.5)
+        sig_line = self._line_sigma(fn, fr.r0, fr.sigma)
+        return _dedup(self._compatible(fr, 0.005 + 5.0 * sig_line), max(1e-6, 10.0 * sig_line)), m_par
+
+    def _estimate(self, cands: list[_Cand], bits: int, m_par: float) -> ContactEstimate:
+        """Candidates ranked by their residual (the first along the force line on a tie), the best
+        reported."""
         cands.sort(key=lambda c: (c.chi2 + 1e-12 * c.s))
         if len(cands) > 1 and cands[1].chi2 - cands[0].chi2 < self.ambiguity_dchi2:
             bits |= FLAG_BITS["ambiguous"]
@@ -349,23 +377,34 @@ class Leng2016Solver:
                                flag_names(bits), tuple(c.prim.link for c in cands), data)
 
     # -- 5.1-5.3 noise-free: the force line crossed with the outline --------------------------------------
-    def _exact(self, f, tau, u, r0, poses, sigma) -> list[_Cand]:
+    def _exact(self, fr: _Frame) -> list[_Cand]:
         out = []
-        for prim in self._prims:
-            if not prim.touch:
-                continue
-            rot, org = poses[prim.geom]
-            o_loc, d_loc = rot.T @ (r0 - org), rot.T @ u
+        for prim, o_loc, d_loc in self._touchable(fr):
             for patch in prim.patches:
                 for x_loc in patch.crossings(o_loc, d_loc, self.bound_tol):
-                    n = rot @ patch.normal(x_loc)
-                    if not float(f @ n) < 0.0:  # eq. 28, p = f (eq. 25)
-                        continue
-                    x = rot @ x_loc + org
-                    if self._hidden(x[None], n[None], prim, poses)[0]:
-                        continue
-                    out.append(_Cand(prim, x, f.copy(), n, self._chi2(x, f, tau, sigma), float((x - r0) @ u)))
+                    cand = self._candidate(prim, patch, x_loc, fr)
+                    if cand is not None:
+                        out.append(cand)
         return out
+
+    def _touchable(self, fr: _Frame):
+        """Every touchable primitive with the force line in its frame (o_loc, d_loc)."""
+        for prim in self._prims:
+            if prim.touch:
+                rot, org = fr.poses[prim.geom]
+                yield prim, rot.T @ (fr.r0 - org), rot.T @ fr.u
+
+    def _candidate(self, prim: _Prim, patch: _Patch, x_loc: np.ndarray, fr: _Frame) -> _Cand | None:
+        """The contact at a patch point (geom frame) with p = f (eq. 25), if it pushes (eq. 28) and lies
+        on the outline (eq. 27)."""
+        rot, org = fr.poses[prim.geom]
+        n = rot @ patch.normal(x_loc)
+        if not float(fr.f @ n) < 0.0:
+            return None
+        x = rot @ x_loc + org
+        if self._hidden(x[None], n[None], prim, fr.poses)[0]:
+            return None
+        return _Cand(prim, x, fr.f.copy(), n, self._chi2(x, fr.f, fr.tau, fr.sigma), float((x - fr.r0) @ fr.u))
 
     # -- 5.5 compatibility solution -----------------------------------------------------------------------
     def _line_sigma(self, fn: float, r0: np.ndarray, sigma: np.ndarray) -> float:
@@ -374,64 +413,62 @@ class Leng2016Solver:
         st = math.sqrt(max(np.linalg.eigvalsh(sigma[3:, 3:]).max(), 0.0))
         return (st + 2.0 * sf * (float(np.linalg.norm(r0)) + self.extent)) / fn
 
-    def _compatible(self, f, tau, u, r0, poses, sigma, margin: float) -> list[_Cand]:
+    def _compatible(self, fr: _Frame, margin: float) -> list[_Cand]:
         out = []
-        for prim in self._prims:
-            if not prim.touch:
-                continue
-            rot, org = poses[prim.geom]
-            o_loc, d_loc = rot.T @ (r0 - org), rot.T @ u
+        for prim, o_loc, d_loc in self._touchable(fr):
             if float(np.linalg.norm(o_loc - (o_loc @ d_loc) * d_loc)) > prim.bound + margin:
                 continue  # the line passes far from this primitive
-            pts, nrms = [], []
-            for patch in prim.patches:
-                # start: the patch's push crossing of the least-squares line, else its point nearest the line
-                start = None
-                for x_loc in patch.crossings(o_loc, d_loc, self.bound_tol):
-                    if float(d_loc @ patch.normal(x_loc)) < 0.0:
-                        start = x_loc
-                        break
-                if start is None:
-                    start, dist = _nearest_to_line(patch, o_loc, d_loc)
-                    if dist > margin:
-                        continue
-                c0 = rot @ start + org
-                cs, ps, ok = self._newton(patch, rot, org, f, tau, c0)
-                for k in np.flatnonzero(ok):
-                    x_loc = rot.T @ (cs[k] - org)
-                    if not patch.in_bounds(x_loc, self.bound_tol):  # eqs. 29-32
-                        continue
-                    n = rot @ patch.normal(x_loc)
-                    if not float(ps[k] @ n) < 0.0:  # eq. 28
-                        continue
-                    pts.append(cs[k])
-                    nrms.append(n)
+            pts, nrms = self._solutions(prim, o_loc, d_loc, fr, margin)
             if not pts:
                 continue
             pts_a, nrm_a = np.array(pts), np.array(nrms)
-            keep = ~self._hidden(pts_a, nrm_a, prim, poses)  # eq. 27: on the outline
+            keep = ~self._hidden(pts_a, nrm_a, prim, fr.poses)  # eq. 27: on the outline
             pts_a, nrm_a = pts_a[keep], nrm_a[keep]
             if len(pts_a) == 0:
                 continue
             keep = _inliers(pts_a, nrm_a, self.outlier_k)  # "remove singular solutions"
-            mean = pts_a[keep].mean(axis=0)
             # the closest point of the outline (this primitive's patches) to the average
-            m_loc = rot.T @ (mean - org)
+            rot, org = fr.poses[prim.geom]
+            m_loc = rot.T @ (pts_a[keep].mean(axis=0) - org)
             best, best_d = None, math.inf
             for patch in prim.patches:
                 x_loc = patch.project(m_loc)
                 dist = float(np.linalg.norm(x_loc - m_loc))
                 if dist < best_d:
                     best, best_d = (patch, x_loc), dist
-            patch, x_loc = best
-            x = rot @ x_loc + org
-            n = rot @ patch.normal(x_loc)
-            if not float(f @ n) < 0.0:  # eq. 28 with p = f (eq. 25)
-                continue
-            if self._hidden(x[None], n[None], prim, poses)[0]:
-                continue
-            out.append(_Cand(prim, x, f.copy(), n, self._chi2(x, f, tau, sigma), float((x - r0) @ u)))
+            cand = self._candidate(prim, *best, fr)
+            if cand is not None:
+                out.append(cand)
         return out
+
+    def _solutions(self, prim: _Prim, o_loc: np.ndarray, d_loc: np.ndarray, fr: _Frame,
+                   margin: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """The converged subsystem solutions (points, normals; base frame) on each patch of ``prim``
+        within the patch's bounds (eqs. 29-32) that push (eq. 28)."""
+        rot, org = fr.poses[prim.geom]
+        pts, nrms = [], []
+        for patch in prim.patches:
+            # start: the patch's push crossing of the least-squares line, else its point nearest the line
+            start = None
+            for x_loc in patch.crossings(o_loc, d_loc, self.bound_tol):
+                if float(d_loc @ patch.normal(x_loc)) < 0.0:
+                    start = x_loc
+                    break
+            if start is None:
+                start, dist = _nearest_to_line(patch, o_loc, d_loc)
+                if dist > margin:
+                    continue
+            cs, ps, ok = self._newton(patch, rot, org, fr.f, fr.tau, rot @ start + org)
+            for k in np.flatnonzero(ok):
+                x_loc = rot.T @ (cs[k] - org)
+                if not patch.in_bounds(x_loc, self.bound_tol):
+                    continue
+                n = rot @ patch.normal(x_loc)
+                if not float(ps[k] @ n) < 0.0:
+                    continue
+                pts.append(cs[k])
+                nrms.append(n)
+        return pts, nrms
 
     def _newton(self, patch: _Patch, rot: np.ndarray, org: np.ndarray, f: np.ndarray, tau: np.ndarray,
                 c0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -506,6 +543,15 @@ class Leng2016Solver:
         ok = conv & np.all(np.isfinite(x), axis=1)
         return x[:, :3], x[:, 3:], ok
 
+    # -- kinematics (the Solver protocol) -------------------------------------------------------------------
+    def body_poses(self, q) -> BodyPoses:
+        """Every body's position and quaternion at q: the model's own kinematics."""
+        return self.model.body_poses(q)
+
+    def solved_body_poses(self) -> None:
+        """None: a solve leaves no body poses of its own to reuse."""
+        return None
+
     # -- constraints --------------------------------------------------------------------------------------
     def _hidden(self, points: np.ndarray, normals: np.ndarray, prim: _Prim, poses) -> np.ndarray:
         """Not on the arm's outline: the point just outside (along the outward normal) lies inside
@@ -516,7 +562,7 @@ class Leng2016Solver:
             if other.geom == prim.geom:
                 continue
             rot, org = poses[other.geom]
-            hid |= G.inside(other.kind, other.size, (y - org) @ rot)
+            hid |= inside(other.kind, other.size, (y - org) @ rot)
         return hid
 
     def _mutation_links(self, tau_ext: np.ndarray) -> set[int] | None:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from ..geometry import kinds as GK
 from ..model import ArmModel
 from ..model.arm import GEOM_KINDS, SURFACE_GROUP
 from ..scene import Scene
@@ -161,7 +162,7 @@ class ContactSolver:
         geoms = [g for g in range(m.ngeom)
                  if m.geom_group[g] == SURFACE_GROUP and int(m.geom_type[g]) in GEOM_KINDS]
         self._geom_ids = np.array(geoms, dtype=np.int64)
-        self.kinds = np.array([K.KINDS[GEOM_KINDS[int(m.geom_type[g])]] for g in geoms], dtype=np.int64)
+        self.kinds = np.array([GK.KINDS[GEOM_KINDS[int(m.geom_type[g])]] for g in geoms], dtype=np.int64)
         # MuJoCo's size triple and a bounding radius about the geom centre
         self.sizes = np.array([np.append(m.geom_size[g], _bounding_radius(self.kinds[i], m.geom_size[g]))
                                for i, g in enumerate(geoms)], dtype=float).reshape(len(geoms), 4)
@@ -212,7 +213,7 @@ class ContactSolver:
         # reach; near misses within miss_sigma of it stay candidates
         kin = self.model.kinematics(q0)
         reach = max(float(np.linalg.norm((kin[self.links[self.prim_link[i]]] @ np.append(
-            m.geom_pos[g], 1.0))[:3])) + self.sizes[i, 3] for i, g in enumerate(geoms) if self.kinds[i] != K.PLANE)
+            m.geom_pos[g], 1.0))[:3])) + self.sizes[i, 3] for i, g in enumerate(geoms) if self.kinds[i] != GK.PLANE)
         sig = np.sqrt(np.diag(self._WS0[6:]))
         self.cfg[K.CFG_MISS_TOL] = miss_sigma * float(np.linalg.norm(sig[3:]) + np.linalg.norm(sig[:3]) * reach)
         self.cfg[K.CFG_MISS_T] = miss_sigma * float(np.linalg.norm(sig[3:]))
@@ -429,15 +430,15 @@ class _TreeArrays:
 
 def _bounding_radius(kind: int, size: np.ndarray) -> float:
     r, h = float(size[0]), float(size[1])
-    if kind == K.SPHERE:
+    if kind == GK.SPHERE:
         return r
-    if kind == K.CAPSULE:
+    if kind == GK.CAPSULE:
         return r + h
-    if kind == K.CYLINDER:
+    if kind == GK.CYLINDER:
         return float(np.hypot(r, h))
-    if kind == K.ELLIPSOID:
+    if kind == GK.ELLIPSOID:
         return float(np.max(size[:3]))
-    if kind == K.BOX:
+    if kind == GK.BOX:
         return float(np.linalg.norm(size[:3]))
     return math.inf  # plane
 

@@ -8,7 +8,10 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from ftc_hw.geometry.kinds import KINDS
+from ftc_hw.geometry.solid import inside_local
 from ftc_hw.model import ArmModel, Payload
+from ftc_hw.model.arm import GEOM_KINDS, SURFACE_GROUP, pose
 from ftc_hw.model.sampling import SurfacePoint, sample_surface_points
 from ftc_hw.scene import Scene
 
@@ -55,8 +58,6 @@ def sample_contacts(model: ArmModel, q, n: int, rng: np.random.Generator, max_an
 def visible_filter(model: ArmModel, q, eps: float = 1e-8):
     """A ``hidden(point, normal, posed_surface)`` predicate: true when the point is not on the arm's
     outer surface, by the solver's own rule (the point just outside it lies inside another geom)."""
-    from ftc_hw.solver.kernels import KINDS, inside_local
-
     others = _all_arm_geoms(model, q)
 
     def hidden(point: np.ndarray, normal: np.ndarray, ps) -> bool:
@@ -74,8 +75,6 @@ def visible_filter(model: ArmModel, q, eps: float = 1e-8):
 
 def _all_arm_geoms(model: ArmModel, q):
     """Every group-1 primitive of the arm (touchable or not) with its pose: what can hide a point."""
-    from ftc_hw.model.arm import GEOM_KINDS, SURFACE_GROUP, pose
-
     model.kinematics(q)
     m, d = model.model, model.data
     out = []

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from ftc_hw.geometry import ray_distance
 from ftc_hw.model import (
     FORCE_SENSOR,
     TORQUE_SENSOR,
@@ -23,6 +24,7 @@ from ftc_hw.model import (
     descends,
     load_spec,
 )
+from ftc_hw.model.arm import GEOM_KINDS
 from ftc_hw.scene import Scene
 
 from .sensor_model import FTSensorModel, SensorReading
@@ -286,13 +288,13 @@ class World:
         inside the arm; the same line gives the same wrench, and this point is on the surface.
         """
         norm = float(np.linalg.norm(force))
-        if norm == 0.0:
+        m, d = self.model, self.data
+        kind = GEOM_KINDS.get(int(m.geom_type[geom]))
+        if norm == 0.0 or kind is None:
             return pos.copy()
         u = force / norm
-        m, d = self.model, self.data
         start = pos - 0.05 * u
-        dist = mujoco.mju_rayGeom(d.geom_xpos[geom], d.geom_xmat[geom], m.geom_size[geom], start, u,
-                                  int(m.geom_type[geom]))
+        dist = ray_distance(kind, m.geom_size[geom], d.geom_xpos[geom], d.geom_xmat[geom], start, u)
         return start + dist * u if 0.0 <= dist <= 0.06 else pos.copy()
 
     def step(self) -> WorldState:

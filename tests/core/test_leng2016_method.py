@@ -10,11 +10,12 @@ import pytest
 
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.model.sampling import SurfacePoint, sample_local
+from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import _cone, visible_filter
-from ftc_hw.solver import BatchEstimate, ContactEstimate, ContactSolver, flag_names, make_solver
-from ftc_hw.solver import geometry as G
+from ftc_hw.solver import BatchEstimate, ContactEstimate, ContactSolver, Solver, flag_names, make_solver
 from ftc_hw.solver.leng2016 import Leng2016Solver, _inliers
+from tests.model import geometry_reference as G
 
 PAPER_Q = np.array([math.pi / 6, -math.pi / 6, -math.pi / 4])  # section 6
 FORCE_N = 100.0  # section 6
@@ -217,3 +218,25 @@ def test_batch_gives_the_same_answers(setup, cases):
         np.testing.assert_array_equal(batch.force[i], e.force)
         assert flag_names(int(batch.flags[i])) == e.flags
     assert "invalid_input" in flag_names(int(batch.flags[2]))
+
+
+def test_both_methods_are_solvers_and_either_drives_the_pipeline(setup, cases):
+    """The Solver protocol: the paper's method takes the pipeline's per-frame inputs (torque noise,
+    the compensation's own covariance) and its events carry its point."""
+    scene, model, leng = setup
+    assert isinstance(leng, Solver) and isinstance(make_solver(scene, "ours"), Solver)
+    assert leng.solved_body_poses() is None
+    sp, force, w, _ = cases[0]
+    e = leng.solve(w, PAPER_Q, tau_std=np.ones(3), extra_cov=np.zeros((6, 6)))
+    assert _exact(e, sp, force)
+    assert "invalid_input" in leng.solve(w, PAPER_Q, extra_cov=np.full((6, 6), np.nan)).flags
+    pipe = ContactPipeline(scene, level="bias", bias=np.zeros(6), use_currents=False, method="leng2016")
+    assert isinstance(pipe.solver, Leng2016Solver)
+    std = np.sqrt(np.diag(scene.sensor.noise_cov))
+    rng = np.random.default_rng(5)
+    events = []
+    for k in range(60):
+        raw = (w if 10 <= k < 50 else np.zeros(6)) + rng.normal(size=6) * std
+        events += pipe.process(k * 1_000_000, raw, PAPER_Q).events
+    updates = [ev for ev in events if ev.kind == "update" and ev.link == sp.link]
+    assert updates and min(np.linalg.norm(ev.point - sp.point) for ev in updates) < 0.01

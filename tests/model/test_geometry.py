@@ -1,4 +1,5 @@
-"""Tests of ftc_hw.solver.geometry: line/primitive crossings, closest points, signed distances."""
+"""Tests of the numpy geometry reference (geometry_reference.py): line/primitive crossings, closest points,
+signed distances."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from ftc_hw.solver import geometry as geo
+from tests.model import geometry_reference as geo
 
 EPS = np.finfo(np.float64).eps
 # Any numpy RuntimeWarning (overflow, invalid, divide) in the module under test fails the test.
@@ -736,5 +737,6 @@ def test_surface_normal_matches_crossings(kind: str) -> None:
 def test_bench_runs() -> None:
     from ftc_hw.bench.geometry import bench
 
-    r = bench(2000, repeat=1)
-    assert set(r) == set(KINDS) and all(v["intersect"] > 0 for v in r.values())
+    r = bench(2000, repeat=1, reference=geo)
+    assert set(r) == set(KINDS)
+    assert all(v[q] > 0 for v in r.values() for q in ("crossings", "inside", "closest", "reference_intersect"))

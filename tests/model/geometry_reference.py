@@ -1,4 +1,6 @@
-"""Line / primitive geometry in the primitive's local frame (metres).
+"""The numpy reference of the geometry engine (ftc_hw.geometry), for the tests only: line / primitive
+geometry in the primitive's local frame (metres), vectorised and robust to the last ulp, slower.
+test_geometry.py tests it; test_geometry_engine.py holds the engine against it.
 
 Everything here works in the local frame of one primitive (MuJoCo geom conventions, centre at the
 origin, axis along local z); the caller transforms the line ``x(s) = o + s*d`` into that frame.
