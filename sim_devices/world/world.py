@@ -145,6 +145,8 @@ class World:
             raise ValueError(f"sensor rate {scene.sensor.rate_hz} Hz is not a divisor of the physics rate "
                              f"{1 / self.dt:g} Hz")
         self.steps_per_sample = int(round(ratio))
+        # the first obstacle contact comes in real time: compile (or load) the ray kernel now, not then
+        ray_distance("sphere", (1.0,), np.zeros(3), np.eye(3), (-2.0, 0.0, 0.0), (1.0, 0.0, 0.0))
         self.torque_on = True
         self._reference: Trajectory = setup.trajectory
         self._t_ref0 = 0.0
