@@ -1,19 +1,22 @@
-"""Micro-benchmark of the geometry engine's numpy-facing queries (not a test).
+"""``ftc bench geometry``: the geometry engine's numpy-facing queries, lines (or points) per second.
 
-Run: ``python -m ftc_hw.bench.geometry [n]``. ``bench(reference=...)`` times a vectorised numpy
-implementation with the interface of ``tests/geometry_reference.py`` beside the engine (its test
-passes that module: production code does not import the tests).
+``bench(reference=...)`` times a vectorised numpy implementation with the interface of
+``tests/model/geometry_reference.py`` beside the engine (its test passes that module: production
+code does not import the tests).
 """
 
 from __future__ import annotations
 
-import sys
+import json
 import time
+from pathlib import Path
 from types import ModuleType
 
 import numpy as np
+from rich.table import Table
 
 from ftc_hw import geometry as geo
+from ftc_hw.bench.report import table_console
 
 _SIZES = {
     "sphere": [0.05],
@@ -75,8 +78,17 @@ def bench(n: int = 100_000, repeat: int = 3, seed: int = 0,
     return out
 
 
-if __name__ == "__main__":
-    n_lines = int(sys.argv[1]) if len(sys.argv) > 1 else 100_000
-    for kind, r in bench(n_lines).items():
-        print(f"{kind:10s} crossings {r['crossings']:12.3g}/s  inside {r['inside']:12.3g}/s  "
-              f"closest {r['closest']:12.3g}/s  hit {r['hit_fraction']:.2f}")
+
+def run(json_path: Path | None = None, lines: int = 100_000, repeat: int = 3, seed: int = 0) -> dict:
+    """Print the table, write the figures as JSON if ``json_path``; returns them."""
+    res = bench(lines, repeat, seed)
+    t = Table(title=f"geometry engine: {lines} random lines (or points) per call, best of {repeat}")
+    for col in ("primitive", "crossings /s", "inside /s", "closest /s", "lines that hit"):
+        t.add_column(col, justify="left" if col == "primitive" else "right")
+    for kind, r in res.items():
+        t.add_row(kind, *(f"{r[k]:.3g}" for k in ("crossings", "inside", "closest")), f"{r['hit_fraction']:.2f}")
+    table_console().print(t)
+    if json_path is not None:
+        Path(json_path).write_text(json.dumps({"lines": lines, "repeat": repeat, "seed": seed, "kinds": res},
+                                              indent=2) + "\n")
+    return res

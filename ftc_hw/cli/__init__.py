@@ -193,6 +193,17 @@ def bench_solver(
         magnitude_cases=magnitude_cases)
 
 
+@bench_app.command("geometry")
+def bench_geometry(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    lines: Annotated[int, typer.Option(min=100, help="Random lines (or points) per call.")] = 100_000,
+) -> None:
+    """The geometry engine: line crossings, inside tests and closest points per second, per primitive."""
+    from ftc_hw.bench.geometry import run  # lazy: CLI start-up
+
+    run(json_path=json_path, lines=lines)
+
+
 @bench_app.command("compensation")
 def bench_compensation(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045

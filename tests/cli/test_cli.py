@@ -92,6 +92,16 @@ def test_bench_bus_writes_json(tmp_path):
     assert figures["publish_deliver_fps"]["1_sub_callback"] > 0
 
 
+def test_bench_geometry_prints_a_table_and_writes_json(tmp_path):
+    out = tmp_path / "geometry.json"
+    r = runner.invoke(app, ["bench", "geometry", "--json", str(out), "--lines", "2000"])
+    assert r.exit_code == 0, r.output
+    assert "geometry engine" in r.output and "ellipsoid" in r.output
+    figures = json.loads(out.read_text())
+    assert figures["lines"] == 2000 and set(figures["kinds"]) >= {"sphere", "capsule", "cylinder", "box"}
+    assert all(k["crossings"] > 0 and 0.0 < k["hit_fraction"] <= 1.0 for k in figures["kinds"].values())
+
+
 def test_bench_solver_scores_both_methods_on_the_same_cases(tmp_path):
     out = tmp_path / "solver.json"
     r = runner.invoke(app, ["bench", "solver", "--cases", "100", "--scene", "leng2016", "--json", str(out)])
