@@ -1,0 +1,62 @@
+"""The one rig builder: a scene's devices picked by role from the adapter registry, opened, waited for."""
+from __future__ import annotations
+
+import pytest
+
+from ftc_hw.app.rig import RigError, build_rig, pick_device
+from ftc_hw.devices.can_ft import CanFTAdapter
+from ftc_hw.devices.dynamixel import DynamixelArm
+from ftc_hw.devices.ft300 import FT300Adapter
+from ftc_hw.devices.registry import kinds
+from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
+from ftc_hw.devices.ur import URArm
+from ftc_hw.scene import DeviceSpec, load_scene
+from ftc_hw.sim_devices.emulator import sample_number
+from ftc_hw.sim_devices.host import WorldHost
+
+pytestmark = pytest.mark.timeout(120)
+
+
+@pytest.mark.parametrize(("scene_name", "ft_class", "arm_class"), [
+    ("ur5e", CanFTAdapter, URArm), ("dxl-arm", FT300Adapter, DynamixelArm)])
+def test_a_scene_rig_is_its_f_t_sensor_and_its_arm(scene_name, ft_class, arm_class):
+    rig = build_rig(load_scene(scene_name))
+    assert isinstance(rig.ft, ft_class) and isinstance(rig.arm, arm_class)
+    assert [a.role for a in rig.adapters] == ["ft", "arm"]
+    rig.close()  # never opened: closing is harmless
+
+
+def test_a_scene_without_an_arm_device_says_so():
+    scene = load_scene("leng2016")
+    assert pick_device(scene, "arm") is None
+    with pytest.raises(RigError, match=r"declares no arm device \(kinds: " + ", ".join(kinds("arm"))):
+        build_rig(scene)
+    assert isinstance(build_rig(scene, roles=("ft",)).ft, SerialStreamFTAdapter)
+
+
+def test_an_unknown_kind_is_a_rig_error():
+    scene = load_scene("leng2016")
+    with pytest.raises(RigError, match="no adapter for device kind 'laser'"):
+        build_rig(scene, devices=[DeviceSpec("x", "laser", "serial", "/dev/null")])
+
+
+def test_a_device_that_does_not_answer_is_named_with_its_counters(tmp_path):
+    scene = load_scene("leng2016")
+    spec = DeviceSpec("ft", "ft-serial-stream", "serial", str(tmp_path / "no-such-port"), {"format": "ftc-1k"})
+    rig = build_rig(scene, devices=[spec], timeout=0.5)
+    with pytest.raises(RigError, match=r"ft \(ft-serial-stream\) did not connect within 0.5 s: .*connect_failures"):
+        with rig:
+            pass
+    assert not rig.ft.connected.is_set()  # closed on the way out
+
+
+def test_a_rig_on_a_hosted_world_streams_the_world_samples():
+    with WorldHost("leng2016", "hold", devices=["ft"], noise=False) as world:
+        rig = build_rig(world.scene, endpoints=world.endpoints, roles=("ft",), timeout=20.0)
+        with rig:
+            rig.wait(data=True)
+            frame = rig.bus.latest(rig.ft.topic)
+        reader = world.ft_reader(from_start=True)
+        published = {sample_number(float(r[0]), world.scene.sensor.rate_hz): r[1:7] for r in reader.new()}
+    assert frame is not None and frame.seq in published
+    assert abs(frame.wrench - published[frame.seq]).max() <= 1e-4  # the ftc-1k encoding's resolution
