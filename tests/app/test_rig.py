@@ -44,7 +44,8 @@ def test_a_device_that_does_not_answer_is_named_with_its_counters(tmp_path):
     scene = load_scene("leng2016")
     spec = DeviceSpec("ft", "ft-serial-stream", "serial", str(tmp_path / "no-such-port"), {"format": "ftc-1k"})
     rig = build_rig(scene, devices=[spec], timeout=0.5)
-    with pytest.raises(RigError, match=r"ft \(ft-serial-stream\) did not connect within 0.5 s: .*connect_failures"), rig:
+    says = r"ft \(ft-serial-stream\) did not connect within 0.5 s: .*connect_failures"
+    with pytest.raises(RigError, match=says), rig:
         pass
     assert not rig.ft.connected.is_set()  # closed on the way out
 
