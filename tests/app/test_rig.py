@@ -1,6 +1,8 @@
 """The one rig builder: a scene's devices picked by role from the adapter registry, opened, waited for."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from ftc_hw.app.rig import RigError, build_rig, pick_device
@@ -17,10 +19,19 @@ from ftc_hw.sim_devices.host import WorldHost
 pytestmark = pytest.mark.timeout(120)
 
 
+def _addressed(spec: DeviceSpec) -> DeviceSpec:
+    """The scene's device as a user's own hardware would be declared: with an address."""
+    address = "127.0.0.1:1" if spec.transport in ("tcp", "modbus-tcp") else "/dev/ttyFTC0"
+    return replace(spec, address=address)
+
+
 @pytest.mark.parametrize(("scene_name", "ft_class", "arm_class"), [
     ("ur5e", CanFTAdapter, URArm), ("dxl-arm", FT300Adapter, DynamixelArm)])
 def test_a_scene_rig_is_its_f_t_sensor_and_its_arm(scene_name, ft_class, arm_class):
-    rig = build_rig(load_scene(scene_name))
+    scene = load_scene(scene_name)
+    with pytest.raises(RigError, match="device 'ft': no endpoint and no address"):
+        build_rig(scene)  # the shipped scenes name no hardware address: an emulator's endpoint is needed
+    rig = build_rig(scene, devices=[_addressed(pick_device(scene, r)) for r in ("ft", "arm")])
     assert isinstance(rig.ft, ft_class) and isinstance(rig.arm, arm_class)
     assert [a.role for a in rig.adapters] == ["ft", "arm"]
     rig.close()  # never opened: closing is harmless
@@ -31,7 +42,7 @@ def test_a_scene_without_an_arm_device_says_so():
     assert pick_device(scene, "arm") is None
     with pytest.raises(RigError, match=r"declares no arm device \(kinds: " + ", ".join(kinds("arm"))):
         build_rig(scene)
-    assert isinstance(build_rig(scene, roles=("ft",)).ft, SerialStreamFTAdapter)
+    assert isinstance(build_rig(scene, devices=[_addressed(pick_device(scene, "ft"))]).ft, SerialStreamFTAdapter)
 
 
 def test_an_unknown_kind_is_a_rig_error():
