@@ -1,4 +1,7 @@
-"""``ftc solve``: JSON Lines in, one estimate (or error) line out per input line, in order."""
+"""``ftc solve``: JSON Lines in, one estimate (or error) line out per input line, blank ones included,
+in order. Every output line is standard JSON (no NaN or Infinity): a wrench beyond the sensor's range
+or a joint angle outside its joint's range is an error line, and an estimate holding a non-finite
+number goes out as no contact with ``null`` there and the ``non_finite`` flag."""
 from __future__ import annotations
 
 import json
@@ -35,16 +38,70 @@ def _vector(obj: dict, key: str, n: int, required: bool = True) -> np.ndarray | 
     return np.array(v, dtype=float)
 
 
+# a joint without limits in the model still turns only so far: beyond this many radians a reading is
+# not an angle (a wrapped encoder or a unit slip)
+UNLIMITED_JOINT_RAD = 8 * math.pi
+# a reading this far past the model's limits is not the arm's (calibration offsets stay below it)
+LIMIT_SLACK_RAD = 0.05
+
+
 def _lst(v: np.ndarray) -> list[float]:
     return [float(x) for x in v]
 
 
+def _check_range(wrench: np.ndarray, sensor_range: np.ndarray) -> None:
+    names = ("fx", "fy", "fz", "tx", "ty", "tz")
+    over = np.flatnonzero(np.abs(wrench) > sensor_range)
+    if over.size:
+        i = int(over[0])
+        unit = "N" if i < 3 else "N m"
+        raise InputError(f"wrench {names[i]} = {wrench[i]:g} {unit} is beyond the sensor's range "
+                         f"(+-{sensor_range[i]:g} {unit}): not a reading of this sensor")
+
+
+def joint_bounds(model) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's accepted angles: the model's limits widened by LIMIT_SLACK_RAD; +-UNLIMITED_JOINT_RAD
+    for a joint the model leaves unlimited."""
+    lo, hi = model.joint_limits(unlimited=UNLIMITED_JOINT_RAD)
+    return lo - LIMIT_SLACK_RAD, hi + LIMIT_SLACK_RAD
+
+
+def _check_q(q: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> None:
+    lo, hi = bounds
+    out = np.flatnonzero((q < lo) | (q > hi))
+    if out.size:
+        i = int(out[0])
+        raise InputError(f"q[{i}] = {q[i]:g} rad is outside joint {i}'s range [{lo[i]:g}, {hi[i]:g}] rad")
+
+
 def estimate_record(e: ContactEstimate) -> dict[str, Any]:
+    """The estimate as standard JSON: a non-finite number becomes null, and an estimate holding one
+    is no contact, flagged ``non_finite``."""
+    record, replaced = _finite(_record(e))
+    if replaced:
+        record["contact"] = False
+        record["flags"] = [*record["flags"], "non_finite"]
+    return record
+
+
+def _finite(obj: Any) -> tuple[Any, bool]:
+    if isinstance(obj, float):
+        return (obj, False) if math.isfinite(obj) else (None, True)
+    if isinstance(obj, dict):
+        pairs = {k: _finite(v) for k, v in obj.items()}
+        return {k: v for k, (v, _) in pairs.items()}, any(r for _, r in pairs.values())
+    if isinstance(obj, list):
+        items = [_finite(v) for v in obj]
+        return [v for v, _ in items], any(r for _, r in items)
+    return obj, False
+
+
+def _record(e: ContactEstimate) -> dict[str, Any]:
     return {
         "contact": e.contact, "link": e.link, "point": _lst(e.point), "force": _lst(e.force),
         "normal": _lst(e.normal), "point_std": _lst(e.point_std), "force_std": _lst(e.force_std),
         "residual": float(e.residual), "chi2": float(e.chi2),
-        "conditioning": float(e.conditioning) if math.isfinite(e.conditioning) else None,
+        "conditioning": float(e.conditioning),
         "flags": list(e.flags),
         "candidates": [{"link": c.link, "point": _lst(c.point), "force": _lst(c.force), "score": float(c.score)}
                        for c in e.candidates],
@@ -53,10 +110,12 @@ def estimate_record(e: ContactEstimate) -> dict[str, Any]:
 
 def solve_lines(solver, compensator: Compensator, lines: Iterable[str]) -> Iterator[dict[str, Any]]:
     n_joints = solver.model.n_joints
+    bounds = joint_bounds(solver.model)
+    sensor_range = np.asarray(solver.scene.sensor.range, dtype=float)
     for number, line in enumerate(lines, start=1):
-        if not line.strip():
-            continue
         try:
+            if not line.strip():
+                raise InputError("blank line")
             try:
                 obj = json.loads(line, parse_constant=lambda c: (_ for _ in ()).throw(InputError(f"{c} is not JSON")))
             except json.JSONDecodeError as exc:
@@ -71,9 +130,14 @@ def solve_lines(solver, compensator: Compensator, lines: Iterable[str]) -> Itera
             compensated = obj.get("compensated", False)
             if not isinstance(compensated, bool):
                 raise InputError("'compensated' must be true or false")
+            _check_q(q, bounds)
+            if not compensated:
+                _check_range(wrench, sensor_range)
             saturated = bool(np.any(np.abs(wrench) >= solver.scene.sensor.range))
-            external = wrench if compensated else compensator.external(wrench, q, qd, qdd)
-            yield estimate_record(solver.solve(external, q, tau_ext=tau, saturated=saturated))
+            with np.errstate(over="ignore", invalid="ignore"):  # a non-finite result is flagged instead
+                external = wrench if compensated else compensator.external(wrench, q, qd, qdd)
+                record = estimate_record(solver.solve(external, q, tau_ext=tau, saturated=saturated))
+            yield record
         except InputError as exc:
             yield {"error": str(exc), "line": number}
 
@@ -88,14 +152,30 @@ def run_solve(scene_name: str, method: str, input_path: str, output_path: str, b
         except (ValueError, TypeError) as exc:
             raise SystemExit(f"error: --bias must be a JSON list of 6 numbers ({exc})") from None
     compensator = Compensator(solver.model, bias=bias_vec)
-    src: IO[str] = sys.stdin if input_path == "-" else open(input_path, encoding="utf-8")  # noqa: SIM115
-    dst: IO[str] = sys.stdout if output_path == "-" else open(output_path, "w", encoding="utf-8")  # noqa: SIM115
+    src: IO[str] = sys.stdin if input_path == "-" else _open(input_path, "r", "input")
     try:
-        for record in solve_lines(solver, compensator, src):
-            dst.write(json.dumps(record, separators=(",", ":")) + "\n")
-            dst.flush()
+        dst: IO[str] = sys.stdout if output_path == "-" else _open(output_path, "w", "output")
+        try:
+            for record in solve_lines(solver, compensator, _lines(src, input_path)):
+                dst.write(json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n")
+                dst.flush()
+        finally:
+            if dst is not sys.stdout:
+                dst.close()
     finally:
         if src is not sys.stdin:
             src.close()
-        if dst is not sys.stdout:
-            dst.close()
+
+
+def _open(path: str, mode: str, what: str) -> IO[str]:
+    try:
+        return open(path, mode, encoding="utf-8")  # noqa: SIM115
+    except OSError as exc:
+        raise SystemExit(f"error: cannot open {what} file {path!r}: {exc.strerror}") from None
+
+
+def _lines(src: IO[str], path: str) -> Iterator[str]:
+    try:
+        yield from src
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SystemExit(f"error: cannot read input {path!r}: {exc}") from None

@@ -142,9 +142,10 @@ class ArmModel:
             out[joint] |= descends(m, bid, int(m.jnt_bodyid[jid]))
         return out
 
-    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each joint's position range (lower, upper), -pi..pi where the model sets none."""
-        return self.joints.limits(self.model)
+    def joint_limits(self, unlimited: float = np.pi) -> tuple[np.ndarray, np.ndarray]:
+        """Each joint's position range (lower, upper), rad; -unlimited..unlimited where the model sets
+        none (default -pi..pi: one turn, what pose sampling wants)."""
+        return self.joints.limits(self.model, unlimited)
 
     # -- state ----------------------------------------------------------------------------------------
     def _set(self, q: Sequence[float] | np.ndarray, qd=None, qdd=None) -> None:

@@ -99,13 +99,13 @@ class JointMap:
         """A Jacobian over the model's dofs (k x nv) as one over the scene joints (k x n): J C."""
         return jac_dofs @ self.matrix if self.coupled else jac_dofs[:, self.dadr]
 
-    def limits(self, m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
-        """Each scene joint's position range: its model joint's (-pi..pi when unlimited); a coupling's
-        the tightest its driven joints allow."""
+    def limits(self, m: mujoco.MjModel, unlimited: float = np.pi) -> tuple[np.ndarray, np.ndarray]:
+        """Each scene joint's position range: its model joint's (-unlimited..unlimited when it has
+        none); a coupling's the tightest its driven joints allow."""
         lo = np.full(self.n_joints, -np.inf)
         hi = np.full(self.n_joints, np.inf)
         for jid, i, r in zip(self.jnt_ids, self.joint, self.ratio, strict=True):
-            a, b = (m.jnt_range[jid] if m.jnt_limited[jid] else (-np.pi * abs(r), np.pi * abs(r)))
+            a, b = (m.jnt_range[jid] if m.jnt_limited[jid] else (-unlimited * abs(r), unlimited * abs(r)))
             a, b = sorted((a / r, b / r))
             lo[i] = max(lo[i], a)
             hi[i] = min(hi[i], b)

@@ -76,3 +76,50 @@ def test_stdin_stdout_and_method_choice():
         assert proc.returncode == 0, proc.stderr
         r = json.loads(proc.stdout)
         np.testing.assert_allclose(r["point"], point, atol=1e-6)
+
+
+def _strict(line: str):
+    def refuse(c):
+        raise AssertionError(f"non-standard JSON constant {c} in {line}")
+    return json.loads(line, parse_constant=refuse)
+
+
+def test_out_of_range_input_is_an_error_line_and_output_is_standard_json(tmp_path):
+    scene = load_scene("leng2016")
+    q = list(scene.robot.home)
+    lo, hi = ArmModel(scene).joint_limits(unlimited=np.inf)
+    limited = int(np.flatnonzero(np.isfinite(hi))[0])
+    beyond = list(q)
+    beyond[limited] = float(hi[limited]) + 0.5
+    lines = [
+        json.dumps({"q": q, "wrench": [0, 0, 1e308, 0, 0, 0]}),  # beyond the sensor's range
+        "",  # a blank line still gets its line
+        json.dumps({"q": q, "wrench": [0, 0, 1e308, 0, 0, 0], "compensated": True}),
+        json.dumps({"q": beyond, "wrench": [0, 0, 1, 0, 0, 0]}),
+        "   ",
+    ]
+    src = tmp_path / "in.jsonl"
+    src.write_text("\n".join(lines) + "\n")
+    proc = subprocess.run([*FTC, "solve", "--scene", "leng2016", "--input", str(src)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    records = [_strict(line) for line in proc.stdout.splitlines()]
+    assert len(records) == len(lines)
+    assert "fz = 1e+308 N is beyond the sensor's range" in records[0]["error"] and records[0]["line"] == 1
+    assert records[1] == {"error": "blank line", "line": 2}
+    flagged = records[2]  # an already-compensated wrench is the caller's: solved, never a NaN contact
+    assert not flagged["contact"] and "non_finite" in flagged["flags"] and None in flagged["force"]
+    assert "RuntimeWarning" not in proc.stderr
+    assert f"q[{limited}] = " in records[3]["error"] and "outside joint" in records[3]["error"]
+    assert records[4] == {"error": "blank line", "line": 5}
+
+
+def test_file_errors_are_one_line_messages(tmp_path):
+    no_dir = str(tmp_path / "no-dir" / "out.jsonl")
+    for args, says in ((["--input", str(tmp_path / "missing.jsonl")], "cannot open input file"),
+                       (["--input", "-", "--output", no_dir], "cannot open output file")):
+        proc = subprocess.run([*FTC, "solve", "--scene", "leng2016", *args], input="",
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode != 0
+        assert proc.stderr.strip().count("\n") == 0 and says in proc.stderr, proc.stderr
+        assert "Traceback" not in proc.stderr
