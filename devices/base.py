@@ -20,6 +20,14 @@ from typing import Any
 from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
 from ftc_hw.priority import READER_NICE, preferred_cpu
 
+NOTE_EVERY_S = 10.0  # while a device stays unreachable, its reconnecting event is repeated this often
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as one line: vendor libraries' messages can span lines (and carry C++ type names)."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
 
 class DeviceError(Exception):
     """A device-level failure the caller should see (bad configuration, refused command)."""
@@ -86,31 +94,39 @@ class Adapter(ABC):
     # -- the reader loop -------------------------------------------------------------------------------
     def _run(self) -> None:
         backoff = self.backoff_min
+        attempts = 0  # failed connects of this outage
+        next_note = 0.0
         while not self._stop.is_set():
             try:
                 self._connect()
             except Exception as exc:  # noqa: BLE001 - any failure to connect is retried
                 self._safe_disconnect()  # a half-open transport would hold the port (exclusive lock) for good
                 self.counters["connect_failures"] += 1
-                self.event("reconnecting", f"connect failed ({exc}); retry in {backoff:.2f} s")
+                attempts += 1
+                if time.monotonic() >= next_note:  # once per outage, then a reminder every NOTE_EVERY_S
+                    self.event("reconnecting", f"connect failed ({one_line(exc)}); retrying every "
+                               f"{self.backoff_min:g}-{self.backoff_max:g} s, attempt {attempts} "
+                               "(connect_failures counts them)")
+                    next_note = time.monotonic() + NOTE_EVERY_S
                 if self._stop.wait(backoff):
                     break
                 backoff = min(self.backoff_max, backoff * 2)
                 continue
             backoff = self.backoff_min
             self.connected.set()
-            self.event("connect", self.describe())
+            self.event("connect", self.describe() + (f" (after {attempts} failed attempts)" if attempts else ""))
+            attempts, next_note = 0, 0.0
             try:
                 while not self._stop.is_set():
                     self._read_once()
             except DeviceIOError as exc:
                 self.connected.clear()  # before the event: whoever sees it sees the adapter disconnected
                 self.counters["disconnects"] += 1
-                self.event("disconnect", str(exc))
+                self.event("disconnect", one_line(exc))
             except Exception as exc:  # noqa: BLE001 - the reader never dies silently
                 self.connected.clear()
                 self.counters["errors"] += 1
-                self.event("error", f"{type(exc).__name__}: {exc}")
+                self.event("error", f"{type(exc).__name__}: {one_line(exc)}")
             finally:
                 self.connected.clear()
                 self._safe_disconnect()

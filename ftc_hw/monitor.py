@@ -16,6 +16,15 @@ than 1.5 joint periods apart, the period being the stream's median spacing) carr
 ``joint_gap_ns`` (counted: ``joint_gap_frames``): the motion in between is unknown, and the pipeline
 widens the compensation's uncertainty over it.
 
+A stream that stops is a state, not a silence: when no F/T frame has arrived for ``ft_lost_s`` (or no
+joint frame for ``arm_lost_s``) the monitor publishes ``DeviceEvent(kind="sensor_lost")`` (or
+``"arm_lost"``) on ``events/device`` and closes an open contact with an offset flagged ``lost``;
+while the joint stream is lost every F/T frame is dropped unjudged (``blind_frames``: no joint state,
+no contact can be told from the arm's own motion). ``sensor_back`` / ``arm_back`` when frames flow
+again; the acceleration estimate restarts then. ``lost`` (the streams lost now), ``losses`` (a list of
+(stream, host ns lost, host ns back or None)) and the counters ``sensor_lost``, ``arm_lost``,
+``blind_frames`` keep the record.
+
 What the pipeline consumes for each F/T frame (its aligned time, the raw wrench, the joint state
 interpolated there, whether it went to the tare) is published on ``monitor/input`` as a
 :class:`PipelineInput`: the alignment and interpolation depend on arrival order and thread timing,
@@ -34,13 +43,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bus import EVENTS_CONTACT, Bus, ClockAligner, WrenchFlag, joints_topic, wrench_topic
+from .bus import (
+    EVENTS_CONTACT,
+    EVENTS_DEVICE,
+    Bus,
+    ClockAligner,
+    DeviceEvent,
+    WrenchFlag,
+    joints_topic,
+    wrench_topic,
+)
 from .pipeline import ContactPipeline, FrameResult
 from .scene import Scene
 
 MONITOR_INPUT = "monitor/input"
 LATE_NS = 50_000_000  # an F/T frame received this long after its (aligned) time counts as late
 JOINT_PERIOD_SAMPLES = 64  # the joint period is the median spacing of this many recent samples
+LOST_S = 0.25  # default: a stream silent this long is lost (shorter gaps: frames counted no_joint_state)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -71,7 +90,8 @@ class MonitoredFrame:
 class LiveMonitor:
     def __init__(self, bus: Bus, scene: Scene, *, ft_source: str = "ft", arm_source: str = "arm",
                  tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
-                 max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, **pipeline_options) -> None:
+                 max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, ft_lost_s: float = LOST_S,
+                 arm_lost_s: float = LOST_S, **pipeline_options) -> None:
         self.bus = bus
         self.scene = scene
         self.pipeline = ContactPipeline(scene, **pipeline_options)
@@ -103,6 +123,12 @@ class LiveMonitor:
         self._joint_sub = None
         self._joint_period_ns: int | None = None  # the joint stream's median spacing (recent samples)
         self._joint_count = 0
+        self._why_none = ""  # why the last _joints_at gave None: before, old, late, gap
+        self.lost_after_ns = {"sensor": int(ft_lost_s * 1e9), "arm": int(arm_lost_s * 1e9)}
+        self._rx_ns: dict[str, int | None] = {"sensor": None, "arm": None}  # host time of the newest frame
+        self.lost: set[str] = set()
+        self.losses: list[list] = []  # [stream, t_lost_ns, t_back_ns or None]
+        self._source = {"sensor": ft_source, "arm": arm_source}
 
     def start(self) -> LiveMonitor:
         if self._thread is None:
@@ -139,7 +165,8 @@ class LiveMonitor:
         pending: deque = deque()
         while not self._stop.is_set():
             try:
-                frame = self._sub.get(timeout=0.001 if pending else 0.1)
+                frame = self._sub.get(timeout=0.001 if pending else 0.01)
+                self._received("sensor")
                 t_frame = self._aligned(self._ft_clock, frame)
                 if frame.t_host_ns - t_frame > LATE_NS:  # a backlog between the device and us
                     self.counters["ft_frames_late"] += 1
@@ -148,6 +175,7 @@ class LiveMonitor:
                 pass
             except Exception:  # noqa: BLE001 - the subscription was closed: we are stopping
                 break
+            self._check_streams()
             now = time.monotonic()
             while pending:
                 arrived, t, frame = pending[0]
@@ -162,6 +190,61 @@ class LiveMonitor:
                     self.counters["errors"] += 1
                     self.counters[f"error:{type(exc).__name__}"] += 1
 
+    # -- lost streams (the worker's thread; the joint callback only notes the time) ----------------------
+    def _received(self, stream: str) -> None:
+        self._rx_ns[stream] = time.monotonic_ns()
+        if stream in self.lost and stream == "sensor":
+            self._back(stream)
+
+    def _check_streams(self) -> None:
+        now = time.monotonic_ns()
+        for stream, after in self.lost_after_ns.items():
+            rx = self._rx_ns[stream]
+            if rx is None:
+                continue
+            if stream not in self.lost and now - rx > after:
+                self._lose(stream, now, rx)
+            elif stream == "arm" and stream in self.lost and now - rx <= after:
+                self._back(stream)
+
+    def _lose(self, stream: str, now: int, rx: int) -> None:
+        self.lost.add(stream)
+        self.losses.append([stream, now, None])
+        self.counters[f"{stream}_lost"] += 1
+        what = "F/T" if stream == "sensor" else "joint"
+        self._stream_event(now, stream, f"{stream}_lost", f"no {what} frame for {(now - rx) / 1e9:.3f} s: "
+                           + ("no contact can be judged" if stream == "sensor" else
+                              "blind: F/T frames are dropped unjudged until joint state returns"))
+
+    def _back(self, stream: str) -> None:
+        now = time.monotonic_ns()
+        self.lost.discard(stream)
+        gone = 0.0
+        for loss in reversed(self.losses):
+            if loss[0] == stream and loss[2] is None:
+                loss[2] = now
+                gone = (now - loss[1]) / 1e9
+                break
+        self._stream_event(now, stream, f"{stream}_back", f"frames again after {gone:.3f} s lost")
+
+    def _stream_event(self, t_ns: int, stream: str, kind: str, message: str) -> None:
+        counters = {k: v for k, v in self.counters.items() if isinstance(v, int)}
+        ev = DeviceEvent.make(t_ns, self._source[stream], kind, message, counters)
+        self.bus.publish(EVENTS_DEVICE, ev)  # first: a recording holds it before the offset it causes
+        self.apply_stream_event(ev)
+
+    def apply_stream_event(self, ev: DeviceEvent) -> None:
+        """What a lost or returned stream does to the pipeline, live or replayed from a recording: a
+        loss closes the open contact (an offset flagged ``lost``, at the loss's time); the joint
+        stream's return restarts the acceleration estimate."""
+        if ev.kind in ("sensor_lost", "arm_lost") and self.pipeline.in_contact:
+            self.counters["contacts_lost"] += 1
+            event = self.pipeline.close_contact(ev.t_host_ns, lost=True)
+            self.counters["event_offset"] += 1
+            self.bus.publish(EVENTS_CONTACT, event)
+        elif ev.kind == "arm_back":
+            self.pipeline.restart_motion()
+
     @staticmethod
     def _aligned(clock: ClockAligner, frame) -> int:
         if frame.t_device_ns is None:
@@ -171,6 +254,7 @@ class LiveMonitor:
 
     def on_joints(self, frame) -> None:
         """A JointFrame: kept with its aligned time for interpolation at the F/T samples."""
+        self._rx_ns["arm"] = time.monotonic_ns()  # the worker's check sees it back
         t = self._aligned(self._arm_clock, frame)
         x = np.concatenate([frame.q, frame.qd, frame.current])
         with self._joint_lock:
@@ -190,6 +274,7 @@ class LiveMonitor:
             ts = self._joint_t
             i = bisect.bisect_right(ts, t)
             if i == 0:
+                self._why_none = "before" if not ts or self._joint_count == len(ts) else "old"
                 return None
             t0, x0 = ts[i - 1], self._joint_x[i - 1]
             if i == len(ts):
@@ -197,6 +282,7 @@ class LiveMonitor:
                 # extrapolate linearly from the last two, at most max_extrapolate ahead. Holding would
                 # lag the arm, which the dynamics compensation would read as a contact.
                 if t - t0 > self.max_extrapolate_ns:
+                    self._why_none = "late"
                     return None
                 if i < 2 or t0 - ts[i - 2] > self.max_gap_ns:
                     return x0, t - t0
@@ -204,6 +290,7 @@ class LiveMonitor:
                 return x0 + (t - t0) / (t0 - tp) * (x0 - xp), t - tp
             t1, x1 = ts[i], self._joint_x[i]
         if t1 - t0 > self.max_gap_ns:
+            self._why_none = "gap"
             return None
         w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
         return x0 + w * (x1 - x0), t1 - t0
@@ -218,8 +305,14 @@ class LiveMonitor:
         if t is None:
             t = self._aligned(self._ft_clock, frame)
         joints = self._joints_at(t)
-        if joints is None:
-            self.counters["no_joint_state"] += 1
+        if joints is None or "arm" in self.lost:
+            if "arm" in self.lost:
+                self.counters["blind_frames"] += 1
+            elif self._why_none == "before":  # the joint stream has not begun: not a loss
+                self.counters["before_joint_state"] += 1
+            else:
+                self.counters["no_joint_state"] += 1
+                self.counters[f"no_joint_state_{self._why_none}"] += 1
             return None
         x, span = joints
         gap = self._gap(span)

@@ -36,6 +36,31 @@ class FrameResult:
     events: tuple[ContactEvent, ...]
 
 
+@dataclass
+class _ContactRun:
+    """The open (or last) contact: its id, its figures so far and its last event with an estimate."""
+
+    contact_id: int = 0
+    onset_ns: int = 0
+    last_ns: int = 0
+    peak: float = 0.0
+    impulse: float = 0.0
+    last_event: ContactEvent | None = None
+
+    def add(self, t_ns: int, external: np.ndarray) -> None:
+        f = math.sqrt(float(external[0] ** 2 + external[1] ** 2 + external[2] ** 2))
+        self.impulse += f * max(t_ns - self.last_ns, 0) * 1e-9
+        self.peak = max(self.peak, f)
+        self.last_ns = t_ns
+
+    def stamp(self, ev: ContactEvent, final: bool = False) -> ContactEvent:
+        out = replace(ev, contact_id=self.contact_id, duration_s=max(ev.t_host_ns - self.onset_ns, 0) * 1e-9,
+                      peak_force=self.peak, impulse=self.impulse)
+        if not final and "no_estimate" not in ev.flags:
+            self.last_event = out
+        return out
+
+
 class ContactPipeline:
     """One scene's compensation, detection and localization. Not thread-safe: one per reader thread."""
 
@@ -58,6 +83,7 @@ class ContactPipeline:
         self.update_period_ns = int(update_period_s * 1e9)
         self._last_update_ns = 0
         self._last_estimate: ContactEstimate | None = None
+        self._contact = _ContactRun()
         # events carry the contact's point fused over its frames (None: each frame's own estimate)
         self.track = (None if track_slide is None else
                       ContactTrack(model, slide=track_slide, body_poses=self.solver.body_poses))
@@ -178,21 +204,63 @@ class ContactPipeline:
                 self._last_estimate = estimate
                 if self.track is not None:
                     self.track.update(t_ns, estimate, q, self._solved_poses())
-            track = self.track if self.track is not None and self.track.active else None
-            if det.change == "onset":
-                events.append(self._event(det.onset_t_ns or t_ns, "onset", estimate, det, track, self._link_reach))
-                self._last_update_ns = t_ns
-            elif det.change == "offset":
-                events.append(self._event(t_ns, "offset", self._last_estimate, det, track, self._link_reach))
-                self._last_estimate = None
-                if self.track is not None:
-                    self.track.reset()
-            elif t_ns - self._last_update_ns >= self.update_period_ns:
-                events.append(self._event(t_ns, "update", estimate, det, track, self._link_reach))
-                self._last_update_ns = t_ns
+            events.extend(self._contact_events(t_ns, det, estimate, external))
         if self.track is not None:
             self._prev = (t_ns, external, q.copy(), model_error, saturated)
         return FrameResult(t_ns, external, det, estimate, tau_ext, tuple(events))
+
+    def _contact_events(self, t_ns: int, det: Detection, estimate: ContactEstimate | None,
+                        external: np.ndarray) -> list[ContactEvent]:
+        """This frame's onset, update or offset, stamped with the contact's id and figures."""
+        track = self.track if self.track is not None and self.track.active else None
+        if det.change == "onset":
+            onset = det.onset_t_ns or t_ns
+            self._contact = _ContactRun(self._contact.contact_id + 1, onset, onset)
+            self._contact.add(t_ns, external)
+            self._last_update_ns = t_ns
+            ev = self._event(onset, "onset", estimate, det.probability, track, self._link_reach)
+        elif det.change == "offset":
+            return [self.close_contact(t_ns, det.probability)]
+        else:
+            self._contact.add(t_ns, external)
+            if t_ns - self._last_update_ns < self.update_period_ns:
+                return []
+            ev = self._event(t_ns, "update", estimate, det.probability, track, self._link_reach)
+            self._last_update_ns = t_ns
+        return [self._contact.stamp(ev)]
+
+    def restart_motion(self) -> None:
+        """The joint stream was lost and is back: what was estimated from its past (the acceleration,
+        the currents before a contact, the last frame) starts afresh."""
+        self.qdd.reset()
+        self._qdd_ring_t[:] = -1
+        self._pre_current.clear()
+        self._prev = None
+        self._gap_until = -1
+
+    @property
+    def in_contact(self) -> bool:
+        return self.detector.active
+
+    def close_contact(self, t_ns: int, probability: float | None = None, *, lost: bool = False) -> ContactEvent:
+        """The open contact's offset at host time t_ns: its last estimate (as its last onset or update
+        with an estimate said; the last frame's own when it never had one) with its duration, peak
+        force and impulse. ``lost``: closed because a stream was lost (flagged ``lost``; the detector
+        and the track start afresh). ``probability``: the offset frame's (default: the last event's)."""
+        run = self._contact
+        last = run.last_event
+        if last is None:
+            last = self._event(t_ns, "offset", self._last_estimate, probability or 0.0)
+        flags = (*last.flags, "lost") if lost else last.flags
+        p = last.probability if probability is None else probability
+        ev = run.stamp(ContactEvent.make(t_ns, "offset", last.link, last.point, last.force, last.point_std,
+                                         flags=flags, probability=p), final=True)
+        self._last_estimate = None
+        if lost:
+            self.detector.reset()
+        if self.track is not None:
+            self.track.reset()
+        return ev
 
     def _extra(self, model_error: np.ndarray | None) -> np.ndarray | None:
         """The compensation's own uncertainty for a frame: the acceleration estimate's lag error weighs
@@ -310,7 +378,7 @@ class ContactPipeline:
         return self.lag_gain * change
 
     @staticmethod
-    def _event(t_ns: int, kind: str, e: ContactEstimate | None, det: Detection,
+    def _event(t_ns: int, kind: str, e: ContactEstimate | None, probability: float,
                track: ContactTrack | None = None, reach: dict[str, float] | None = None) -> ContactEvent:
         """The event always goes out (an onset above all). With a track, its point is the contact's
         fused point and the frame's estimate gives the force and flags; otherwise the frame's own
@@ -323,17 +391,17 @@ class ContactPipeline:
             point, std = track.point_and_std()
             flags = _with_uncertain(e.flags if e is not None else (), track.link, std, reach)
             return ContactEvent.make(t_ns, kind, track.link, point, force, std, flags=flags,
-                                     probability=det.probability)
+                                     probability=probability)
         if e is not None and e.contact and e.link:
             std = e.point_std
             if math.isfinite(float(e.point.sum() + e.force.sum() + std.sum())):
                 return ContactEvent.make(t_ns, kind, e.link, e.point, e.force, std,
                                          flags=_with_uncertain(e.flags, e.link, std, reach),
-                                         probability=det.probability)
+                                         probability=probability)
         z = np.zeros(3)
         flags = (*e.flags, "no_estimate") if e is not None else ("no_estimate",)
         link = e.link if e is not None and e.link else "unknown"
-        return ContactEvent.make(t_ns, kind, link, z, z, z, flags=flags, probability=det.probability)
+        return ContactEvent.make(t_ns, kind, link, z, z, z, flags=flags, probability=probability)
 
 
 def _with_uncertain(flags: tuple[str, ...], link: str, std: np.ndarray,

@@ -23,7 +23,7 @@ from rich.live import Live
 from ftc_hw import __version__
 from ftc_hw.app.evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.app.view import LiveView, evaluation_table, stream_table
-from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, joints_topic, wrench_topic
+from ftc_hw.bus import EVENTS_CONTACT, STREAM_EVENT_KINDS, Bus, ContactEvent, DeviceEvent, joints_topic, wrench_topic
 from ftc_hw.calibration.file import load_calibration
 from ftc_hw.devices.base import frozen_heap, responsive_readers
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
@@ -37,6 +37,8 @@ from .rig import RigError, build_rig, pick_device, require_device
 from .sim_joints import SimJointSource
 
 SETTLE_S = 0.5
+DEGRADED_EXIT = 3  # the run went to its end, but was blind or dropped frames for a while (see degraded)
+DROPPED_SHARE = 0.05  # above this share of F/T frames not judged (or late), a run is degraded
 
 
 class MonitorSetupError(Exception):
@@ -71,6 +73,8 @@ class MonitorOutcome:
     reflex: dict[str, Any] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
     t_closed_ns: int = 0  # when the adapters were closed
+    stream_events: list[dict[str, Any]] = field(default_factory=list)  # sensor_lost, arm_back, ...
+    degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
 
 
 def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any], dict[str, str]]:
@@ -258,8 +262,9 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         def pump() -> None:
             for ev in ev_sub.drain():
                 view.add(ev)
-                if isinstance(ev, ContactEvent):
-                    out.events.append(event_record(ev))
+                stream = isinstance(ev, DeviceEvent) and ev.kind in STREAM_EVENT_KINDS
+                if isinstance(ev, ContactEvent) or stream:
+                    (out.stream_events if stream else out.events).append(event_record(ev))
                     if writer is not None:
                         writer.write(ev)
 
@@ -285,6 +290,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                 reflex.close()
         pump()
         _finish(cfg, scene, monitor, reflex, world, truth_path, recorder, out)
+        _judge_degraded(monitor, rig.adapters, out)
         _summary(console, cfg, bus, topics, out, rig.adapters, recorder, world)
     return out
 
@@ -341,6 +347,36 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
         out.exit_code = 1
 
 
+def _judge_degraded(monitor: LiveMonitor, adapters, out: MonitorOutcome) -> None:
+    """Why this run cannot be read as clean (lost streams, frames not judged, a host that could not
+    keep up, devices that dropped): each reason a line of the summary; exit code DEGRADED_EXIT."""
+    c = monitor.counters
+    for stream in ("sensor", "arm"):
+        spans = [(back or out.t_closed_ns) - lost for s, lost, back in monitor.losses if s == stream]
+        if spans:
+            what = "F/T sensor stream" if stream == "sensor" else "arm's joint stream (blind meanwhile)"
+            out.degraded.append(f"{what} lost {len(spans)}x, {sum(spans) / 1e9:.2f} s in all")
+    if c.get("contacts_lost"):
+        out.degraded.append(f"{c['contacts_lost']} open contact(s) closed by a lost stream (offsets flagged lost)")
+    frames = c.get("frames", 0)
+    unjudged = {k: c.get(k, 0) for k in ("ft_frames_dropped", "no_joint_state", "blind_frames")}
+    total = frames + sum(unjudged.values())
+    if total and sum(unjudged.values()) > DROPPED_SHARE * total:
+        detail = ", ".join(f"{k} {v}" for k, v in unjudged.items() if v)
+        out.degraded.append(f"{100 * sum(unjudged.values()) / total:.1f} % of F/T frames not judged ({detail}): "
+                            "contacts may be missed, false alarms possible")
+    if frames and c.get("ft_frames_late", 0) > DROPPED_SHARE * frames:
+        out.degraded.append(f"the host could not keep up: {c['ft_frames_late']} F/T frames reached the monitor "
+                            "over 50 ms late")
+    for a in adapters:
+        drops = a.counters.get("disconnects", 0) + a.counters.get("errors", 0)
+        if drops:
+            out.degraded.append(f"device {a.name} ({a.kind}) dropped {drops}x and reconnected "
+                                f"{a.counters.get('event_connect', 1) - 1}x")
+    if out.degraded and out.exit_code == 0:
+        out.exit_code = DEGRADED_EXIT
+
+
 def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], out: MonitorOutcome, adapters,
              recorder, world) -> None:
     console.print(stream_table(bus, topics, out.t_closed_ns or time.monotonic_ns(),
@@ -365,3 +401,5 @@ def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], 
             console.print(f"ground truth -> {cfg.truth}")
     for p in out.problems:
         console.print(f"[yellow]{p}[/]")
+    if out.degraded:
+        console.print(f"[bold red]DEGRADED run[/] (exit code {DEGRADED_EXIT}): " + "; ".join(out.degraded))

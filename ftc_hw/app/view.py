@@ -54,13 +54,21 @@ def wrench_table(raw, external, d2: float | None, threshold: float | None) -> Ta
     return t
 
 
-def contact_table(result, fused: ContactEvent | None = None) -> Table:
+LOST_STATUS = {"sensor": "[bold red]SENSOR LOST[/]: no F/T frames, no contact can be judged",
+               "arm": "[bold red]BLIND[/]: joint stream lost, F/T frames dropped unjudged"}
+
+
+def contact_table(result, fused: ContactEvent | None = None, lost: frozenset[str] | set[str] = frozenset()) -> Table:
     """The newest frame's estimate and, while in contact, the newest event's point (fused over the
-    contact's frames)."""
+    contact's frames); a lost stream instead of either (the newest frame is old news then)."""
     t = Table(title="contact (base frame)", title_justify="left", expand=False)
     for c in ("status", "link", "x mm", "y mm", "z mm", "|F| N", "force N", "+- mm (1 sigma)", "flags"):
         t.add_column(c, justify="left" if c in ("status", "link", "flags", "force N") else "right")
     e = None if result is None else result.estimate
+    if lost:
+        for stream in sorted(lost):
+            t.add_row(LOST_STATUS[stream], "", "", "", "", "", "", "", "")
+        return t
     if result is None:
         t.add_row("waiting", "", "", "", "", "", "", "", "")
     elif result.detection.active and e is not None and e.contact:
@@ -120,7 +128,7 @@ class LiveView:
                                   result.external if result is not None else None,
                                   float(result.detection.d2) if result is not None else None,
                                   threshold),
-                     contact_table(result, self.fused), Text("events", style="bold"),
+                     contact_table(result, self.fused, set(self.monitor.lost)), Text("events", style="bold"),
                      Text("\n".join(self.log) or "(no events yet)"), Text(f"monitor: {counters}\n", style="dim"))
 
 

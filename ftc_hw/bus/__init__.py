@@ -9,6 +9,7 @@ from .clock import ClockAligner, ClockNotReadyError
 from .frames import (
     CONTACT_KINDS,
     DEVICE_EVENT_KINDS,
+    STREAM_EVENT_KINDS,
     ContactEvent,
     ContactKind,
     DeviceEvent,
@@ -27,6 +28,7 @@ from .watchdog import Watchdog
 __all__ = [
     "CONTACT_KINDS",
     "DEVICE_EVENT_KINDS",
+    "STREAM_EVENT_KINDS",
     "EVENTS_CONTACT",
     "EVENTS_DEVICE",
     "Bus",

@@ -16,6 +16,7 @@ Frames compare by identity (``eq=False``): element-wise array equality has no si
 from __future__ import annotations
 
 import enum
+import math
 import operator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -69,9 +70,13 @@ class JointFlag(enum.IntFlag):
 
 
 ContactKind = Literal["onset", "update", "offset"]
-DeviceEventKind = Literal["connect", "disconnect", "error", "stale", "recovered", "reconnecting"]
+# sensor_lost / arm_lost: the monitor lost the F/T or the joint stream (it is blind: no contact is
+# judged; an open contact is closed by an offset flagged "lost"); sensor_back / arm_back: it returned
+DeviceEventKind = Literal["connect", "disconnect", "error", "stale", "recovered", "reconnecting",
+                          "sensor_lost", "sensor_back", "arm_lost", "arm_back"]
 CONTACT_KINDS: frozenset[str] = frozenset(get_args(ContactKind))
 DEVICE_EVENT_KINDS: frozenset[str] = frozenset(get_args(DeviceEventKind))
+STREAM_EVENT_KINDS: frozenset[str] = frozenset({"sensor_lost", "sensor_back", "arm_lost", "arm_back"})
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -202,7 +207,10 @@ class JointFrame:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ContactEvent:
-    """A contact estimate: ``point`` (m, base frame) where ``force`` (N, applied to the arm) acts."""
+    """A contact estimate: ``point`` (m, base frame) where ``force`` (N, applied to the arm) acts.
+    ``contact_id`` (from 1 in a run; 0: none) pairs a contact's onset, updates and offset; the
+    contact's figures so far: ``duration_s`` (s since its onset), ``peak_force`` (N, the largest
+    external force) and ``impulse`` (N s, the external force's magnitude integrated over time)."""
 
     t_host_ns: int
     kind: ContactKind
@@ -212,6 +220,10 @@ class ContactEvent:
     point_std: FloatArray
     flags: tuple[str, ...] = ()
     probability: float = 1.0
+    contact_id: int = 0
+    duration_s: float = 0.0
+    peak_force: float = 0.0
+    impulse: float = 0.0
 
     @classmethod
     def make(
@@ -225,8 +237,13 @@ class ContactEvent:
         *,
         flags: tuple[str, ...] | list[str] = (),
         probability: float = 1.0,
+        contact_id: int = 0,
+        duration_s: float = 0.0,
+        peak_force: float = 0.0,
+        impulse: float = 0.0,
     ) -> ContactEvent:
-        """Validate and build; ``point_std`` (m) must be >= 0 and ``probability`` in [0, 1]."""
+        """Validate and build; ``point_std`` (m) must be >= 0, ``probability`` in [0, 1], the contact's
+        id and figures >= 0."""
         if kind not in CONTACT_KINDS:
             raise FrameError(f"kind: expected one of {sorted(CONTACT_KINDS)}, got {kind!r}")
         if not isinstance(link, str) or not link:
@@ -246,7 +263,24 @@ class ContactEvent:
             std,
             tuple(str(f) for f in flags),
             p,
+            _count("contact_id", contact_id),
+            *(_non_negative(k, v) for k, v in (("duration_s", duration_s), ("peak_force", peak_force),
+                                               ("impulse", impulse))),
         )
+
+
+def _count(name: str, value: object) -> int:
+    n = _int(name, value)
+    if n < 0:
+        raise FrameError(f"{name}: must be >= 0, got {n}")
+    return n
+
+
+def _non_negative(name: str, value: object) -> float:
+    x = float(value)  # type: ignore[arg-type]
+    if not x >= 0.0 or not math.isfinite(x):  # also rejects NaN
+        raise FrameError(f"{name}: must be a finite number >= 0, got {value!r}")
+    return x
 
 
 _NO_COUNTERS: Mapping[str, float] = MappingProxyType({})

@@ -8,7 +8,7 @@ from rich.live import Live
 
 from ftc_hw.app.session import MonitorSetupError, load_pipeline_calibration
 from ftc_hw.app.view import LiveView, make_console
-from ftc_hw.bus import Bus, joints_topic, wrench_topic
+from ftc_hw.bus import Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import event_line
 from ftc_hw.record.reader import RecordingError, read_recording
@@ -70,8 +70,11 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
         with open(events_path, "w", encoding="utf-8") as f:
             for e in result.events:
                 f.write(event_line(e) + "\n")
-    kinds = {k: sum(e.kind == k for e in result.events) for k in ("onset", "update", "offset")}
-    console.print(f"replayed {result.inputs} pipeline inputs: {len(result.events)} contact events {kinds}"
+    contacts = [e for e in result.events if isinstance(e, ContactEvent)]
+    kinds = {k: sum(e.kind == k for e in contacts) for k in ("onset", "update", "offset")}
+    lost = len(result.events) - len(contacts)
+    console.print(f"replayed {result.inputs} pipeline inputs: {len(contacts)} contact events {kinds}"
+                  + (f", {lost} stream lost/back events (recorded)" if lost else "")
                   + (f" -> {events_path}" if events_path else ""))
     if result.identical:
         console.print(f"[green]identical[/] to the {len(result.recorded)} recorded events")

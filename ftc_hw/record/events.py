@@ -1,4 +1,14 @@
-"""Contact events as JSON Lines: ``{"t", "kind", "link", "point", "force", "point_std", "flags"}``.
+"""Contact events as JSON Lines: ``{"t", "kind", "contact_id", "link", "point", "force", "point_std",
+"flags", "probability", "duration_s", "peak_force", "impulse", "t_host_ns"}``.
+
+``contact_id`` pairs a contact's onset, updates and offset. The offset carries the contact's last
+estimate (link, point, force, point_std, as its last onset or update with an estimate said) and its
+``duration_s`` (s), ``peak_force`` (N) and ``impulse`` (N s); a contact closed because a stream was
+lost has an offset flagged ``lost``.
+
+The monitor's stream events go in the same file, in order: ``{"t", "kind", "source", "message",
+"t_host_ns"}`` with ``kind`` one of ``sensor_lost``, ``sensor_back``, ``arm_lost``, ``arm_back``
+(``source``: the device's name). A run whose file holds one was blind for a while.
 
 ``t`` is the event's time in seconds on the host's monotonic clock (``time.monotonic()``: the clock of
 the MCAP log times and of the ground truth's ``t_host_ns``); ``t_host_ns`` gives it exactly, in ns.
@@ -10,16 +20,21 @@ import json
 from pathlib import Path
 from typing import IO, Any
 
-from ftc_hw.bus import ContactEvent
+from ftc_hw.bus import ContactEvent, DeviceEvent
 
 
-def event_record(ev: ContactEvent) -> dict[str, Any]:
-    return {"t": ev.t_host_ns / 1e9, "kind": ev.kind, "link": ev.link, "point": [float(x) for x in ev.point],
-            "force": [float(x) for x in ev.force], "point_std": [float(x) for x in ev.point_std],
-            "flags": list(ev.flags), "probability": float(ev.probability), "t_host_ns": int(ev.t_host_ns)}
+def event_record(ev: ContactEvent | DeviceEvent) -> dict[str, Any]:
+    if isinstance(ev, DeviceEvent):
+        return {"t": ev.t_host_ns / 1e9, "kind": ev.kind, "source": ev.source, "message": ev.message,
+                "t_host_ns": int(ev.t_host_ns)}
+    return {"t": ev.t_host_ns / 1e9, "kind": ev.kind, "contact_id": ev.contact_id, "link": ev.link,
+            "point": [float(x) for x in ev.point], "force": [float(x) for x in ev.force],
+            "point_std": [float(x) for x in ev.point_std], "flags": list(ev.flags),
+            "probability": float(ev.probability), "duration_s": ev.duration_s, "peak_force": ev.peak_force,
+            "impulse": ev.impulse, "t_host_ns": int(ev.t_host_ns)}
 
 
-def event_line(ev: ContactEvent) -> str:
+def event_line(ev: ContactEvent | DeviceEvent) -> str:
     return json.dumps(event_record(ev), separators=(",", ":"))
 
 
@@ -30,7 +45,7 @@ class EventWriter:
         self.stream = stream
         self.count = 0
 
-    def write(self, ev: ContactEvent) -> None:
+    def write(self, ev: ContactEvent | DeviceEvent) -> None:
         self.stream.write(event_line(ev) + "\n")
         self.stream.flush()
         self.count += 1

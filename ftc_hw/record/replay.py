@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent
+from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, STREAM_EVENT_KINDS, Bus, ContactEvent, DeviceEvent
 from ftc_hw.model import Payload
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import event_record
@@ -61,8 +61,8 @@ def recorded_scene(rec: Recording) -> Scene:
 @dataclass
 class ReplayResult:
     inputs: int
-    events: list[ContactEvent]
-    recorded: list[ContactEvent]
+    events: list[ContactEvent | DeviceEvent]  # contact events and the streams' lost/back events, in order
+    recorded: list[ContactEvent | DeviceEvent]
     monitor: LiveMonitor
 
     def records(self) -> tuple[list[dict], list[dict]]:
@@ -100,8 +100,8 @@ def replay(rec: Recording, *, scene: Scene | None = None, pipeline_kwargs: dict[
                           tare_s=None if tare in ("", "None") else float(tare), publish_inputs=False, **kwargs)
     if monitor_ready is not None:
         monitor_ready(monitor)
-    sub = bus.subscribe(EVENTS_CONTACT, maxsize=None)
-    recorded: list[ContactEvent] = []
+    sub = bus.subscribe("events/", maxsize=None)
+    recorded: list[ContactEvent | DeviceEvent] = []
     t0 = rec.messages[0].log_time
     wall0 = time.monotonic()
     for m in rec.messages:
@@ -115,9 +115,12 @@ def replay(rec: Recording, *, scene: Scene | None = None, pipeline_kwargs: dict[
             recorded.append(m.frame)
         else:
             bus.publish(m.topic, m.frame)
+            if m.topic == EVENTS_DEVICE and m.frame.kind in STREAM_EVENT_KINDS:
+                recorded.append(m.frame)
+                monitor.apply_stream_event(m.frame)  # a lost stream closed a contact live: here too
         if on_message is not None:
             on_message(monitor)
-    events = sub.drain()
+    events = [e for e in sub.drain() if isinstance(e, ContactEvent) or e.kind in STREAM_EVENT_KINDS]
     sub.close()
     if not rec.complete:
         # a cut recording: its last chunk may have lost the events of inputs it kept

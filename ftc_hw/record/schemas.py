@@ -44,7 +44,13 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "ftc_hw.ContactEvent": _schema("ftc_hw.ContactEvent", "contact onset/update/offset, base frame", {
         "t_host_ns": _HOST, "kind": {"enum": ["onset", "update", "offset"]}, "link": _STR,
         "point": _vec(3, "m"), "force": _vec(3, "N applied to the arm"), "point_std": _vec(3, "m, 1 sigma"),
-        "flags": {"type": "array", "items": _STR}, "probability": _NUM}),
+        "flags": {"type": "array", "items": _STR}, "probability": _NUM,
+        "contact_id": {"type": "integer", "description": "pairs a contact's events (from 1; absent in older "
+                       "recordings)"},
+        "duration_s": {"type": "number", "description": "s since the contact's onset"},
+        "peak_force": {"type": "number", "description": "N, the contact's largest external force so far"},
+        "impulse": {"type": "number", "description": "N s, the external force's magnitude integrated"}},
+        optional=("contact_id", "duration_s", "peak_force", "impulse")),
     "ftc_hw.DeviceEvent": _schema("ftc_hw.DeviceEvent", "device or stream event", {
         "t_host_ns": _HOST, "source": _STR, "kind": _STR, "message": _STR,
         "counters": {"type": "object", "additionalProperties": _NUM}}),
@@ -94,7 +100,9 @@ def encode(frame: Any) -> tuple[str, bytes]:
         name, d = "ftc_hw.ContactEvent", {"t_host_ns": frame.t_host_ns, "kind": frame.kind, "link": frame.link,
                                           "point": _list(frame.point), "force": _list(frame.force),
                                           "point_std": _list(frame.point_std), "flags": list(frame.flags),
-                                          "probability": float(frame.probability)}
+                                          "probability": float(frame.probability), "contact_id": frame.contact_id,
+                                          "duration_s": frame.duration_s, "peak_force": frame.peak_force,
+                                          "impulse": frame.impulse}
     elif isinstance(frame, DeviceEvent):
         name, d = "ftc_hw.DeviceEvent", {"t_host_ns": frame.t_host_ns, "source": frame.source, "kind": frame.kind,
                                          "message": frame.message,
@@ -121,7 +129,9 @@ def decode(schema: str, data: bytes) -> Any:
                                seq=d["seq"], t_device_ns=d["t_device_ns"], flags=d["flags"])
     if schema == "ftc_hw.ContactEvent":
         return ContactEvent.make(d["t_host_ns"], d["kind"], d["link"], d["point"], d["force"], d["point_std"],
-                                 flags=d["flags"], probability=d["probability"])
+                                 flags=d["flags"], probability=d["probability"], contact_id=d.get("contact_id", 0),
+                                 duration_s=d.get("duration_s", 0.0), peak_force=d.get("peak_force", 0.0),
+                                 impulse=d.get("impulse", 0.0))
     if schema == "ftc_hw.DeviceEvent":
         return DeviceEvent.make(d["t_host_ns"], d["source"], d["kind"], d["message"], d["counters"])
     if schema == "ftc_hw.PipelineInput":

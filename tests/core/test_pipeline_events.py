@@ -17,7 +17,7 @@ def estimate(link, std, contact=True):
                            flags=("grazing",))
 
 
-DET = SimpleNamespace(probability=0.9)
+DET = 0.9  # the detection probability
 
 
 def test_a_good_estimate_is_carried_as_it_is():
