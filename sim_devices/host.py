@@ -270,6 +270,7 @@ class WorldHost:
         self.endpoints: dict[str, dict[str, Any]] = {}
         self.sample_period_s = 1.0 / scene.sensor.rate_hz
         self.result: dict[str, Any] | None = None
+        self._pipe_lock = threading.RLock()
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self, timeout: float = START_TIMEOUT_S) -> dict[str, dict[str, Any]]:
@@ -346,6 +347,10 @@ class WorldHost:
         """Take what the world sent unasked (its end-of-run report; a late answer is dropped)."""
         if self._conn is None:
             return
+        with self._pipe_lock:
+            self._drain_locked()
+
+    def _drain_locked(self) -> None:
         try:
             while self._conn.poll():
                 self._take(self._conn.recv())
@@ -360,8 +365,9 @@ class WorldHost:
             self._conn.send((op, arg))
 
     def _call(self, op: str, arg: Any = None, timeout: float = 30.0) -> Any:
-        self._send(op, arg)
-        kind, value = self._recv(timeout)
+        with self._pipe_lock:  # one question and its answer at a time (a fault plan calls from its thread)
+            self._send(op, arg)
+            kind, value = self._recv(timeout)
         if kind != "ok":
             raise WorldHostError(f"world process: {op} {arg if arg is not None else ''}: {value}")
         return value

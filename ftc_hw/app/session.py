@@ -11,6 +11,7 @@ import signal
 import tempfile
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,8 +34,10 @@ from ftc_hw.record.writer import McapRecorder
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_scene
 from ftc_hw.sim_devices.host import WorldHost
 
+from .faults import Fault, FaultError, FaultPlan
 from .rig import RigError, build_rig, pick_device, require_device
 from .sim_joints import SimJointSource
+from .vendor_output import vendor_stderr
 
 SETTLE_S = 0.5
 DEGRADED_EXIT = 3  # the run went to its end, but was blind or dropped frames for a while (see degraded)
@@ -62,6 +65,7 @@ class MonitorConfig:
     level: str | None = "dynamics"  # compensation level; None: the scene's
     title: str = "ftc monitor"
     connect_timeout_s: float = 20.0
+    faults: tuple[str, ...] = ()  # with sim: a fault plan (ftc_hw.app.faults), e.g. ("ft:kill@onset+0.1",)
 
 
 @dataclass
@@ -74,6 +78,8 @@ class MonitorOutcome:
     problems: list[str] = field(default_factory=list)
     t_closed_ns: int = 0  # when the adapters were closed
     stream_events: list[dict[str, Any]] = field(default_factory=list)  # sensor_lost, arm_back, ...
+    faults: list[tuple[str, int]] = field(default_factory=list)  # (fault, host ns applied)
+    vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
     degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
 
 
@@ -170,14 +176,20 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
     ft_dev, arm_dev = _devices(scene, cfg.sim)
+    try:
+        faults = [Fault.parse(f) for f in cfg.faults]
+    except FaultError as exc:
+        raise MonitorSetupError(str(exc)) from None
     cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
     out = MonitorOutcome(0)
     if cal_meta and cal_meta.get("unapplied"):
         console.print(f"[yellow]warning[/]: {cfg.calibration} also fitted {cal_meta['unapplied']}; the pipeline "
                       "applies its bias and payload only: if these matter, correct the scene (the sensor site's "
                       "orientation, the gravity vector, the link masses)")
-    with responsive_readers():  # readers that poll, and the reflex, while the pipeline computes
-        return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out)
+    # readers that poll, and the reflex, while the pipeline computes; vendor C++ lines made readable
+    with responsive_readers(), vendor_stderr() as vendor:
+        out.vendor_lines = vendor.counts
+        return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out, faults)
 
 
 def _stop_on_sigterm(stack: contextlib.ExitStack) -> None:
@@ -227,11 +239,16 @@ def _tare_then_go(cfg: MonitorConfig, monitor: LiveMonitor, world: WorldHost) ->
 
 
 def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
-         cal_kwargs: dict[str, Any], cal_meta: dict[str, str] | None, out: MonitorOutcome) -> MonitorOutcome:
+         cal_kwargs: dict[str, Any], cal_meta: dict[str, str] | None, out: MonitorOutcome,
+         faults: list[Fault]) -> MonitorOutcome:
     with contextlib.ExitStack() as stack:
         _stop_on_sigterm(stack)
         world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.truth)
         bus = Bus()
+        try:
+            plan = FaultPlan(faults, world, bus) if faults and world is not None else None
+        except FaultError as exc:
+            raise MonitorSetupError(str(exc)) from None
         ft_name, arm_name = ft_dev.name, arm_dev.name if arm_dev is not None else "arm"
         topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]
         ev_sub = bus.subscribe("events/", maxsize=None)
@@ -278,14 +295,21 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                 reflex = StopReflex(bus, rig.arm)
             if world is not None:
                 _tare_then_go(cfg, monitor, world)
+                if plan is not None:
+                    plan.start()
             stack.enter_context(frozen_heap())  # set up: no collector pause may stall the readers now
             view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
                            + (f", scenario {cfg.scenario} (emulated devices)" if cfg.sim else ""))
             _watch(cfg, console, view, monitor, world, pump, out)
         finally:
             out.t_closed_ns = time.monotonic_ns()
+            if plan is not None:
+                plan.close()
+                out.faults = list(plan.done)
+                if plan.error:
+                    out.problems.append(f"fault plan stopped: {plan.error}")
+            monitor.stop()  # first: the streams end with the adapters, and that is no loss
             rig.close()
-            monitor.stop()
             if reflex is not None:
                 reflex.close()
         pump()
@@ -386,6 +410,10 @@ def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], 
     console.print(f"monitor: {out.counters}")
     for a in adapters:
         console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
+    if out.faults:
+        console.print("faults played: " + ", ".join(f for f, _ in out.faults))
+    for line, n in out.vendor_lines.items():
+        console.print(f"{line} ({n}x)")
     if out.reflex:
         stops = out.reflex["stops"]
         sent = [s["sent_after_onset_ms"] for s in stops]

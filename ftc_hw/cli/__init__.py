@@ -146,12 +146,16 @@ def monitor(
     view: Annotated[bool, typer.Option("--view/--no-view", help="The live view.")] = True,
     level: Annotated[Level, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
                                          "scene (the level the scene file declares).")] = Level.dynamics,
+    fault: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        help="With --sim: DEVICE:ACTION@WHEN, repeatable, in order: ACTION kill, restart or stall:S; WHEN a world "
+             "time T, +S after the previous fault, or onset+S (docs/monitor.md).")] = None,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
 
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
-                                         reflex.value if reflex else None, events, truth, noise, view, level.value))
+                                         reflex.value if reflex else None, events, truth, noise, view, level.value,
+                                         tuple(fault or ())))
 
 
 @app.command()
