@@ -111,6 +111,7 @@ class _Child:
         self.runner = runner
         self.lock = threading.Lock()
         self.counts = {"samples": 0, "contact": 0}
+        self.t_go: float | None = None  # world time at go (the scenario's t = 0)
 
     def reply(self, kind: str, value: Any) -> None:
         with self.lock:
@@ -151,6 +152,8 @@ class _Child:
             return len(runner.applied)
         elif op == "time":
             return runner.world.t
+        elif op == "scenario_time":
+            return None if self.t_go is None else runner.world.t - self.t_go
         elif op == "goal":  # applied like an emulator's goal command, between two steps
             runner.apply(Command("world-host", "goal", q=tuple(float(x) for x in arg)))
         else:
@@ -176,6 +179,7 @@ class _Child:
             world.set_reference(world.setup.trajectory)
             world.start_script()
         runner.duration = self.plan.duration if self.plan.duration is not None else 1e12
+        self.t_go = t_go
         self._scenario(t_go)
         self.reply("done", {**self.counts, "t": world.t - t_go, "preroll_s": t_go})
         runner.duration = 1e12
@@ -399,7 +403,12 @@ class WorldHost:
         self._call("goal", [float(x) for x in q])
 
     def sim_time(self) -> float:
+        """The world's time, s (pre-roll included)."""
         return self._call("time")
+
+    def scenario_time(self) -> float | None:
+        """The scenario's time, s (0 at ``go()``); None before it starts."""
+        return self._call("scenario_time")
 
     def applied(self, since: int = 0) -> list[AppliedCommand]:
         """The commands the world applied, from the ``since``-th on."""

@@ -4,7 +4,7 @@ same adapters and client libraries as a clean run.
 
 A fault is ``DEVICE:ACTION@WHEN``. ``ACTION``: ``kill`` (SIGKILL: a pulled plug), ``restart`` (start
 the killed emulator again), ``stall:S`` (SIGSTOP for S seconds, then SIGCONT: a hung device).
-``WHEN``: ``T`` (the world's time, s), ``+S`` (S s of wall time after the previous fault), or
+``WHEN``: ``T`` (the scenario's time, s, as in the ground truth), ``+S`` (S s of wall time after the previous fault), or
 ``onset+S`` (S s after the next contact onset the monitor reports). Faults run one after another, in
 the order given.
 """
@@ -32,7 +32,7 @@ class Fault:
     device: str
     action: Literal["kill", "restart", "stall"]
     trigger: Literal["time", "after", "onset"]
-    delay_s: float  # world time (time), s after the previous fault (after) or after the onset (onset)
+    delay_s: float  # scenario time (time), s after the previous fault (after) or after the onset (onset)
     stall_s: float = 0.0
     text: str = ""
 
@@ -41,7 +41,7 @@ class Fault:
         m = FAULT_RE.match(text.strip())
         if m is None:
             raise FaultError(f"fault {text!r}: expected DEVICE:ACTION@WHEN, ACTION kill, restart or stall:S, "
-                             "WHEN a world time T, +S after the previous fault, or onset+S (e.g. ft:kill@onset+0.1)")
+                             "WHEN a scenario time T, +S after the previous fault, or onset+S (e.g. ft:kill@onset+0.1)")
         when = m["when"]
         trigger = "onset" if when.startswith("onset") else "after" if when.startswith("+") else "time"
         action = "stall" if m["stall"] else m["action"]
@@ -55,7 +55,7 @@ class Fault:
 
 class FaultPlan:
     """Runs the faults on their own thread against a world host; ``done`` lists what was applied
-    (``(fault text, wall ns applied)``), ``error`` what stopped the plan."""
+    (``(fault text, scenario time s when it was done)``), ``error`` what stopped the plan."""
 
     def __init__(self, faults: list[Fault], world: WorldHost, bus: Bus) -> None:
         unknown = sorted({f.device for f in faults} - set(world.endpoints))
@@ -64,7 +64,7 @@ class FaultPlan:
                              f"(emulated: {', '.join(world.endpoints)})")
         self.faults = faults
         self.world = world
-        self.done: list[tuple[str, int]] = []
+        self.done: list[tuple[str, float]] = []
         self.error: str | None = None
         self._onsets = bus.subscribe(EVENTS_CONTACT, maxsize=None)
         self._stop = threading.Event()
@@ -89,7 +89,7 @@ class FaultPlan:
                     return
                 self._apply(fault)
                 last = time.monotonic()
-                self.done.append((fault.text, time.monotonic_ns()))
+                self.done.append((fault.text, self.world.scenario_time() or 0.0))
         except Exception as exc:  # noqa: BLE001 - reported in the run's summary
             self.error = f"{type(exc).__name__}: {exc}"
 
@@ -102,7 +102,7 @@ class FaultPlan:
             return not self._stop.wait(fault.delay_s)
         if fault.trigger == "after":
             return not self._stop.wait(max(0.0, last + fault.delay_s - time.monotonic()))
-        while self.world.sim_time() < fault.delay_s:
+        while (self.world.scenario_time() or 0.0) < fault.delay_s:
             if self._stop.wait(0.01) or self.world.done:
                 return False
         return True

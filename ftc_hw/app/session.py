@@ -78,7 +78,7 @@ class MonitorOutcome:
     problems: list[str] = field(default_factory=list)
     t_closed_ns: int = 0  # when the adapters were closed
     stream_events: list[dict[str, Any]] = field(default_factory=list)  # sensor_lost, arm_back, ...
-    faults: list[tuple[str, int]] = field(default_factory=list)  # (fault, host ns applied)
+    faults: list[tuple[str, float]] = field(default_factory=list)  # (fault, scenario time s when done)
     vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
     degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
 
@@ -411,7 +411,7 @@ def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], 
     for a in adapters:
         console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
     if out.faults:
-        console.print("faults played: " + ", ".join(f for f, _ in out.faults))
+        console.print("faults played: " + ", ".join(f"{f} (done at t = {t:.2f} s)" for f, t in out.faults))
     for line, n in out.vendor_lines.items():
         console.print(f"{line} ({n}x)")
     if out.reflex:

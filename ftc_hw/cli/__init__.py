@@ -147,7 +147,7 @@ def monitor(
     level: Annotated[Level, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
                                          "scene (the level the scene file declares).")] = Level.dynamics,
     fault: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
-        help="With --sim: DEVICE:ACTION@WHEN, repeatable, in order: ACTION kill, restart or stall:S; WHEN a world "
+        help="With --sim: DEVICE:ACTION@WHEN, repeatable, in order: ACTION kill, restart or stall:S; WHEN a scenario "
              "time T, +S after the previous fault, or onset+S (docs/monitor.md).")] = None,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
