@@ -41,6 +41,14 @@ class Reflex(StrEnum):
 bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: print a table, --json writes the figures.")
 app.add_typer(bench_app, name="bench")
 
+# Pointing a scene at one's own devices (monitor, calibrate): docs/hardware.md
+DeviceOption = Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+    "--device", metavar="NAME.KEY=VALUE", help="Where a scene device is, or one of its params, e.g. "
+    "ft.address=/dev/ttyUSB0, ft.channel=/dev/ttyACM0 (CAN), arm.address=192.168.1.10, arm.baudrate=57600; "
+    "repeatable, applied after --rig.")]
+RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
+    "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
+
 
 def _version(value: bool) -> None:
     if value:
@@ -146,12 +154,15 @@ def monitor(
     view: Annotated[bool, typer.Option("--view/--no-view", help="The live view.")] = True,
     level: Annotated[Level, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
                                          "scene (the level the scene file declares).")] = Level.dynamics,
+    device: DeviceOption = None,
+    rig: RigOption = None,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
 
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
-                                         reflex.value if reflex else None, events, truth, noise, view, level.value))
+                                         reflex.value if reflex else None, events, truth, noise, view, level.value,
+                                         device_overrides=tuple(device or ()), rig=rig))
 
 
 @app.command()
@@ -273,13 +284,16 @@ def calibrate(
     expected_mass: Annotated[float, typer.Option(min=0.0, help="Payload mass (kg) the plan's expected "
                                                                "accuracy assumes.")] = 0.5,
     speed: Annotated[float, typer.Option(min=0.05, max=3.0, help="Peak joint speed of the moves, rad/s.")] = 1.0,
+    device: DeviceOption = None,
+    rig: RigOption = None,
 ) -> None:
     """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
     from .calibrate import run_calibrate_command  # lazy: CLI start-up
 
-    raise typer.Exit(run_calibrate_command(scene, sim=sim, sim_payload=sim_payload, interactive=not non_interactive,
-                                   poses=poses, out=out, json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw,
-                                   tilt=tilt, arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
+    raise typer.Exit(run_calibrate_command(scene, tuple(device or ()), rig, sim=sim, sim_payload=sim_payload,
+                                           interactive=not non_interactive, poses=poses, out=out,
+                                           json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw, tilt=tilt,
+                                           arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
 
 
 def run() -> None:  # pragma: no cover - console entry point

@@ -50,3 +50,14 @@ def test_a_scene_without_an_arm_device_needs_sim():
     truth = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--truth", "t.jsonl"],
                            capture_output=True, text=True, timeout=60)
     assert truth.returncode == 2 and "--truth needs --sim" in truth.stderr
+
+
+def test_without_addresses_the_monitor_says_how_to_give_them():
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "ur5e", "--duration", "1",
+                           "--no-view"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1, proc.stderr
+    assert "no address for device 'ft' (ft-can" in proc.stderr and "and 'arm' (ur-rtde" in proc.stderr, proc.stderr
+    assert "--device ft.channel=" in proc.stderr and "--device arm.address=" in proc.stderr, proc.stderr
+    bad = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "ur5e", "--device", "ft.baud_rate=1"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 1 and "--device: ft.baud_rate:" in bad.stderr and "'bitrate'" in bad.stderr, bad.stderr

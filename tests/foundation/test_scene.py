@@ -164,3 +164,8 @@ def test_device_params_are_checked_against_their_kind(tmp_path, old, new, key, p
     assert old in DXL, old
     _expect(tmp_path, DXL.replace(old, new, 1), key, pattern, model="dxl-arm")
 
+
+def test_builtin_scenes_name_no_hardware_address():
+    for name in builtin_names():
+        assert all(d.address is None for d in load_scene(name).devices), name
+
