@@ -84,6 +84,9 @@ def sim(
     list_: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
     devices: Annotated[bool, typer.Option("--devices/--no-devices",
                                           help="Start the scene's device emulators.")] = True,
+    address: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        metavar="DEVICE=ADDR", help="Where an emulator listens: a loopback IP for a UR arm (arm=127.0.0.3) or a "
+        "Modbus TCP device (host[:port]), a pty path for a serial or CAN device; repeatable.")] = None,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth."""
     from ftc_hw.cli.sim import list_scenarios, run_sim  # lazy: CLI start-up
@@ -93,7 +96,7 @@ def sim(
         return
     if scene is None:
         raise typer.BadParameter("give a scene (ftc scenes lists them) or --list", param_hint="SCENE")
-    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices)
+    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices, address or [])
 
 
 @app.command()

@@ -149,3 +149,10 @@ def test_demo_ends_by_itself_with_a_summary():
     assert r.exit_code == 0, r.output
     assert "contacts: detected against ground truth" in r.output and "false alarms" in r.output
     assert "summary: 1/1 contacts detected" in r.output, r.output[-3000:]  # the 3 s run's one collision
+
+
+def test_sim_addresses_are_checked_before_anything_starts():
+    r = runner.invoke(app, ["sim", "ur5e", "--address", "arm=192.0.2.7"])
+    assert r.exit_code == 2 and "loopback addresses only" in r.output, r.output
+    r = runner.invoke(app, ["calibrate", "--scene", "ur5e", "--device", "arm.adress=192.0.2.7"])
+    assert r.exit_code == 2 and "did you mean 'address'" in r.output, r.output
