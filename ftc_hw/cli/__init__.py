@@ -40,6 +40,8 @@ class Reflex(StrEnum):
 
 bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: print a table, --json writes the figures.")
 app.add_typer(bench_app, name="bench")
+devices_app = typer.Typer(no_args_is_help=True, help="Real devices: what answers where.")
+app.add_typer(devices_app, name="devices")
 
 # Pointing a scene at one's own devices (monitor, calibrate): docs/hardware.md
 DeviceOption = Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
@@ -297,6 +299,30 @@ def calibrate(
                                            interactive=not non_interactive, poses=poses, out=out,
                                            json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw, tilt=tilt,
                                            arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
+
+
+@devices_app.command("probe")
+def devices_probe(
+    scene: Annotated[Optional[str], typer.Option(  # noqa: UP045
+        help="Also try where this scene's devices are (with --device, --rig): their ports, channels, addresses, "
+             "ids, baud rates.")] = None,
+    port: Annotated[Optional[list[str]], typer.Option(help="A serial port to try (default: the system's serial "  # noqa: UP045
+                                                           "ports); repeatable.")] = None,
+    can: Annotated[Optional[list[str]], typer.Option(metavar="[INTERFACE:]CHANNEL", help="A CAN channel to ask "  # noqa: UP045
+                                                     "for a Net F/T (interface default serial); repeatable.")] = None,
+    address: Annotated[Optional[list[str]], typer.Option(help="An IP address to ask for a UR controller; "  # noqa: UP045
+                                                              "repeatable.")] = None,
+    baud: Annotated[Optional[list[int]], typer.Option(help="A DYNAMIXEL baud rate to try (default: 57600 and "  # noqa: UP045
+                                                           "1000000, and the scene's); repeatable.")] = None,
+    timeout: Annotated[float, typer.Option(min=0.05, max=5.0, help="Seconds to wait for each answer.")] = 0.3,
+    device: DeviceOption = None,
+    rig: RigOption = None,
+) -> None:
+    """List what answers: FT 300s and DYNAMIXEL servos on serial ports, Net F/Ts on CAN, UR controllers."""
+    from ftc_hw.cli.devices import run_probe_command  # lazy: CLI start-up
+
+    raise typer.Exit(run_probe_command(scene, tuple(device or ()), rig, ports=port or [], can=can or [],
+                                       addresses=address or [], bauds=baud or [], timeout=timeout))
 
 
 def run() -> None:  # pragma: no cover - console entry point
