@@ -8,6 +8,7 @@ import pytest
 
 from ftc_hw.model import ArmModel
 from ftc_hw.scene import SceneError, builtin_names, load_scene
+from ftc_hw.scene.device_params import KINDS
 from ftc_hw.scene.loader import builtin_dir
 
 LENG = (builtin_dir() / "leng2016.toml").read_text()
@@ -169,3 +170,11 @@ def test_builtin_scenes_name_no_hardware_address():
     for name in builtin_names():
         assert all(d.address is None for d in load_scene(name).devices), name
 
+
+def test_the_hardware_page_lists_every_param_of_every_kind():
+    page = (Path(__file__).resolve().parents[2] / "docs" / "hardware.md").read_text()
+    tables = page.split("## Params of each kind", 1)[1].split("\n### `")[1:]
+    assert [t.split("`", 1)[0] for t in tables] == list(KINDS)
+    for text, kind in zip(tables, KINDS.values(), strict=True):
+        rows = [line.split("`")[1] for line in text.splitlines() if line.startswith("| `")]
+        assert rows == list(kind.names), kind.kind
