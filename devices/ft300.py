@@ -78,6 +78,24 @@ class FT300Adapter(ModbusFTAdapter):
         self.reader.reset()
         self.counters["stream_starts"] += 1
 
+    def identify(self) -> dict[str, str]:
+        """Once, without the reader thread (``ftc devices probe``): stop a running stream, read the
+        identity, close the port. DeviceIOError when nothing answers or what answers is no FT 300."""
+        client = self._open_client()
+        try:
+            if self.transport == "modbus-rtu":
+                self._stop_stream(client.socket)  # type: ignore[arg-type]
+            identity = self._with_retries(self.read_identity) or {}
+        except PollFailed as exc:
+            raise DeviceIOError(f"no answer to the identity read ({exc})") from exc
+        except (serial.SerialException, OSError) as exc:
+            raise DeviceIOError(str(exc)) from exc
+        finally:
+            self._disconnect()
+        if not identity.get("firmware", "").startswith("F"):
+            raise DeviceIOError(f"not an FT 300 (firmware {identity.get('firmware')!r})")
+        return identity
+
     def _stop_stream(self, ser: serial.Serial) -> None:
         """Robotiq's ``rq_com_stop_stream_after_boot``: jam until nothing arrives for 80 ms."""
         ser.reset_input_buffer()

@@ -6,8 +6,10 @@ connected to the endpoint ``ftc sim`` printed for it (its first stdout line,
 F/T device params read here (all optional): ``stale_after_s``, ``range`` (else the device model's or
 the scene sensor's), and per kind: ``ft300``: ``mode`` (stream | poll), ``device_id``, ``baudrate``,
 ``poll_hz``; ``modbus-ft``: ``map``, ``device_id``, ``baudrate``, ``poll_hz``, ``port``;
-``ft-serial-stream``: ``format``, ``baudrate``; ``ft-can``: ``dbc``, ``base_id``, ``mode``,
-``poll_hz``, ``interface``. Arm adapters read theirs in their ``from_spec``.
+``ft-serial-stream``: ``format``, ``baudrate``; ``ft-can``: ``channel`` (else the address), ``dbc``,
+``base_id``, ``mode``, ``poll_hz``, ``interface``. Arm adapters read theirs in their ``from_spec``.
+Every kind's params, with types, ranges and defaults: :data:`ftc_hw.scene.device_params.KINDS`
+(the scene loader checks them).
 """
 from __future__ import annotations
 
@@ -102,7 +104,7 @@ def _can(device: DeviceSpec, bus: Bus, ep: Mapping[str, Any], kw: dict[str, Any]
     p = device.params
     kw.pop("scene_range", None)  # saturation comes in the status frame
     kw.pop("range", None)
-    return CanFTAdapter(device.name, bus, str(ep.get("channel") or _where(device, ep)),
+    return CanFTAdapter(device.name, bus, str(ep.get("channel") or p.get("channel") or _where(device, ep)),
                         interface=str(ep.get("interface", p.get("interface", "serial"))),
                         dbc=str(ep.get("dbc", p.get("dbc", "ati_netft_can.dbc"))),
                         base_id=int(ep.get("base_id", p.get("base_id", 8))),

@@ -30,6 +30,7 @@ from ftc_hw.scene import DeviceSpec, Scene
 
 from .emulator import Emulator, Pacer, PtyLink, default_pty_path, serve_with
 from .link import LinkInfo
+from .loopback import check_loopback
 from .modbus_slave import ModbusSlave
 
 TCP_FAULTS = frozenset(("drop", "delay", "duplicate", "truncate", "stall_s", "disconnect_at_s"))
@@ -78,7 +79,7 @@ class ModbusFTEmulator(Emulator):
         self.pty: PtyLink | None = None
         self.listener: socket.socket | None = None
         self.sel: selectors.BaseSelector | None = None
-        self.host = str(self.options.get("host") or device.address or "127.0.0.1")
+        self.host = check_loopback(str(self.options.get("host") or device.address or "127.0.0.1"))
         self.port = int(self.options.get("port", p.get("port", 0)))
         self.path = str(self.options.get("path") or default_pty_path(scene, device))
         self.extra_stats.update(responses=0, bad_requests=0, stream_starts=0, stream_stops=0)

@@ -1,7 +1,8 @@
 """Universal Robots controller emulator: an RTDE server (protocol v2) and a dashboard server subset.
 
 Binds ``<address>:30004`` (RTDE; ur_rtde hard-codes the port, so every emulator gets its own loopback
-address: the device spec's ``address`` or ``options["address"]``; non-loopback addresses are refused)
+address: ``options["address"]``, else the device spec's ``address``, else ``DEFAULT_ADDRESS``,
+127.0.0.2; non-loopback addresses are refused)
 and ``<address>:29999`` (dashboard).
 
 RTDE: the version request is accepted for protocol 2 only; the controller version is the device's
@@ -35,7 +36,6 @@ robot_status_bits and joint_mode.
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import math
 import os
 import signal
@@ -51,6 +51,7 @@ import numpy as np
 
 from . import ur_data as D
 from .link import Command, EmulatorSide
+from .loopback import check_loopback
 from .thermal import ThermalModel
 from .ur_model import URKinematics
 
@@ -533,14 +534,7 @@ class DashboardServer:
 
 
 # -- the emulator process ---------------------------------------------------------------------------------
-def check_loopback(address: str) -> str:
-    try:
-        ip = ipaddress.ip_address(address)
-    except ValueError:
-        raise ValueError(f"address {address!r} is not an IP address") from None
-    if not ip.is_loopback:
-        raise ValueError(f"refusing to bind {address}: the emulator binds loopback addresses only (127.0.0.x)")
-    return address
+DEFAULT_ADDRESS = "127.0.0.2"  # where an emulated controller listens unless told (scenes name no address)
 
 
 class Emulator:
@@ -550,7 +544,7 @@ class Emulator:
         p = {**device.params, **{k: options[k] for k in ("controller_version", "frequency") if k in options}}
         if scene.n_joints != 6:
             raise ValueError(f"a UR arm has 6 joints; scene {scene.name!r} has {scene.n_joints}")
-        self.address = check_loopback(options.get("address") or device.address or "127.0.0.1")
+        self.address = check_loopback(options.get("address") or device.address or DEFAULT_ADDRESS)
         self.version = parse_version(p.get("controller_version", "5.9"))
         version_max = 500.0 if self.version[0] >= 5 else 125.0
         self.rate = float(p.get("frequency", version_max))

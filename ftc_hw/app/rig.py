@@ -4,7 +4,9 @@ One way to do it for every caller: the monitor session, the calibration wizard's
 device benches. By default a scene's rig is its first F/T sensor and its first arm device (the role
 of each kind is in :data:`ftc_hw.devices.registry.ADAPTERS`); a caller may name its own device specs.
 With a simulated world, ``endpoints`` (:attr:`ftc_hw.sim_devices.host.WorldHost.endpoints`) says
-where each emulated device listens; without, each device's ``address`` in the scene does.
+where each emulated device listens; without, each device's ``address`` in the scene does (or its
+kind's locator param, ``channel`` for CAN), as the scene file, a rig file or ``--device`` options
+(:func:`ftc_hw.scene.load_rig_scene`) set it. Devices that say nowhere are named in one RigError.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from ftc_hw.bus import Bus
 from ftc_hw.devices.base import Adapter, DeviceError
 from ftc_hw.devices.registry import Role, kinds, make_adapter, role_of
 from ftc_hw.scene import DeviceSpec, Scene
+from ftc_hw.scene.device_params import KINDS, located, locator_key
 
 
 class RigError(RuntimeError):
@@ -34,6 +37,27 @@ def require_device(scene: Scene, role: Role) -> DeviceSpec:
         what = {"ft": "F/T sensor", "arm": "arm"}[role]
         raise RigError(f"scene {scene.name!r} declares no {what} device (kinds: {', '.join(kinds(role))})")
     return device
+
+
+def check_located(specs: Iterable[DeviceSpec], endpoints: Mapping[str, Any] | None = None) -> None:
+    """RigError naming every device with neither an emulator's endpoint nor an address (or locator)."""
+    endpoints = endpoints or {}
+    unlocated = [s for s in specs if not endpoints.get(s.name) and s.kind in KINDS
+                 and not located(s.kind, s.address, s.params)]
+    if unlocated:
+        raise RigError(missing_address(unlocated))
+
+
+def missing_address(specs: Iterable[DeviceSpec]) -> str:
+    """What to say when devices have neither an emulator's endpoint nor an address: which, what their
+    address is, and how to give one."""
+    specs = list(specs)
+    what = " and ".join(f"{s.name!r} ({s.kind}: {KINDS[s.kind].address}, e.g. {KINDS[s.kind].example})"
+                        for s in specs)
+    options = " ".join(f"--device {s.name}.{locator_key(s.kind)}={KINDS[s.kind].example}" for s in specs)
+    return (f"no address for device {what}: give {'it' if len(specs) == 1 else 'each one'} with {options}, or "
+            "in a rig file (--rig FILE.toml, a table per device name; docs/hardware.md); "
+            "or run the scene's emulated devices with --sim")
 
 
 class Rig:
@@ -110,6 +134,7 @@ def build_rig(scene: Scene, *, bus: Bus | None = None, devices: Iterable[DeviceS
     device name, keyword arguments for its adapter class."""
     specs = list(devices) if devices is not None else [require_device(scene, r) for r in roles]
     endpoints = endpoints or {}
+    check_located(specs, endpoints)
     overrides = overrides or {}
     bus = bus if bus is not None else Bus()
     rig = Rig(bus, timeout=timeout)

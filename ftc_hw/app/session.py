@@ -31,11 +31,11 @@ from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import EventWriter, event_record, read_truth
 from ftc_hw.record.replay import pipeline_kwargs_to_json
 from ftc_hw.record.writer import McapRecorder
-from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_scene
+from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
 from .faults import Fault, FaultError, FaultPlan
-from .rig import RigError, build_rig, pick_device, require_device
+from .rig import RigError, build_rig, check_located, pick_device, require_device
 from .sim_joints import SimJointSource
 from .vendor_output import vendor_stderr
 
@@ -66,6 +66,8 @@ class MonitorConfig:
     title: str = "ftc monitor"
     connect_timeout_s: float = 20.0
     faults: tuple[str, ...] = ()  # with sim: a fault plan (ftc_hw.app.faults), e.g. ("ft:kill@onset+0.1",)
+    device_overrides: tuple[str, ...] = ()  # NAME.KEY=VALUE (--device), applied after the rig file
+    rig: Path | None = None  # a rig file (--rig): a table of keys per device name
 
 
 @dataclass
@@ -156,7 +158,10 @@ def _devices(scene: Scene, sim: bool) -> tuple[DeviceSpec, DeviceSpec | None]:
     """The scene's F/T sensor and arm devices; without an arm device only a simulated world will do."""
     try:
         ft = require_device(scene, "ft")
-        return ft, (pick_device(scene, "arm") if sim else require_device(scene, "arm"))
+        arm = pick_device(scene, "arm") if sim else require_device(scene, "arm")
+        if not sim:  # said before anything loads: the devices must say where they are
+            check_located([ft, arm])
+        return ft, arm
     except RigError as exc:
         hint = ": with --sim the world's joint state is used" if "arm device" in str(exc) else ""
         raise MonitorSetupError(f"{exc}{hint}") from None
@@ -172,7 +177,7 @@ def _wait_idle(monitor: LiveMonitor, timeout: float = 5.0) -> None:
 def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOutcome:
     console = console or Console()
     try:
-        scene = load_scene(cfg.scene)
+        scene = load_rig_scene(cfg.scene, cfg.device_overrides, cfg.rig)
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
     ft_dev, arm_dev = _devices(scene, cfg.sim)

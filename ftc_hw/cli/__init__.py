@@ -40,6 +40,16 @@ class Reflex(StrEnum):
 
 bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: print a table, --json writes the figures.")
 app.add_typer(bench_app, name="bench")
+devices_app = typer.Typer(no_args_is_help=True, help="Real devices: what answers where.")
+app.add_typer(devices_app, name="devices")
+
+# Pointing a scene at one's own devices (monitor, calibrate): docs/hardware.md
+DeviceOption = Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+    "--device", metavar="NAME.KEY=VALUE", help="Where a scene device is, or one of its params, e.g. "
+    "ft.address=/dev/ttyUSB0, ft.channel=/dev/ttyACM0 (CAN), arm.address=192.168.1.10, arm.baudrate=57600; "
+    "repeatable, applied after --rig.")]
+RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
+    "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
 
 
 def _version(value: bool) -> None:
@@ -76,6 +86,9 @@ def sim(
     list_: Annotated[bool, typer.Option("--list", help="List the scenarios and exit.")] = False,
     devices: Annotated[bool, typer.Option("--devices/--no-devices",
                                           help="Start the scene's device emulators.")] = True,
+    address: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        metavar="DEVICE=ADDR", help="Where an emulator listens: a loopback IP for a UR arm (arm=127.0.0.3) or a "
+        "Modbus TCP device (host[:port]), a pty path for a serial or CAN device; repeatable.")] = None,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth."""
     from ftc_hw.cli.sim import list_scenarios, run_sim  # lazy: CLI start-up
@@ -85,7 +98,7 @@ def sim(
         return
     if scene is None:
         raise typer.BadParameter("give a scene (ftc scenes lists them) or --list", param_hint="SCENE")
-    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices)
+    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices, address or [])
 
 
 @app.command()
@@ -149,13 +162,15 @@ def monitor(
     fault: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
         help="With --sim: DEVICE:ACTION@WHEN, repeatable, in order: ACTION kill, restart or stall:S; WHEN a scenario "
              "time T, +S after the previous fault, or onset+S (docs/monitor.md).")] = None,
+    device: DeviceOption = None,
+    rig: RigOption = None,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
 
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
                                          reflex.value if reflex else None, events, truth, noise, view, level.value,
-                                         tuple(fault or ())))
+                                         tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig))
 
 
 @app.command()
@@ -277,13 +292,40 @@ def calibrate(
     expected_mass: Annotated[float, typer.Option(min=0.0, help="Payload mass (kg) the plan's expected "
                                                                "accuracy assumes.")] = 0.5,
     speed: Annotated[float, typer.Option(min=0.05, max=3.0, help="Peak joint speed of the moves, rad/s.")] = 1.0,
+    device: DeviceOption = None,
+    rig: RigOption = None,
 ) -> None:
     """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
     from .calibrate import run_calibrate_command  # lazy: CLI start-up
 
-    raise typer.Exit(run_calibrate_command(scene, sim=sim, sim_payload=sim_payload, interactive=not non_interactive,
-                                   poses=poses, out=out, json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw,
-                                   tilt=tilt, arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
+    raise typer.Exit(run_calibrate_command(scene, tuple(device or ()), rig, sim=sim, sim_payload=sim_payload,
+                                           interactive=not non_interactive, poses=poses, out=out,
+                                           json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw, tilt=tilt,
+                                           arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
+
+
+@devices_app.command("probe")
+def devices_probe(
+    scene: Annotated[Optional[str], typer.Option(  # noqa: UP045
+        help="Also try where this scene's devices are (with --device, --rig): their ports, channels, addresses, "
+             "ids, baud rates.")] = None,
+    port: Annotated[Optional[list[str]], typer.Option(help="A serial port to try (default: the system's serial "  # noqa: UP045
+                                                           "ports); repeatable.")] = None,
+    can: Annotated[Optional[list[str]], typer.Option(metavar="[INTERFACE:]CHANNEL", help="A CAN channel to ask "  # noqa: UP045
+                                                     "for a Net F/T (interface default serial); repeatable.")] = None,
+    address: Annotated[Optional[list[str]], typer.Option(help="An IP address to ask for a UR controller; "  # noqa: UP045
+                                                              "repeatable.")] = None,
+    baud: Annotated[Optional[list[int]], typer.Option(help="A DYNAMIXEL baud rate to try (default: 57600 and "  # noqa: UP045
+                                                           "1000000, and the scene's); repeatable.")] = None,
+    timeout: Annotated[float, typer.Option(min=0.05, max=5.0, help="Seconds to wait for each answer.")] = 0.3,
+    device: DeviceOption = None,
+    rig: RigOption = None,
+) -> None:
+    """List what answers: FT 300s and DYNAMIXEL servos on serial ports, Net F/Ts on CAN, UR controllers."""
+    from ftc_hw.cli.devices import run_probe_command  # lazy: CLI start-up
+
+    raise typer.Exit(run_probe_command(scene, tuple(device or ()), rig, ports=port or [], can=can or [],
+                                       addresses=address or [], bauds=baud or [], timeout=timeout))
 
 
 def run() -> None:  # pragma: no cover - console entry point

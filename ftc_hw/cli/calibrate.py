@@ -1,6 +1,8 @@
 """``ftc calibrate``: arguments to the bench wizard (:mod:`ftc_hw.app.calibrate`)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 
 from ftc_hw.app.calibrate import run_calibrate
@@ -25,8 +27,9 @@ def parse_sim_payload(text: str) -> Payload:
                                  + (f": {exc}" if str(exc) else ""), param_hint="--sim-payload") from None
 
 
-def run_calibrate_command(scene_name: str, *, sim: bool, sim_payload: str | None, **options) -> int:
-    scene = scene_or_exit(scene_name)
+def run_calibrate_command(scene_name: str, device_overrides: tuple[str, ...] = (), rig: Path | None = None, *,
+                          sim: bool, sim_payload: str | None, **options) -> int:
+    scene = scene_or_exit(scene_name, device_overrides, rig)
     payload = parse_sim_payload(sim_payload) if sim_payload else None
     if payload is not None and not sim:
         raise typer.BadParameter("--sim-payload needs --sim", param_hint="--sim-payload")

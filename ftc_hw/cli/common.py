@@ -1,14 +1,18 @@
 """Shared helpers for the subcommands: scene loading with user-facing errors."""
 from __future__ import annotations
 
+from collections.abc import Iterable
+from pathlib import Path
+
 import typer
 
-from ftc_hw.scene import Scene, SceneError, load_scene
+from ftc_hw.scene import Scene, SceneError, load_rig_scene
 
 
-def scene_or_exit(name: str) -> Scene:
+def scene_or_exit(name: str, device_overrides: Iterable[str] = (), rig: Path | None = None) -> Scene:
+    """The scene, with a rig file's and ``--device`` overrides applied; exit code 2 on an error."""
     try:
-        return load_scene(name)
+        return load_rig_scene(name, device_overrides, rig)
     except SceneError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None

@@ -13,7 +13,8 @@ from ftc_hw.sim_devices.world import SCENARIOS
 def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duration: float | None,
                         calibration: Path | None, record: Path | None, reflex: str | None, events: Path | None,
                         truth: Path | None, noise: bool, view: bool, level: str = "dynamics",
-                        faults: tuple[str, ...] = ()) -> int:
+                        faults: tuple[str, ...] = (), *, device_overrides: tuple[str, ...] = (),
+                        rig: Path | None = None) -> int:
     if truth is not None and not sim:
         typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
         return 2
@@ -25,7 +26,8 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
         return 2
     cfg = MonitorConfig(scene, sim=sim, scenario=scenario, seed=seed, duration=duration, calibration=calibration,
                         record=record, reflex=reflex, events=events, truth=truth, noise=noise, view=view,
-                        level=None if level == "scene" else level, faults=faults)
+                        level=None if level == "scene" else level, faults=faults,
+                        device_overrides=device_overrides, rig=rig)
     out = run_guarded(cfg, make_console())
     return out if isinstance(out, int) else out.exit_code
 

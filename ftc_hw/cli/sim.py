@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from ftc_hw.sim_devices.addresses import parse_addresses
 from ftc_hw.sim_devices.host import WorldHost, WorldHostError
 from ftc_hw.sim_devices.world import SCENARIOS
 
@@ -20,15 +21,20 @@ def list_scenarios() -> None:
 
 
 def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: Path | None,
-            realtime: bool, noise: bool, devices: bool = True) -> None:
+            realtime: bool, noise: bool, devices: bool = True, addresses: list[str] | None = None) -> None:
     scene = scene_or_exit(scene_name)
     if scenario not in SCENARIOS:
         typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
         raise typer.Exit(2)
+    try:
+        options = parse_addresses(addresses or [], scene)
+    except ValueError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
     # SIGTERM stops like Ctrl-C: the world and its emulators are shut down, never orphaned
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
-    world = WorldHost(scene, scenario, devices=None if devices else [], duration=duration, seed=seed, noise=noise,
-                      realtime=realtime, truth=truth)
+    world = WorldHost(scene, scenario, devices=None if devices else [], options=options, duration=duration,
+                      seed=seed, noise=noise, realtime=realtime, truth=truth)
     try:
         endpoints = world.start()
     except WorldHostError as exc:

@@ -1,6 +1,7 @@
 """Scenes: TOML files that say what a setup is. Built-ins ship in ``ftc_hw/scene/builtin``."""
 from .errors import SceneError
 from .loader import builtin_names, load_scene, resolve
+from .overrides import load_rig_scene
 from .schema import (
     COMPENSATION_LEVELS,
     CompensationLevel,
@@ -15,5 +16,6 @@ from .schema import (
 
 __all__ = [
     "COMPENSATION_LEVELS", "CompensationLevel", "Coupling", "DeviceSpec", "RobotSpec", "Scene", "SceneError",
-    "SensorSpec", "SignConvention", "TouchableLink", "builtin_names", "load_scene", "resolve",
+    "SensorSpec", "SignConvention", "TouchableLink", "builtin_names", "load_rig_scene", "load_scene",
+    "resolve",
 ]

@@ -6,6 +6,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from .device_params import ParamError, check_params, check_transport, device_kind
 from .errors import SceneError
 from .schema import (
     COMPENSATION_LEVELS,
@@ -249,13 +250,24 @@ class _Parser:
             p = f"devices[{i}]."
             self.unknown_keys(item, {"name", "kind", "transport", "address", "params"}, p)
             params = self.get(item, "params", p, dict, {})
-            out.append(DeviceSpec(name=self.get(item, "name", p, str), kind=self.get(item, "kind", p, str),
-                                  transport=self.get(item, "transport", p, str),
-                                  address=self.get(item, "address", p, str, None), params=dict(params)))
+            spec = DeviceSpec(name=self.get(item, "name", p, str), kind=self.get(item, "kind", p, str),
+                              transport=self.get(item, "transport", p, str),
+                              address=self.get(item, "address", p, str, None), params=dict(params))
+            out.append(self.checked_device(spec, p))
         names = [d.name for d in out]
         if len(set(names)) != len(names):
             raise self.fail("devices", "device names must be unique")
         return tuple(out)
+
+    def checked_device(self, spec: DeviceSpec, prefix: str) -> DeviceSpec:
+        """The device's kind, transport and params against the kind's schema (:mod:`.device_params`)."""
+        try:
+            check_transport(device_kind(spec.kind).kind, spec.transport)
+            check_params(spec.kind, spec.params)
+        except ParamError as exc:
+            key = exc.key if exc.key in ("kind", "transport") else f"params.{exc.key}"
+            raise self.fail(prefix + key, f"device {spec.name!r}: {exc.problem}") from None
+        return spec
 
 
 def _as_tuple(kind: type | tuple[type, ...]) -> tuple[type, ...]:

@@ -11,6 +11,7 @@ from importlib import resources
 
 from ftc_hw.record.events import read_events
 from ftc_hw.record.reader import read_recording
+from ftc_hw.sim_devices.host import free_loopback
 
 
 def test_monitor_connects_to_the_devices_at_the_scene_addresses(tmp_path):
@@ -50,3 +51,39 @@ def test_a_scene_without_an_arm_device_needs_sim():
     truth = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--truth", "t.jsonl"],
                            capture_output=True, text=True, timeout=60)
     assert truth.returncode == 2 and "--truth needs --sim" in truth.stderr
+
+
+def test_monitor_reaches_emulators_placed_by_sim_address(tmp_path):
+    """``ftc sim --address arm=...`` puts the UR emulator there; ``ftc monitor --device`` points the scene at
+    it and at the CAN emulator's channel: the override path, each in its own process."""
+    address = free_loopback()
+    sim = subprocess.Popen([sys.executable, "-m", "ftc_hw", "sim", "ur5e", "--scenario", "hold", "--duration", "600",
+                            "--address", f"arm={address}"],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        endpoints = {d["name"]: d for d in json.loads(sim.stdout.readline())["devices"]}
+        assert endpoints["arm"]["address"] == address
+        channel = endpoints["ft"]["channel"]
+        proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "ur5e", "--duration", "2",
+                               "--device", f"arm.address={address}", "--device", f"ft.channel={channel}",
+                               "--record", str(tmp_path / "r.mcap"), "--no-view"],
+                              capture_output=True, text=True, timeout=120)
+    finally:
+        sim.terminate()
+        sim.wait(30)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    counts = read_recording(tmp_path / "r.mcap").counts()
+    # both links streamed (1 kHz and 500 Hz; the 2 s include connecting, on a loaded machine) and were paired
+    assert counts["wrench/ft"] >= 100 and counts["joints/arm"] >= 100 and counts["monitor/input"] >= 100, counts
+    assert "ft (ft-can): {" in proc.stdout and "arm (ur-rtde): {" in proc.stdout
+
+
+def test_without_addresses_the_monitor_says_how_to_give_them():
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "ur5e", "--duration", "1",
+                           "--no-view"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1, proc.stderr
+    assert "no address for device 'ft' (ft-can" in proc.stderr and "and 'arm' (ur-rtde" in proc.stderr, proc.stderr
+    assert "--device ft.channel=" in proc.stderr and "--device arm.address=" in proc.stderr, proc.stderr
+    bad = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "ur5e", "--device", "ft.baud_rate=1"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 1 and "--device: ft.baud_rate:" in bad.stderr and "'bitrate'" in bad.stderr, bad.stderr

@@ -12,7 +12,7 @@ from ftc_hw.devices.ft300 import FT300Adapter
 from ftc_hw.devices.registry import kinds
 from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 from ftc_hw.devices.ur import URArm
-from ftc_hw.scene import DeviceSpec, load_scene
+from ftc_hw.scene import DeviceSpec, load_rig_scene, load_scene
 from ftc_hw.sim_devices.emulator import sample_number
 from ftc_hw.sim_devices.host import WorldHost
 
@@ -29,12 +29,22 @@ def _addressed(spec: DeviceSpec) -> DeviceSpec:
     ("ur5e", CanFTAdapter, URArm), ("dxl-arm", FT300Adapter, DynamixelArm)])
 def test_a_scene_rig_is_its_f_t_sensor_and_its_arm(scene_name, ft_class, arm_class):
     scene = load_scene(scene_name)
-    with pytest.raises(RigError, match="device 'ft': no endpoint and no address"):
+    with pytest.raises(RigError) as info:
         build_rig(scene)  # the shipped scenes name no hardware address: an emulator's endpoint is needed
+    says = str(info.value)  # every device without one, what its address is, and how to give it
+    assert says.startswith("no address for device 'ft'") and "and 'arm'" in says, says
+    assert "--device ft." in says and "--device arm.address=" in says and "--rig" in says, says
     rig = build_rig(scene, devices=[_addressed(pick_device(scene, r)) for r in ("ft", "arm")])
     assert isinstance(rig.ft, ft_class) and isinstance(rig.arm, arm_class)
     assert [a.role for a in rig.adapters] == ["ft", "arm"]
     rig.close()  # never opened: closing is harmless
+
+
+def test_overrides_put_the_rig_where_they_say():
+    scene = load_rig_scene("ur5e", ["ft.channel=/dev/ttyFTC1", "ft.base_id=9", "arm.address=192.0.2.10"])
+    rig = build_rig(scene)
+    assert rig.ft.channel == "/dev/ttyFTC1" and rig.ft.codec.base_id == 9 and rig.arm.host == "192.0.2.10"
+    rig.close()
 
 
 def test_a_scene_without_an_arm_device_says_so():

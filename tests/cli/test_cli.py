@@ -149,3 +149,19 @@ def test_demo_ends_by_itself_with_a_summary():
     assert r.exit_code == 0, r.output
     assert "contacts: detected against ground truth" in r.output and "false alarms" in r.output
     assert "summary: 1/1 contacts detected" in r.output, r.output[-3000:]  # the 3 s run's one collision
+
+
+def test_devices_probe_says_what_it_tried():
+    r = runner.invoke(app, ["devices", "probe", "--address", "127.0.0.98", "--timeout", "0.2"])
+    assert r.exit_code == 1, r.output
+    assert "UR controller at 127.0.0.98: RTDE at 127.0.0.98:30004 does not answer" in r.output, r.output
+    assert "nothing answered" in r.output
+    r = runner.invoke(app, ["devices", "probe", "--device", "ft.address=/dev/ttyUSB0"])
+    assert r.exit_code == 2 and "give --scene too" in r.output
+
+
+def test_sim_addresses_are_checked_before_anything_starts():
+    r = runner.invoke(app, ["sim", "ur5e", "--address", "arm=192.0.2.7"])
+    assert r.exit_code == 2 and "loopback addresses only" in r.output, r.output
+    r = runner.invoke(app, ["calibrate", "--scene", "ur5e", "--device", "arm.adress=192.0.2.7"])
+    assert r.exit_code == 2 and "did you mean 'address'" in r.output, r.output

@@ -8,6 +8,7 @@ import pytest
 
 from ftc_hw.model import ArmModel
 from ftc_hw.scene import SceneError, builtin_names, load_scene
+from ftc_hw.scene.device_params import KINDS
 from ftc_hw.scene.loader import builtin_dir
 
 LENG = (builtin_dir() / "leng2016.toml").read_text()
@@ -139,3 +140,41 @@ def test_a_model_joint_the_scene_does_not_set_is_an_error(tmp_path):
     text = DXL.replace(COUPLING, 'joint = "gripper"\ndrives = ["gripper_left_joint"]', 1)
     _expect(tmp_path, text.replace("ratios = [0.015, 0.015]", "ratios = [0.015]", 1), "robot.joints",
             "6 position coordinates but the scene sets 5 .*gripper_left_joint", model="dxl-arm")
+
+
+# -- device params: the schema per kind (ftc_hw.scene.device_params) ------------------------------------
+@pytest.mark.parametrize(("old", "new", "key", "pattern"), [
+    ("baudrate = 19200", "baud_rate = 19200", "devices[0].params.baud_rate",
+     r"device 'ft': unknown parameter of device kind ft300 \(accepted: mode, device_id, baudrate, .*\); "
+     r"did you mean 'baudrate'\?"),
+    ("device_id = 9", 'device_id = "nine"', "devices[0].params.device_id", r"device 'ft': expected an integer.*'nine'"),
+    ("device_id = 9", "device_id = 300", "devices[0].params.device_id", r"<= 247, got 300 \(out of range\)"),
+    ('mode = "stream"', 'mode = "burst"', "devices[0].params.mode", "one of stream, poll, got 'burst'"),
+    ("baudrate = 1000000", "baudrate = 1000001", "devices[1].params.baudrate", "one of 9600, 57600"),
+    ("ids = [11, 12, 13, 14, 15]", "ids = [11, 12, 13, 14, 300]", "devices[1].params.ids", "out of range"),
+    ("directions = [1, 1, 1, 1, -1]", "directions = [1, 1, 1, 1, 0]", "devices[1].params.directions",
+     "a list, each one of -1, 1"),
+    ('kind = "dynamixel"', 'kind = "dynamixl"', "devices[1].kind", "did you mean 'dynamixel'"),
+    ('kind = "ft300"\ntransport = "modbus-rtu"', 'kind = "ft300"\ntransport = "serial"', "devices[0].transport",
+     "transport modbus-rtu, modbus-tcp, not 'serial'"),
+    ('kind = "ft300"\ntransport = "modbus-rtu"\n[devices.params]\nbaudrate = 19200\ndevice_id = 9\nmode = "stream"',
+     'kind = "modbus-ft"\ntransport = "modbus-rtu"\n[devices.params]\nbaudrate = 19200\ndevice_id = 9',
+     "devices[0].params.map", "required by device kind modbus-ft"),
+])
+def test_device_params_are_checked_against_their_kind(tmp_path, old, new, key, pattern):
+    assert old in DXL, old
+    _expect(tmp_path, DXL.replace(old, new, 1), key, pattern, model="dxl-arm")
+
+
+def test_builtin_scenes_name_no_hardware_address():
+    for name in builtin_names():
+        assert all(d.address is None for d in load_scene(name).devices), name
+
+
+def test_the_hardware_page_lists_every_param_of_every_kind():
+    page = (Path(__file__).resolve().parents[2] / "docs" / "hardware.md").read_text()
+    tables = page.split("## Params of each kind", 1)[1].split("\n### `")[1:]
+    assert [t.split("`", 1)[0] for t in tables] == list(KINDS)
+    for text, kind in zip(tables, KINDS.values(), strict=True):
+        rows = [line.split("`")[1] for line in text.splitlines() if line.startswith("| `")]
+        assert rows == list(kind.names), kind.kind
