@@ -46,6 +46,7 @@ class _ContactRun:
     peak: float = 0.0
     impulse: float = 0.0
     last_event: ContactEvent | None = None
+    onset_link: str = ""
 
     def add(self, t_ns: int, external: np.ndarray) -> None:
         f = math.sqrt(float(external[0] ** 2 + external[1] ** 2 + external[2] ** 2))
@@ -219,6 +220,7 @@ class ContactPipeline:
             self._contact.add(t_ns, external)
             self._last_update_ns = t_ns
             ev = self._event(onset, "onset", estimate, det.probability, track, self._link_reach)
+            self._contact.onset_link = ev.link
         elif det.change == "offset":
             return [self.close_contact(t_ns, det.probability)]
         else:
@@ -245,13 +247,15 @@ class ContactPipeline:
     def close_contact(self, t_ns: int, probability: float | None = None, *, lost: bool = False) -> ContactEvent:
         """The open contact's offset at host time t_ns: its last estimate (as its last onset or update
         with an estimate said; the last frame's own when it never had one) with its duration, peak
-        force and impulse. ``lost``: closed because a stream was lost (flagged ``lost``; the detector
-        and the track start afresh). ``probability``: the offset frame's (default: the last event's)."""
+        force and impulse; flagged ``relinked`` when that names another link than the onset did.
+        ``lost``: closed because a stream was lost (flagged ``lost``; the detector and the track start
+        afresh). ``probability``: the offset frame's (default: the last event's)."""
         run = self._contact
         last = run.last_event
         if last is None:
             last = self._event(t_ns, "offset", self._last_estimate, probability or 0.0)
-        flags = (*last.flags, "lost") if lost else last.flags
+        # the track settled on another link than the onset's provisional estimate: said, not hidden
+        flags = (*last.flags, *(("relinked",) if last.link != run.onset_link else ()), *(("lost",) if lost else ()))
         p = last.probability if probability is None else probability
         ev = run.stamp(ContactEvent.make(t_ns, "offset", last.link, last.point, last.force, last.point_std,
                                          flags=flags, probability=p), final=True)

@@ -37,7 +37,9 @@ def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record:
                          + (f"; of error / the uncertainty it reports: {honest:.2f}" if honest is not None else "")
                          + ")" if ratio is not None else "")
                       + "".join(f"; contact {c.index} was cut by the run's end after {c.trusted} unflagged "
-                                f"estimates (not in the worst figures; its row above)" for c in cut))
+                                f"estimates (not in the worst figures; its row above)" for c in cut)
+                      + (f"; [bold red]DEGRADED[/] ({'; '.join(out.degraded)}): read these figures with that in mind"
+                         if out.degraded else ""))
         if not ev.contacts:
             console.print(f"[yellow]the world made no contact in this run: scenario {scenario!r} over {duration:g} s "
                           "had nothing to detect, so nothing above was judged[/]")

@@ -1,5 +1,5 @@
 """``ftc demo`` in a terminal (a pty): the live view renders without errors, the run ends by itself
-with the summary against ground truth and exit status 0."""
+with the summary against ground truth and exit status 0 (or 3, degraded, by the host's load alone)."""
 from __future__ import annotations
 
 import os
@@ -38,9 +38,9 @@ def run_in_pty(args: list[str], timeout: float = 180) -> tuple[int, str]:
     return rc, b"".join(chunks).decode("utf-8", errors="replace")
 
 
-def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary():
+def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary(clean_or_loaded):
     rc, out = run_in_pty([sys.executable, "-m", "ftc_hw", "demo", "--duration", "5"])
-    assert rc == 0, out[-4000:]
+    clean_or_loaded(rc, re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out))
     assert "Traceback" not in out and "Error" not in out, out[-4000:]
     assert "\x1b[" in out  # a terminal: rich drew (and redrew) the live view with escape sequences
     plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out)

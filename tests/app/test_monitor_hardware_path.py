@@ -14,7 +14,7 @@ from ftc_hw.record.reader import read_recording
 from ftc_hw.sim_devices.host import free_loopback
 
 
-def test_monitor_connects_to_the_devices_at_the_scene_addresses(tmp_path):
+def test_monitor_connects_to_the_devices_at_the_scene_addresses(tmp_path, clean_or_loaded):
     builtin = resources.files("ftc_hw") / "scene" / "builtin"
     sim = subprocess.Popen([sys.executable, "-m", "ftc_hw", "sim", "dxl-arm", "--scenario", "hold", "--duration", "60"],
                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
@@ -32,7 +32,7 @@ def test_monitor_connects_to_the_devices_at_the_scene_addresses(tmp_path):
     finally:
         sim.terminate()
         sim.wait(30)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
     assert "ft (ft300): {" in proc.stdout and "arm (dynamixel): {" in proc.stdout
     rec = read_recording(tmp_path / "r.mcap")
     counts = rec.counts()
@@ -53,7 +53,7 @@ def test_a_scene_without_an_arm_device_needs_sim():
     assert truth.returncode == 2 and "--truth needs --sim" in truth.stderr
 
 
-def test_monitor_reaches_emulators_placed_by_sim_address(tmp_path):
+def test_monitor_reaches_emulators_placed_by_sim_address(tmp_path, clean_or_loaded):
     """``ftc sim --address arm=...`` puts the UR emulator there; ``ftc monitor --device`` points the scene at
     it and at the CAN emulator's channel: the override path, each in its own process."""
     address = free_loopback()
@@ -71,7 +71,7 @@ def test_monitor_reaches_emulators_placed_by_sim_address(tmp_path):
     finally:
         sim.terminate()
         sim.wait(30)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
     counts = read_recording(tmp_path / "r.mcap").counts()
     # both links streamed (1 kHz and 500 Hz; the 2 s include connecting, on a loaded machine) and were paired
     assert counts["wrench/ft"] >= 100 and counts["joints/arm"] >= 100 and counts["monitor/input"] >= 100, counts

@@ -31,16 +31,20 @@ def ftc(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "ftc_hw", *args], capture_output=True, text=True, timeout=timeout)
 
 
-def run_monitor(tmp_path, scene: str, duration: float, *extra: str):
-    events, truth = tmp_path / "events.jsonl", tmp_path / "truth.jsonl"
-    proc = ftc("monitor", "--scene", scene, "--sim", "--scenario", "sweep-with-collision", "--duration", str(duration),
-               "--events", str(events), "--truth", str(truth), "--no-view", *extra)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    return proc, read_events(events), read_truth(truth)
+@pytest.fixture
+def run_monitor(clean_or_loaded):
+    def run(tmp_path, scene: str, duration: float, *extra: str):
+        events, truth = tmp_path / "events.jsonl", tmp_path / "truth.jsonl"
+        proc = ftc("monitor", "--scene", scene, "--sim", "--scenario", "sweep-with-collision", "--duration",
+                   str(duration), "--events", str(events), "--truth", str(truth), "--no-view", *extra)
+        clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
+        return proc, read_events(events), read_truth(truth)
+
+    return run
 
 
 @pytest.mark.parametrize("scene", ["ur5e", "dxl-arm", "leng2016"])
-def test_every_collision_is_detected_in_time_and_localized(tmp_path, scene):
+def test_every_collision_is_detected_in_time_and_localized(tmp_path, scene, run_monitor):
     proc, events, truth = run_monitor(tmp_path, scene, 8.0)
     ev = evaluate(events, truth, 1.0 / load_scene(scene).sensor.rate_hz)
     console = Console(width=160, record=True)
@@ -58,11 +62,28 @@ def test_every_collision_is_detected_in_time_and_localized(tmp_path, scene):
         assert c.err_median_mm <= MEDIAN_ERR_MM[scene], report
         assert c.force_err_median_n < 10.0, report  # a quarter of the obstacle's 40 N peak
     lines = [e for e in events if e["kind"] in ("onset", "update", "offset")]
-    assert len(lines) == len(events) and all(set(e) >= {"t", "kind", "link", "point", "force", "point_std", "flags"}
-                                             for e in events)
+    assert len(lines) == len(events) and all(set(e) >= {"t", "kind", "contact_id", "link", "point", "force",
+                                                        "point_std", "flags"} for e in events)
+    check_pairs(events, report)
 
 
-def test_reflex_stop_halts_the_arm_at_the_onset(tmp_path):
+def check_pairs(events: list[dict], report: str) -> None:
+    """Every contact's onset, updates and offset share its id; its offset carries its last estimate (never
+    a zero point, never another link than its last event's) and its figures."""
+    onsets = [e for e in events if e["kind"] == "onset"]
+    assert [e["contact_id"] for e in onsets] == list(range(1, len(onsets) + 1)), report
+    for onset in onsets:
+        mine = [e for e in events if e.get("contact_id") == onset["contact_id"]]
+        offset = mine[-1]
+        assert offset["kind"] == "offset" and [e["kind"] for e in mine].count("offset") == 1, report
+        last = [e for e in mine[:-1] if "no_estimate" not in e["flags"]][-1]
+        assert offset["point"] == last["point"] != [0.0, 0.0, 0.0] and offset["link"] == last["link"], (offset, last)
+        assert offset["duration_s"] > 0.1 and offset["peak_force"] > 10.0 and offset["impulse"] > 0.5, offset
+        if offset["link"] != onset["link"]:
+            assert "relinked" in offset["flags"], (onset, offset)
+
+
+def test_reflex_stop_halts_the_arm_at_the_onset(tmp_path, run_monitor):
     proc, events, truth = run_monitor(tmp_path, "dxl-arm", 4.0, "--reflex", "stop")
     onset = next(e for e in events if e["kind"] == "onset")
     sent = re.search(r"reflex stop: 1 sent, ([0-9.]+)-[0-9.]+ ms after the onset sample", proc.stdout)
@@ -81,7 +102,7 @@ def test_reflex_stop_halts_the_arm_at_the_onset(tmp_path):
     assert np.abs(ref - ref[0]).max() > 0.3
 
 
-def test_a_calibration_file_replaces_the_tare_and_goes_into_the_recording(tmp_path):
+def test_a_calibration_file_replaces_the_tare_and_goes_into_the_recording(tmp_path, run_monitor):
     from ftc_hw.calibration.file import Calibration, now_iso, save_calibration
     from ftc_hw.record.reader import read_recording
 

@@ -20,11 +20,11 @@ def ftc(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
+def recorded(tmp_path_factory, clean_or_loaded):
     d = tmp_path_factory.mktemp("rec")
     proc = ftc("monitor", "--scene", "dxl-arm", "--sim", "--duration", "4", "--record", str(d / "run.mcap"),
                "--events", str(d / "events.jsonl"), "--no-view")
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
     return d
 
 
