@@ -328,5 +328,19 @@ def devices_probe(
                                        addresses=address or [], bauds=baud or [], timeout=timeout))
 
 
+@app.command(hidden=True)
+def warm(
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scenes whose kernels to load (default: the "  # noqa: UP045
+                                                            "built-in ones).")] = None,
+) -> None:
+    """Compile the numba kernels of ftc demo and ftc monitor --sim into numba's cache (scripts/bootstrap.sh runs it)."""
+    typer.echo("[warm] loading MuJoCo and numba ...", err=True)
+    from ftc_hw.app.warm import warm as run_warm  # lazy: CLI start-up
+
+    from .common import scene_or_exit  # lazy: CLI start-up
+
+    run_warm([scene_or_exit(name) for name in scene] if scene else None)
+
+
 def run() -> None:  # pragma: no cover - console entry point
     app()
