@@ -42,13 +42,15 @@ def _world(scene: Scene) -> None:
 
 
 def _pipeline(scene: Scene) -> None:
-    """The monitor process: a pipeline calls each of its kernels once when it is built; and the
+    """The monitor process: a pipeline calls each of its kernels once when it is built; then the
     detector's kernels with the model error the pipeline passes once the arm moves, whose rows are
-    a transposed array (Fortran order: another signature, ContactPipeline._model_error)."""
+    a transposed array (Fortran order: another signature, ContactPipeline._model_error), and the
+    solver's tree kinematics, which a contact's track asks for at a q the last solve was not at."""
     pipe = ContactPipeline(scene, level="dynamics")
     rows = np.zeros((6, 2)).T
     mahalanobis2(np.zeros(6), pipe.detector.cov, rows)
     quad_sum(rows, pipe.detector.inv)
+    pipe.solver.body_poses(np.asarray(scene.robot.home, dtype=float) + 0.01)
 
 
 def _evaluation(scene: Scene) -> None:
