@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
-# Creates (or refreshes) the project's virtual environment in .venv and installs ftc-hw into it.
-# Re-runs pip only when pyproject.toml changed since the last successful install.
+# Creates (or refreshes) the project's virtual environment in .venv and installs ftc-hw into it,
+# then compiles its numba kernels into numba's on-disk cache (`ftc warm`, a progress line per step).
+# Re-runs pip only when pyproject.toml changed since the last successful install, and the warm-up
+# only after an install or when a source file is newer than the last warm-up (numba's cache index
+# then recompiles just the kernels whose sources changed).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$root/.venv"
@@ -24,4 +27,18 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip >&2
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$root[test]" >&2
   echo "$want" > "$stamp"
+  rm -f "$venv/.ftc-warmed"  # numba itself may have changed
+fi
+warmed="$venv/.ftc-warmed"
+sources=("$root/ftc_hw" "$root/sim_devices" "$root/calibration" "$root/devices")
+if [ ! -f "$warmed" ] || [ -n "$(find "${sources[@]}" -name '*.py' -newer "$warmed" -print -quit)" ] \
+   || { [ -z "${NUMBA_CACHE_DIR:-}" ] && ! compgen -G "$root/ftc_hw/solver/__pycache__/*.nbi" >/dev/null; }; then
+  echo "[bootstrap] compiling the numba kernels into numba's cache (ftc warm: once, minutes; after an edit, what changed)" >&2
+  touch "$warmed.new"  # a file edited during the warm-up is newer than the stamp
+  if "$venv/bin/ftc" warm; then
+    mv "$warmed.new" "$warmed"
+  else
+    rm -f "$warmed.new"
+    echo "[bootstrap] warning: ftc warm failed; the first run compiles its kernels itself (slow start)" >&2
+  fi
 fi

@@ -49,7 +49,7 @@ from .runner import AppliedCommand, SimRunner
 from .world import Hold, truth_record
 
 UR_PORTS = (30004, 29999)  # RTDE (hard-coded by ur_rtde) and dashboard
-START_TIMEOUT_S = 90.0  # a first run compiles the world's kernels
+START_TIMEOUT_S = 90.0  # without `ftc warm` first, the world compiles its kernels
 
 
 class WorldHostError(RuntimeError):
@@ -210,8 +210,10 @@ class _Child:
 def _main(conn: Any, plan: _Plan) -> None:
     """Entry point of the world process."""
     try:
+        t0 = time.monotonic()
         runner = SimRunner(plan.scene, plan.scenario, duration=plan.duration or 1e12, seed=plan.seed,
                            noise=plan.noise, devices=plan.devices, options=plan.options, payload=plan.payload)
+        world_s = time.monotonic() - t0
         endpoints = runner.start()
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises; start() cleaned up
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
@@ -220,7 +222,9 @@ def _main(conn: Any, plan: _Plan) -> None:
     try:
         child.reply("ready", {"endpoints": endpoints, "joint_ring": runner.link.joints.name,
                               "ft_ring": runner.link.ft.name, "n_joints": plan.scene.n_joints,
-                              "sample_period_s": 1.0 / plan.scene.sensor.rate_hz})
+                              "sample_period_s": 1.0 / plan.scene.sensor.rate_hz,
+                              "startup_s": {"world": world_s, **{e.device.name: e.started_s
+                                                                  for e in runner.emulators}}})
         child.serve()
     except (_Quit, EOFError, BrokenPipeError, KeyboardInterrupt):
         pass
@@ -275,6 +279,7 @@ class WorldHost:
         self.sample_period_s = 1.0 / scene.sensor.rate_hz
         self.result: dict[str, Any] | None = None
         self._pipe_lock = threading.RLock()
+        self.startup_s: dict[str, float] = {}  # seconds to build the world ("world"), to start each emulator
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self, timeout: float = START_TIMEOUT_S) -> dict[str, dict[str, Any]]:
@@ -298,6 +303,7 @@ class WorldHost:
         self._rings = {"joints": Ring(joint_width(n), name=info["joint_ring"], create=False),
                        "ft": Ring(12, name=info["ft_ring"], create=False)}
         self.sample_period_s = info["sample_period_s"]
+        self.startup_s = info["startup_s"]
         return self.endpoints
 
     def close(self) -> None:

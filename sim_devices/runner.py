@@ -5,97 +5,20 @@ commands applied; one emulator process per device. It runs inside the world proc
 from __future__ import annotations
 
 import dataclasses
-import importlib
-import multiprocessing as mp
-import queue
-import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ftc_hw.model import ArmModel, Payload
-from ftc_hw.priority import DEVICE_NICE, WORLD_NICE, prefer_cpu
+from ftc_hw.priority import WORLD_NICE, prefer_cpu
 from ftc_hw.scene import DeviceSpec, Scene
 
-from .link import Command, LinkInfo, WorldLink
-from .registry import EMULATORS
+from .launch import EmulatorProcess
+from .link import Command, WorldLink
 from .world import World, WorldState, build_scenario
-
-
-class EmulatorStartError(RuntimeError):
-    pass
-
-
-def _entry(kind: str):
-    target = EMULATORS.get(kind)
-    if target is None:
-        raise EmulatorStartError(f"no emulator for device kind {kind!r} (known: {', '.join(EMULATORS)})")
-    module, func = target.split(":")
-    return getattr(importlib.import_module(module), func)
-
-
-EMULATOR_SWITCH_INTERVAL_S = 0.0002
-
-
-def _serve(kind: str, device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:
-    """Entry point of an emulator process."""
-    # A device answers from its own threads (a dashboard reader beside the RTDE stream, a serial
-    # reader beside the pacing loop): at Python's default 5 ms switch interval a thread ready to
-    # answer can wait that long for the GIL, longer than a control period.
-    sys.setswitchinterval(EMULATOR_SWITCH_INTERVAL_S)
-    prefer_cpu(DEVICE_NICE, exact=True)  # below the world's tier even when the world started it
-    try:
-        serve = _entry(kind)
-    except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
-        ready.put({"error": f"{type(exc).__name__}: {exc}"})
-        return
-    serve(device, scene, link, ready, options)
-
-
-@dataclass
-class EmulatorProcess:
-    device: DeviceSpec
-    process: Any
-    endpoint: dict[str, Any] = field(default_factory=dict)
-
-    @classmethod
-    def start(cls, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict | None = None,
-              timeout: float = 30.0) -> EmulatorProcess:
-        ctx = mp.get_context("spawn")
-        ready = ctx.Queue()
-        proc = ctx.Process(target=_serve, args=(device.kind, device, scene, link, ready, options or {}),
-                           name=f"emulator:{device.name}", daemon=True)
-        proc.start()
-        try:
-            endpoint = ready.get(timeout=timeout)
-        except queue.Empty:
-            proc.terminate()
-            raise EmulatorStartError(f"emulator for {device.name!r} ({device.kind}) did not start within "
-                                     f"{timeout:g} s") from None
-        if "error" in endpoint:
-            proc.join(timeout=5)
-            raise EmulatorStartError(f"emulator for {device.name!r} ({device.kind}): {endpoint['error']}")
-        return cls(device, proc, endpoint)
-
-    @property
-    def alive(self) -> bool:
-        return self.process.is_alive()
-
-    def stop(self, timeout: float = 5.0) -> None:
-        if self.process.is_alive():
-            self.process.terminate()
-        self.process.join(timeout)
-        if self.process.is_alive():
-            self.process.kill()
-            self.process.join(timeout)
-
-    def kill(self) -> None:
-        """Die like a pulled plug (tests use it): no clean shutdown."""
-        self.process.kill()
-        self.process.join(5.0)
 
 
 @dataclass(frozen=True)
@@ -134,10 +57,16 @@ class SimRunner:
     def start(self) -> list[dict[str, Any]]:
         # joint state first, so emulators that answer at once have something to serve
         self._publish(self.world.state, with_ft=True)
+        # launched together, waited for together: their start-ups (imports, binding) overlap
+        launched = []
         try:
             for d in self.devices:
-                self.emulators.append(EmulatorProcess.start(d, self.scene, self.link.info, self.options.get(d.name)))
+                launched.append(EmulatorProcess.launch(d, self.scene, self.link.info, self.options.get(d.name)))
+            for pending in launched:
+                self.emulators.append(pending.wait())
         except Exception:
+            for pending in launched[len(self.emulators):]:
+                pending.cancel()
             self.stop()
             raise
         # after the emulators started (they take their own tier, below the world's): the world's

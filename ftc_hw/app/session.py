@@ -212,13 +212,17 @@ def _start_world(cfg: MonitorConfig, console: Console, scene: Scene, stack: cont
         truth_path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))) / "truth.jsonl"
     world = WorldHost(scene, cfg.scenario, duration=cfg.duration, seed=cfg.seed, noise=cfg.noise, preroll=True,
                       truth=truth_path)
-    console.print(f"starting the emulated devices of [cyan]{scene.name}[/] "
-                  f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)})...")
+    console.print(f"starting the world (MuJoCo) and the emulated devices of [cyan]{scene.name}[/] "
+                  f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)}) ...")
+    t0 = time.monotonic()
     try:
         world.start()
     except Exception as exc:  # noqa: BLE001 - emulator start failures carry their reason
         raise MonitorSetupError(str(exc)) from None
     stack.callback(world.close)
+    took = world.startup_s
+    console.print(f"world up in {time.monotonic() - t0:.1f} s (built in {took.get('world', 0.0):.1f} s); emulators up: "
+                  + ", ".join(f"{n} ({e['kind']}) {took.get(n, 0.0):.1f} s" for n, e in world.endpoints.items()))
     return world, truth_path
 
 
@@ -259,6 +263,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         ev_sub = bus.subscribe("events/", maxsize=None)
         tare_s = None if cal_kwargs else 0.1
         pipeline_kwargs = {**cal_kwargs, **({"level": cfg.level} if cfg.level else {})}
+        console.print("loading the pipeline (its compiled kernels) ...")
         monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
         recorder = None
         if cfg.record:
@@ -272,6 +277,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         writer = EventWriter(events_file) if events_file is not None else None
         if world is None:
             monitor.start()  # on hardware the arm must be still now: the tare takes the first 0.1 s
+        console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "") + " ...")
         try:
             rig = build_rig(scene, bus=bus, devices=[d for d in (ft_dev, arm_dev) if d is not None],
                             endpoints=world.endpoints if world is not None else None, timeout=cfg.connect_timeout_s)
@@ -299,6 +305,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
             if cfg.reflex == "stop":
                 reflex = StopReflex(bus, rig.arm)
             if world is not None:
+                console.print("waiting for the first frames (the sensor is tared at rest) ...")
                 _tare_then_go(cfg, monitor, world)
                 if plan is not None:
                     plan.start()

@@ -38,6 +38,8 @@ class Reflex(StrEnum):
     stop = "stop"
 
 
+LOADING = "loading MuJoCo, numba and the device stack ..."  # seconds, before a live command's first line
+
 bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: print a table, --json writes the figures.")
 app.add_typer(bench_app, name="bench")
 devices_app = typer.Typer(no_args_is_help=True, help="Real devices: what answers where.")
@@ -135,6 +137,7 @@ def demo(
     record: Annotated[Optional[Path], typer.Option(help="Also record the run to this MCAP file.")] = None,  # noqa: UP045
 ) -> None:
     """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
+    typer.echo(LOADING, err=True)
     from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
 
     raise typer.Exit(run_demo(scene, scenario, duration, seed, record))
@@ -166,6 +169,7 @@ def monitor(
     rig: RigOption = None,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
+    typer.echo(LOADING, err=True)
     from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
 
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
@@ -326,6 +330,20 @@ def devices_probe(
 
     raise typer.Exit(run_probe_command(scene, tuple(device or ()), rig, ports=port or [], can=can or [],
                                        addresses=address or [], bauds=baud or [], timeout=timeout))
+
+
+@app.command(hidden=True)
+def warm(
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scenes whose kernels to load (default: the "  # noqa: UP045
+                                                            "built-in ones).")] = None,
+) -> None:
+    """Compile the numba kernels of ftc demo and ftc monitor --sim into numba's cache (scripts/bootstrap.sh runs it)."""
+    typer.echo("[warm] loading MuJoCo and numba ...", err=True)
+    from ftc_hw.app.warm import warm as run_warm  # lazy: CLI start-up
+
+    from .common import scene_or_exit  # lazy: CLI start-up
+
+    run_warm([scene_or_exit(name) for name in scene] if scene else None)
 
 
 def run() -> None:  # pragma: no cover - console entry point

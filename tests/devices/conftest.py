@@ -24,8 +24,8 @@ import pytest
 from ftc_hw.bus import EVENTS_DEVICE, Bus
 from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
+from ftc_hw.sim_devices.launch import EmulatorProcess
 from ftc_hw.sim_devices.link import WorldLink
-from ftc_hw.sim_devices.runner import EmulatorProcess
 
 # -- F/T adapters against their emulators ------------------------------------------------------------
 
