@@ -346,7 +346,9 @@ class ContactPipeline:
         if self._g_cache is None or t_clock - self._g_time >= G_REFRESH_NS:
             self._g_cache = self.compensator.model.wrench_qdd_jacobian()
             self._g_time = t_clock
-        return (self._g_cache * np.where(np.abs(lag_error) >= self.lag_floor, lag_error, 0.0)).T
+        # rows contiguous: the kernels compiled (and warmed) for C-ordered rows take it as it is
+        rows = (self._g_cache * np.where(np.abs(lag_error) >= self.lag_floor, lag_error, 0.0)).T
+        return np.ascontiguousarray(rows)
 
     def _gap_held(self, t_clock: int, lag_error: np.ndarray | None, joint_gap_ns: int) -> np.ndarray | None:
         """The lag error the detector judges an onset with over missed joint samples (None: the
