@@ -9,7 +9,9 @@ A worker thread owns the pipeline (a bounded queue decouples it from the F/T rea
 drops frames, counted, instead of stalling the device). Without a calibration the sensor is tared
 on the first ``tare_s`` of frames, which must be taken with the arm still and untouched. A frame
 received more than 50 ms after its aligned time counts as late (``ft_frames_late``: a backlog between
-the device and the monitor; the clock alignment keeps such frames at their true time).
+the device and the monitor, or, with emulated devices, a simulated world running behind real time;
+the clock alignment keeps such frames at their true time). A frame judged more than 50 ms after its
+adapter received it counts in ``ft_frames_backlog``: the monitor itself fell behind.
 
 A frame whose joint state had to be made across missed joint samples (the samples around it more
 than 1.5 joint periods apart, the period being the stream's median spacing) carries that span as
@@ -58,6 +60,9 @@ from .scene import Scene
 
 MONITOR_INPUT = "monitor/input"
 LATE_NS = 50_000_000  # an F/T frame received this long after its (aligned) time counts as late
+# an F/T frame judged this long after its adapter received it: the monitor fell behind (a host that
+# cannot keep up); the joint wait (max_gap_ms, 20 ms) stays well inside it
+BACKLOG_NS = 50_000_000
 JOINT_PERIOD_SAMPLES = 64  # the joint period is the median spacing of this many recent samples
 LOST_S = 0.25  # default: a stream silent this long is lost (shorter gaps: frames counted no_joint_state)
 
@@ -184,6 +189,8 @@ class LiveMonitor:
                 if newest is not None and newest < t and now - arrived < self.wait_s:
                     break
                 pending.popleft()
+                if time.monotonic_ns() - frame.t_host_ns > BACKLOG_NS:  # we fell behind our own reader
+                    self.counters["ft_frames_backlog"] += 1
                 try:
                     self.handle(frame, t)
                 except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor

@@ -326,7 +326,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                 reflex.close()
         pump()
         _finish(cfg, scene, monitor, reflex, world, truth_path, recorder, out)
-        _judge_degraded(monitor, rig.adapters, out)
+        _judge_degraded(monitor, rig.adapters, out, cfg.sim)
         _summary(console, cfg, bus, topics, out, rig.adapters, recorder, world)
     return out
 
@@ -383,7 +383,7 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
         out.exit_code = 1
 
 
-def _judge_degraded(monitor: LiveMonitor, adapters, out: MonitorOutcome) -> None:
+def _judge_degraded(monitor: LiveMonitor, adapters, out: MonitorOutcome, sim: bool) -> None:
     """Why this run cannot be read as clean (lost streams, frames not judged, a host that could not
     keep up, devices that dropped): each reason a line of the summary; exit code DEGRADED_EXIT."""
     c = monitor.counters
@@ -401,9 +401,14 @@ def _judge_degraded(monitor: LiveMonitor, adapters, out: MonitorOutcome) -> None
         detail = ", ".join(f"{k} {v}" for k, v in unjudged.items() if v)
         out.degraded.append(f"{100 * sum(unjudged.values()) / total:.1f} % of F/T frames not judged ({detail}): "
                             "contacts may be missed, false alarms possible")
-    if frames and c.get("ft_frames_late", 0) > DROPPED_SHARE * frames:
-        out.degraded.append(f"the host could not keep up: {c['ft_frames_late']} F/T frames reached the monitor "
-                            "over 50 ms late")
+    if frames and c.get("ft_frames_backlog", 0) > DROPPED_SHARE * frames:
+        out.degraded.append(f"the host could not keep up: {c['ft_frames_backlog']} F/T frames were judged over "
+                            "50 ms after they arrived")
+    # with emulated devices, frames late by their device clock say the simulated world ran behind real
+    # time, not that the monitor did (it judged them as they came): degraded only on real devices
+    if not sim and frames and c.get("ft_frames_late", 0) > DROPPED_SHARE * frames:
+        out.degraded.append(f"the F/T frames came late: {c['ft_frames_late']} reached the monitor over 50 ms "
+                            "after their device time")
     for a in adapters:
         drops = a.counters.get("disconnects", 0) + a.counters.get("errors", 0)
         if drops:
