@@ -129,6 +129,7 @@ class LiveMonitor:
         self._joint_period_ns: int | None = None  # the joint stream's median spacing (recent samples)
         self._joint_count = 0
         self._why_none = ""  # why the last _joints_at gave None: before, old, late, gap
+        self._lags: deque[int] = deque(maxlen=20_000)  # ns from a frame's arrival to its judgement
         self.lost_after_ns = {"sensor": int(ft_lost_s * 1e9), "arm": int(arm_lost_s * 1e9)}
         self._rx_ns: dict[str, int | None] = {"sensor": None, "arm": None}  # host time of the newest frame
         self.lost: set[str] = set()
@@ -153,6 +154,10 @@ class LiveMonitor:
         self._thread.join(timeout=5.0)
         self._thread = None
         self.counters["ft_frames_dropped"] = self._sub.drops
+        if self._lags:  # from a frame's arrival to its judgement (the recent ones)
+            lags = np.array(self._lags) / 1e6
+            self.counters["judge_lag_ms_p50"] = round(float(np.median(lags)))
+            self.counters["judge_lag_ms_p99"] = round(float(np.percentile(lags, 99)))
         for name, clock in (("ft", self._ft_clock), ("arm", self._arm_clock)):
             if clock.capped:
                 self.counters[f"{name}_clock_capped"] = clock.capped
@@ -189,7 +194,9 @@ class LiveMonitor:
                 if newest is not None and newest < t and now - arrived < self.wait_s:
                     break
                 pending.popleft()
-                if time.monotonic_ns() - frame.t_host_ns > BACKLOG_NS:  # we fell behind our own reader
+                lag = time.monotonic_ns() - frame.t_host_ns
+                self._lags.append(lag)
+                if lag > BACKLOG_NS:  # we fell behind our own reader
                     self.counters["ft_frames_backlog"] += 1
                 try:
                     self.handle(frame, t)
