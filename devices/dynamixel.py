@@ -47,6 +47,8 @@ from ftc_hw.codecs.dxl_table import MODELS, PRESENT_LENGTH, PRESENT_START
 from .arm_base import ArmAdapter
 from .base import DeviceError, DeviceIOError
 
+DEFAULT_MODEL = "XM430-W350"  # a scene's servo model when it names none
+
 try:
     import termios
 
@@ -65,7 +67,7 @@ class DynamixelArm(ArmAdapter):
     kind = "dynamixel"
     moves_on_goals = True
 
-    def __init__(self, name: str, bus: Bus, port: str, ids: Sequence[int], *, model: str = "XM430-W350",
+    def __init__(self, name: str, bus: Bus, port: str, ids: Sequence[int], *, model: str = DEFAULT_MODEL,
                  baudrate: int = 1_000_000, zero_ticks: Sequence[int] | None = None,
                  directions: Sequence[int] | None = None, torque_constant: Sequence[float] | float | None = None,
                  rate_hz: float = 500.0, fast_read: bool = False, stale_after: float = 0.05,

@@ -176,8 +176,8 @@ class LiveMonitor:
         while not self._stop.is_set():
             try:
                 frame = self._sub.get(timeout=0.001 if pending else 0.01)
-                self._received("sensor")
                 t_frame = self._aligned(self._ft_clock, frame)
+                self._received("sensor", t_frame)
                 if frame.t_host_ns - t_frame > LATE_NS:  # a backlog between the device and us
                     self.counters["ft_frames_late"] += 1
                 pending.append((time.monotonic(), t_frame, frame))
@@ -205,10 +205,10 @@ class LiveMonitor:
                     self.counters[f"error:{type(exc).__name__}"] += 1
 
     # -- lost streams (the worker's thread; the joint callback only notes the time) ----------------------
-    def _received(self, stream: str) -> None:
+    def _received(self, stream: str, t_frame: int) -> None:
         self._rx_ns[stream] = time.monotonic_ns()
         if stream in self.lost and stream == "sensor":
-            self._back(stream)
+            self._back(stream, t_frame)  # back from this sample's time: every later sample is after it
 
     def _check_streams(self) -> None:
         now = time.monotonic_ns()
@@ -219,7 +219,7 @@ class LiveMonitor:
             if stream not in self.lost and now - rx > after:
                 self._lose(stream, now, rx)
             elif stream == "arm" and stream in self.lost and now - rx <= after:
-                self._back(stream)
+                self._back(stream, min(rx, now))
 
     def _lose(self, stream: str, now: int, rx: int) -> None:
         self.lost.add(stream)
@@ -230,16 +230,16 @@ class LiveMonitor:
                            + ("no contact can be judged" if stream == "sensor" else
                               "blind: F/T frames are dropped unjudged until joint state returns"))
 
-    def _back(self, stream: str) -> None:
-        now = time.monotonic_ns()
+    def _back(self, stream: str, t_ns: int) -> None:
+        """The stream is back from host time t_ns (its first sample's; never before the loss)."""
         self.lost.discard(stream)
         gone = 0.0
         for loss in reversed(self.losses):
             if loss[0] == stream and loss[2] is None:
-                loss[2] = now
-                gone = (now - loss[1]) / 1e9
+                t_ns = loss[2] = max(t_ns, loss[1])
+                gone = (t_ns - loss[1]) / 1e9
                 break
-        self._stream_event(now, stream, f"{stream}_back", f"frames again after {gone:.3f} s lost")
+        self._stream_event(t_ns, stream, f"{stream}_back", f"frames again after {gone:.3f} s lost")
 
     def _stream_event(self, t_ns: int, stream: str, kind: str, message: str) -> None:
         counters = {k: v for k, v in self.counters.items() if isinstance(v, int)}

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,7 @@ from ftc_hw.calibration import (
     take_sample,
 )
 from ftc_hw.calibration.acquire import pose_error
+from ftc_hw.calibration.plan import visiting_order
 from ftc_hw.devices.base import DeviceError
 from ftc_hw.model import ArmModel, Payload
 from ftc_hw.scene import Scene
@@ -144,6 +146,14 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
     console.print(f"[bold]ftc calibrate[/]: scene [cyan]{scene.name}[/]"
                   + (" on [yellow]emulated devices[/] (the world hides the payload)" if sim else ""))
     session = DeviceSession(scene, sim=sim, sim_payload=payload, seed=seed)
+    # planned before the devices start: then the planning has the CPU to itself (27 s instead of 5 s on
+    # 2 cores beside the world and the emulators); the visiting order follows the arm's pose once known
+    opts = FitOptions(yaw=yaw, tilt=tilt, arm_gravity=arm_gravity, q_std=session.q_resolution / np.sqrt(12))
+    identifier = Identifier(GeometryModel(ArmModel(scene)), opts)
+    n_samples = int(round(sample_s * scene.sensor.rate_hz))
+    with console.status(f"planning {poses} poses"):
+        plan = plan_poses(scene, identifier, poses, samples_per_pose=n_samples, expected_mass=expected_mass,
+                          seed=seed)
     try:
         with console.status("connecting to the scene's devices"):
             session.start()
@@ -158,13 +168,8 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
             console.print("[red]this arm cannot be moved by the wizard (UR: jog it by hand): run without "
                           "--non-interactive[/]")
             return 1
-        opts = FitOptions(yaw=yaw, tilt=tilt, arm_gravity=arm_gravity, q_std=session.q_resolution / np.sqrt(12))
-        identifier = Identifier(GeometryModel(ArmModel(scene)), opts)
         q_now, _ = session.joint_state()
-        n_samples = int(round(sample_s * scene.sensor.rate_hz))
-        with console.status(f"planning {poses} poses"):
-            plan = plan_poses(scene, identifier, poses, samples_per_pose=n_samples, expected_mass=expected_mass,
-                              seed=seed, start=q_now)
+        plan = replace(plan, q=visiting_order(plan.q, q_now))
         console.print(plan_table(plan))
         console.print(expected_table(plan, sample_s))
         if session.arm.moves_on_goals:

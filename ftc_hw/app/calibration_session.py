@@ -17,6 +17,8 @@ import numpy as np
 
 from ftc_hw.bus import Bus, joints_topic, wrench_topic
 from ftc_hw.calibration.samples import Window
+from ftc_hw.codecs.dxl_table import MODELS
+from ftc_hw.devices.dynamixel import DEFAULT_MODEL as DEFAULT_DXL_MODEL
 from ftc_hw.model import Payload
 from ftc_hw.scene import Scene
 from ftc_hw.sim_devices.host import WorldHost
@@ -97,9 +99,11 @@ class DeviceSession:
 
     @property
     def q_resolution(self) -> float:
-        """Joint encoder resolution (rad): DYNAMIXEL ticks; UR reports doubles (taken as 1e-5 rad)."""
-        model = getattr(self.arm, "model", None)
-        return float(getattr(model, "rad_per_tick", 1e-5))
+        """Joint encoder resolution (rad): DYNAMIXEL ticks; UR reports doubles (taken as 1e-5 rad).
+        Known from the scene before the devices start."""
+        if self.arm_spec.kind == "dynamixel":
+            return float(MODELS[str(self.arm_spec.params.get("model", DEFAULT_DXL_MODEL))].rad_per_tick)
+        return 1e-5
 
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         f = self.bus.latest(self.arm.topic)
