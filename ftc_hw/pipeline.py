@@ -17,7 +17,7 @@ from .model import ArmModel, Payload
 from .model.arm import link_reach
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, Solver, make_solver
-from .tracking import ContactTrack, fuse_point, link_pose, report
+from .tracking import FUSED_FLAGS, ContactTrack, fuse_point, link_pose, report
 
 G_REFRESH_NS = 10_000_000
 QDD_RING = 64
@@ -45,7 +45,8 @@ class _ContactRun:
     last_ns: int = 0
     peak: float = 0.0
     impulse: float = 0.0
-    last_event: ContactEvent | None = None
+    last_event: ContactEvent | None = None  # the last with an estimate
+    last_trusted: ContactEvent | None = None  # the last whose estimate the track would fuse (flags: grazing)
     onset_link: str = ""
 
     def add(self, t_ns: int, external: np.ndarray) -> None:
@@ -59,6 +60,8 @@ class _ContactRun:
                       peak_force=self.peak, impulse=self.impulse)
         if not final and "no_estimate" not in ev.flags:
             self.last_event = out
+            if FUSED_FLAGS.issuperset(f for f in ev.flags if f != "uncertain"):
+                self.last_trusted = out
         return out
 
 
@@ -246,12 +249,14 @@ class ContactPipeline:
 
     def close_contact(self, t_ns: int, probability: float | None = None, *, lost: bool = False) -> ContactEvent:
         """The open contact's offset at host time t_ns: its last estimate (as its last onset or update
-        with an estimate said; the last frame's own when it never had one) with its duration, peak
-        force and impulse; flagged ``relinked`` when that names another link than the onset did.
+        with a sound estimate said, one the track would fuse; else its last with any estimate; else the
+        last frame's own) with its duration, peak force and impulse; flagged ``relinked`` when that
+        names another link than the onset did.
         ``lost``: closed because a stream was lost (flagged ``lost``; the detector and the track start
         afresh). ``probability``: the offset frame's (default: the last event's)."""
         run = self._contact
-        last = run.last_event
+        # a contact's last low-force or ambiguous estimate (its release) says less than its last sound one
+        last = run.last_trusted or run.last_event
         if last is None:
             last = self._event(t_ns, "offset", self._last_estimate, probability or 0.0)
         # the track settled on another link than the onset's provisional estimate: said, not hidden

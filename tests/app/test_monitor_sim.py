@@ -76,7 +76,9 @@ def check_pairs(events: list[dict], report: str) -> None:
         mine = [e for e in events if e.get("contact_id") == onset["contact_id"]]
         offset = mine[-1]
         assert offset["kind"] == "offset" and [e["kind"] for e in mine].count("offset") == 1, report
-        last = [e for e in mine[:-1] if "no_estimate" not in e["flags"]][-1]
+        known = [e for e in mine[:-1] if "no_estimate" not in e["flags"]]
+        sound = [e for e in known if set(e["flags"]) - {"uncertain"} <= {"grazing"}]
+        last = (sound or known)[-1]  # the contact's last sound estimate (else its last one)
         assert offset["point"] == last["point"] != [0.0, 0.0, 0.0] and offset["link"] == last["link"], (offset, last)
         assert offset["duration_s"] > 0.1 and offset["peak_force"] > 10.0 and offset["impulse"] > 0.5, offset
         if offset["link"] != onset["link"]:
