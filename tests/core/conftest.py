@@ -12,6 +12,7 @@ import pytest
 from ftc_hw.bus import Bus, DeviceEvent, JointFrame, WrenchFlag, WrenchFrame, joints_topic, wrench_topic
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.model.sampling import SurfacePoint
+from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import World, WorldState
 
 
@@ -119,3 +120,16 @@ def world_feeder():
     yield make
     for feeder in feeders:
         feeder.stop()
+
+
+@pytest.fixture(scope="module")
+def link3_push():
+    """leng2016 at home, a point on link3's top face and its outward normal (base frame):
+    ``(scene, model, q, point, normal)``."""
+    scene = load_scene("leng2016")
+    model = ArmModel(scene)
+    q = np.array(scene.robot.home, dtype=float)
+    b_T = model.kinematics(q)["link3"]
+    point = b_T[:3, :3] @ np.array([0.1, 0.0, 0.04]) + b_T[:3, 3]
+    normal = b_T[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    return scene, model, q, point, normal

@@ -6,22 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ftc_hw.model import ArmModel, Contact
+from ftc_hw.model import Contact
 from ftc_hw.pipeline import ContactPipeline
-from ftc_hw.scene import load_scene
 
 RATE_HZ = 1000.0
-
-
-@pytest.fixture(scope="module")
-def arm():
-    scene = load_scene("leng2016")
-    model = ArmModel(scene)
-    q = np.array(scene.robot.home, dtype=float)
-    b_T = model.kinematics(q)["link3"]
-    point = b_T[:3, :3] @ np.array([0.1, 0.0, 0.04]) + b_T[:3, 3]
-    normal = b_T[:3, :3] @ np.array([0.0, 0.0, 1.0])
-    return scene, model, q, point, normal
 
 
 def _run(pipe, model, q, point, normal, profile, rng, t0_ns=0):
@@ -37,8 +25,8 @@ def _run(pipe, model, q, point, normal, profile, rng, t0_ns=0):
     return events
 
 
-def test_a_contact_s_events_share_an_id_and_its_offset_carries_its_last_estimate(arm):
-    scene, model, q, point, normal = arm
+def test_a_contact_s_events_share_an_id_and_its_offset_carries_its_last_estimate(link3_push):
+    scene, model, q, point, normal = link3_push
     pipe = ContactPipeline(scene, level="gravity", use_currents=False)
     rng = np.random.default_rng(1)
     push = np.concatenate([np.linspace(0, 30, 50), np.full(200, 30.0), np.linspace(30, 0, 50)])
@@ -65,8 +53,8 @@ def test_a_contact_s_events_share_an_id_and_its_offset_carries_its_last_estimate
     assert first.impulse == pytest.approx(30.0 * 0.25, rel=0.1)  # 200 ms at 30 N plus two ramps
 
 
-def test_a_lost_stream_closes_the_open_contact_with_a_lost_offset(arm):
-    scene, model, q, point, normal = arm
+def test_a_lost_stream_closes_the_open_contact_with_a_lost_offset(link3_push):
+    scene, model, q, point, normal = link3_push
     pipe = ContactPipeline(scene, level="gravity", use_currents=False)
     rng = np.random.default_rng(2)
     events = _run(pipe, model, q, point, normal, np.concatenate([np.zeros(50), np.full(100, 25.0)]), rng)
