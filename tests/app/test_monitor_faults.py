@@ -78,7 +78,8 @@ def _check_run(tmp_path, proc, events: list[dict], stream: str, losses: int) -> 
 def test_the_f_t_sensor_stalled_killed_in_contact_and_in_free_motion_and_restarted(tmp_path):
     # stalled in free motion, killed in the first collision, restarted, killed in free motion (the
     # second collision comes while it is gone), restarted before the third
-    faults = ("ft:stall:0.5@0.6", "ft:kill@onset+0.1", "ft:restart@+0.2", "ft:kill@+1.5", "ft:restart@+0.2")
+    # the sensor stays dead 0.6 s before each restart: longer than the monitor's backlog plus the 0.25 s loss
+    faults = ("ft:stall:0.5@0.6", "ft:kill@onset+0.1", "ft:restart@+0.6", "ft:kill@+1.5", "ft:restart@+0.6")
     proc, events = _monitor(tmp_path, 12, *faults)
     contacts = _check_run(tmp_path, proc, events, "sensor", losses=3)
     played = proc.stdout.split("faults played: ")[1]
