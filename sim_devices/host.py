@@ -42,11 +42,12 @@ from typing import Any
 import numpy as np
 
 from ftc_hw.model import Payload
+from ftc_hw.model.true_arm import true_arm_spec
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
 from .link import Command, Ring, RingReader, joint_width
 from .runner import AppliedCommand, SimRunner
-from .world import Hold, truth_record
+from .world import Hold, Reality, truth_record, with_reality
 
 UR_PORTS = (30004, 29999)  # RTDE (hard-coded by ur_rtde) and dashboard
 START_TIMEOUT_S = 90.0  # without `ftc warm` first, the world compiles its kernels
@@ -262,15 +263,20 @@ class WorldHost:
     def __init__(self, scene: Scene | str, scenario: str = "hold", *, devices: Iterable[str | DeviceSpec] | None = None,
                  options: dict[str, dict] | None = None, duration: float | None = None, seed: int = 0,
                  noise: bool = True, preroll: bool = False, realtime: bool = True, truth: Path | None = None,
-                 payload: Payload | None = None) -> None:
+                 payload: Payload | None = None, reality: Reality | str = Reality.IDEAL,
+                 reality_seed: int | None = None) -> None:
         scene = load_scene(scene) if isinstance(scene, str) else scene
         specs = _device_specs(scene, devices)
+        # the world's arm: the scene's [world] and a draw of the reality (seeded by the run's seed unless
+        # given); drawn and checked here, so a bad [world] table fails before any process starts
+        true_scene = with_reality(scene, reality, seed if reality_seed is None else reality_seed)
+        true_arm_spec(true_scene)
         options = {k: dict(v) for k, v in (options or {}).items()}
         for d in specs:
             if d.kind == "ur-rtde":
                 options.setdefault(d.name, {}).setdefault("address", free_loopback())
         self.scene = scene
-        self._plan = _Plan(scene, scenario, specs, options, duration, seed, noise, preroll, realtime,
+        self._plan = _Plan(true_scene, scenario, specs, options, duration, seed, noise, preroll, realtime,
                            str(truth) if truth else None, payload)
         self._proc: Any = None
         self._conn: Any = None

@@ -34,7 +34,7 @@ from ftc_hw.calibration.acquire import pose_error
 from ftc_hw.calibration.plan import visiting_order
 from ftc_hw.devices.base import DeviceError
 from ftc_hw.model import ArmModel, Payload
-from ftc_hw.scene import Scene
+from ftc_hw.scene import Scene, SceneError
 
 from .calibration_session import DeviceSession, SessionError
 
@@ -135,7 +135,7 @@ def _ask(console: Console, interactive: bool, question: str, default: bool = Tru
 def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, interactive: bool, poses: int,
                   out: Path | None, json_path: Path | None, sample_s: float = 1.0, seed: int = 0,
                   yaw: bool = False, tilt: bool = False, arm_gravity: bool = False, expected_mass: float = 0.5,
-                  speed: float = 1.0) -> int:
+                  speed: float = 1.0, reality: str = "ideal") -> int:
     """The wizard on ``scene``'s devices (``sim``: emulated, hiding ``sim_payload``, default 0.5 kg 5 cm
     out along the flange's z). Returns the exit code (module docstring)."""
     console = Console()
@@ -144,8 +144,8 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
         payload = Payload(0.5, (0.0, 0.0, 0.05))
     out = out or Path(f"calibration-{scene.name}.toml")
     console.print(f"[bold]ftc calibrate[/]: scene [cyan]{scene.name}[/]"
-                  + (" on [yellow]emulated devices[/] (the world hides the payload)" if sim else ""))
-    session = DeviceSession(scene, sim=sim, sim_payload=payload, seed=seed)
+                  + (f" on [yellow]emulated devices[/] (hidden payload; reality {reality})" if sim else ""))
+    session = DeviceSession(scene, sim=sim, sim_payload=payload, seed=seed, reality=reality)
     # planned before the devices start: then the planning has the CPU to itself (27 s instead of 5 s on
     # 2 cores beside the world and the emulators); the visiting order follows the arm's pose once known
     opts = FitOptions(yaw=yaw, tilt=tilt, arm_gravity=arm_gravity, q_std=session.q_resolution / np.sqrt(12))
@@ -157,7 +157,7 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
     try:
         with console.status("connecting to the scene's devices"):
             session.start()
-    except (SessionError, DeviceError, RuntimeError, OSError) as exc:
+    except (SessionError, DeviceError, RuntimeError, OSError, SceneError) as exc:
         console.print(f"[red]cannot connect:[/] {exc}")
         return 1
     try:

@@ -32,8 +32,9 @@ class SessionError(RuntimeError):
 
 class DeviceSession:
     def __init__(self, scene: Scene, *, sim: bool = False, sim_payload: Payload | None = None, seed: int = 0,
-                 noise: bool = True) -> None:
+                 noise: bool = True, reality: str = "ideal") -> None:
         self.scene = scene
+        self.reality = reality
         self.sim = sim
         self.sim_payload = sim_payload
         self.seed = seed
@@ -58,7 +59,8 @@ class DeviceSession:
         try:
             if self.sim:
                 self.world = WorldHost(self.scene, "hold", devices=[self.ft_spec.name, self.arm_spec.name],
-                                       seed=self.seed, noise=self.noise, payload=self.sim_payload)
+                                       seed=self.seed, noise=self.noise, payload=self.sim_payload,
+                                       reality=self.reality)
                 self.world.start()
             self._wrench = self.bus.subscribe(wrench_topic(self.ft_spec.name), maxsize=200_000)
             self._joints = self.bus.subscribe(joints_topic(self.arm_spec.name), maxsize=200_000)

@@ -68,6 +68,7 @@ class MonitorConfig:
     faults: tuple[str, ...] = ()  # with sim: a fault plan (ftc_hw.app.faults), e.g. ("ft:kill@onset+0.1",)
     device_overrides: tuple[str, ...] = ()  # NAME.KEY=VALUE (--device), applied after the rig file
     rig: Path | None = None  # a rig file (--rig): a table of keys per device name
+    reality: str = "ideal"  # with sim: how the world's arm differs from the model (ideal, typical, harsh)
 
 
 @dataclass
@@ -210,9 +211,13 @@ def _start_world(cfg: MonitorConfig, console: Console, scene: Scene, stack: cont
     truth_path = cfg.truth
     if truth_path is None:
         truth_path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))) / "truth.jsonl"
-    world = WorldHost(scene, cfg.scenario, duration=cfg.duration, seed=cfg.seed, noise=cfg.noise, preroll=True,
-                      truth=truth_path)
-    console.print(f"starting the world (MuJoCo) and the emulated devices of [cyan]{scene.name}[/] "
+    try:
+        world = WorldHost(scene, cfg.scenario, duration=cfg.duration, seed=cfg.seed, noise=cfg.noise, preroll=True,
+                          truth=truth_path, reality=cfg.reality)
+    except SceneError as exc:
+        raise MonitorSetupError(str(exc)) from None
+    console.print(f"starting the world (MuJoCo, reality [cyan]{cfg.reality}[/]) and the emulated devices of "
+                  f"[cyan]{scene.name}[/] "
                   f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)}) ...")
     t0 = time.monotonic()
     try:

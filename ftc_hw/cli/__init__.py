@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -36,6 +36,19 @@ class Level(StrEnum):
 
 class Reflex(StrEnum):
     stop = "stop"
+
+
+class RealityChoice(StrEnum):
+    """How the simulated world's arm differs from the model (docs/reality.md)."""
+
+    ideal = "ideal"
+    typical = "typical"
+    harsh = "harsh"
+
+
+def reality_option(default: RealityChoice, what: str = "") -> Any:
+    return typer.Option(help=f"{what}The simulated world: ideal (the model itself), typical or harsh (seeded draws "
+                             "of a real arm's, sensor's and shell's differences from the model; docs/reality.md).")
 
 
 LOADING = "loading MuJoCo, numba and the device stack ..."  # seconds, before a live command's first line
@@ -91,6 +104,7 @@ def sim(
     address: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
         metavar="DEVICE=ADDR", help="Where an emulator listens: a loopback IP for a UR arm (arm=127.0.0.3) or a "
         "Modbus TCP device (host[:port]), a pty path for a serial or CAN device; repeatable.")] = None,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal)] = RealityChoice.ideal,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth."""
     from ftc_hw.cli.sim import list_scenarios, run_sim  # lazy: CLI start-up
@@ -100,7 +114,7 @@ def sim(
         return
     if scene is None:
         raise typer.BadParameter("give a scene (ftc scenes lists them) or --list", param_hint="SCENE")
-    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices, address or [])
+    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices, address or [], reality.value)
 
 
 @app.command()
@@ -135,12 +149,13 @@ def demo(
     duration: Annotated[float, typer.Option(min=1.0, help="Simulated seconds (real time) of live view.")] = 30.0,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     record: Annotated[Optional[Path], typer.Option(help="Also record the run to this MCAP file.")] = None,  # noqa: UP045
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal)] = RealityChoice.ideal,
 ) -> None:
     """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
     typer.echo(LOADING, err=True)
     from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
 
-    raise typer.Exit(run_demo(scene, scenario, duration, seed, record))
+    raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value))
 
 
 @app.command()
@@ -167,6 +182,7 @@ def monitor(
              "time T, +S after the previous fault, or onset+S (docs/monitor.md).")] = None,
     device: DeviceOption = None,
     rig: RigOption = None,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
@@ -174,7 +190,8 @@ def monitor(
 
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
                                          reflex.value if reflex else None, events, truth, noise, view, level.value,
-                                         tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig))
+                                         tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
+                                         reality=reality.value))
 
 
 @app.command()
@@ -298,6 +315,7 @@ def calibrate(
     speed: Annotated[float, typer.Option(min=0.05, max=3.0, help="Peak joint speed of the moves, rad/s.")] = 1.0,
     device: DeviceOption = None,
     rig: RigOption = None,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
 ) -> None:
     """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
     from .calibrate import run_calibrate_command  # lazy: CLI start-up
@@ -305,7 +323,8 @@ def calibrate(
     raise typer.Exit(run_calibrate_command(scene, tuple(device or ()), rig, sim=sim, sim_payload=sim_payload,
                                            interactive=not non_interactive, poses=poses, out=out,
                                            json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw, tilt=tilt,
-                                           arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed))
+                                           arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed,
+                                           reality=reality.value))
 
 
 @devices_app.command("probe")

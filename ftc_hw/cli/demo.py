@@ -10,13 +10,15 @@ from ftc_hw.app.view import make_console
 from .monitor import run_guarded
 
 
-def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record: Path | None = None) -> int:
+def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record: Path | None = None,
+             reality: str = "ideal") -> int:
     console = make_console()
-    console.print(f"[bold]ftc demo[/]: scene [cyan]{scene_name}[/], scenario [cyan]{scenario}[/], {duration:g} s: "
+    console.print(f"[bold]ftc demo[/]: scene [cyan]{scene_name}[/], scenario [cyan]{scenario}[/], reality "
+                  f"[cyan]{reality}[/], {duration:g} s: "
                   "emulated devices -> adapters -> bus -> compensation, detection, localization; "
                   "then the contacts against ground truth")
     cfg = MonitorConfig(scene_name, sim=True, scenario=scenario, seed=seed, duration=duration, record=record,
-                        title="ftc demo")
+                        title="ftc demo", reality=reality)
     out = run_guarded(cfg, console)
     if isinstance(out, int):
         return out

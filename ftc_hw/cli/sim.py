@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from ftc_hw.scene import SceneError
 from ftc_hw.sim_devices.addresses import parse_addresses
 from ftc_hw.sim_devices.host import WorldHost, WorldHostError
 from ftc_hw.sim_devices.world import SCENARIOS
@@ -21,7 +22,8 @@ def list_scenarios() -> None:
 
 
 def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: Path | None,
-            realtime: bool, noise: bool, devices: bool = True, addresses: list[str] | None = None) -> None:
+            realtime: bool, noise: bool, devices: bool = True, addresses: list[str] | None = None,
+            reality: str = "ideal") -> None:
     scene = scene_or_exit(scene_name)
     if scenario not in SCENARIOS:
         typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
@@ -33,8 +35,12 @@ def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: P
         raise typer.Exit(2) from None
     # SIGTERM stops like Ctrl-C: the world and its emulators are shut down, never orphaned
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
-    world = WorldHost(scene, scenario, devices=None if devices else [], options=options, duration=duration,
-                      seed=seed, noise=noise, realtime=realtime, truth=truth)
+    try:
+        world = WorldHost(scene, scenario, devices=None if devices else [], options=options, duration=duration,
+                          seed=seed, noise=noise, realtime=realtime, truth=truth, reality=reality)
+    except SceneError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
     try:
         endpoints = world.start()
     except WorldHostError as exc:
@@ -42,7 +48,8 @@ def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: P
         raise typer.Exit(1) from None
     try:
         # The first stdout line tells clients what to connect to.
-        print(json.dumps({"scene": scene.name, "scenario": scenario, "devices": list(endpoints.values())}),
+        print(json.dumps({"scene": scene.name, "scenario": scenario, "reality": reality, "seed": seed,
+                          "devices": list(endpoints.values())}),
               flush=True)
         while not world.wait_done(1.0):
             pass

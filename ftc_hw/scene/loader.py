@@ -6,6 +6,8 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .device_params import ParamError, check_params, check_transport, device_kind
 from .errors import SceneError
 from .schema import (
@@ -19,6 +21,7 @@ from .schema import (
     TouchableLink,
     _frozen,
 )
+from .world_spec import IDEAL, InertialError, WorldSpec
 
 SCHEMA_VERSION = 1
 _BUILTIN_DIR = Path(__file__).resolve().parent / "builtin"
@@ -131,7 +134,7 @@ class _Parser:
     # -- sections --------------------------------------------------------------------------------------
     def scene(self, data: dict) -> Scene:
         self.unknown_keys(data, {"schema", "name", "description", "robot", "gravity", "sensor",
-                                 "touchable", "compensation", "devices"}, "")
+                                 "touchable", "compensation", "devices", "world"}, "")
         schema = self.get(data, "schema", "", int)
         if schema != SCHEMA_VERSION:
             raise self.fail("schema", f"expected schema version {SCHEMA_VERSION}, got {schema}")
@@ -147,20 +150,16 @@ class _Parser:
         self.unknown_keys(comp, {"level"}, "compensation.")
         level = self.choice(comp, "level", "compensation.", COMPENSATION_LEVELS)
         devices = self.devices(data.get("devices", []))
+        world = self.world(self.table(data, "world"), robot.joints) if "world" in data else IDEAL
         return Scene(name=name, description=self.get(data, "description", "", str, ""), path=self.path,
                      robot=robot, gravity=gravity, sensor=sensor, touchable=touchable,
-                     compensation=level, devices=devices)
+                     compensation=level, devices=devices, world=world)
 
     def robot(self, t: dict) -> RobotSpec:
         p = "robot."
         self.unknown_keys(t, {"model", "joints", "home", "flange", "torque_constant", "friction_viscous",
                               "friction_coulomb", "kp", "kd", "current_noise_std", "couplings"}, p)
-        model = self.get(t, "model", p, str)
-        model_path = (self.path.parent / model).resolve()
-        if model_path.suffix.lower() not in (".xml", ".urdf"):
-            raise self.fail(p + "model", f"expected an MJCF (.xml) or URDF (.urdf) file, got {model!r}")
-        if not model_path.is_file():
-            raise self.fail(p + "model", f"model file not found: {model_path}")
+        model_path = self.model_file(t, p)
         joints = self.get(t, "joints", p, list)
         if not joints or not all(isinstance(j, str) and j for j in joints):
             raise self.fail(p + "joints", "expected a non-empty list of joint names")
@@ -180,6 +179,16 @@ class _Parser:
             current_noise_std=self.vector(t, "current_noise_std", p, n, nonneg=True, default=[0.0] * n),
             couplings=self.couplings(t.get("couplings", []), tuple(joints)),
         )
+
+    def model_file(self, t: dict, p: str) -> Path:
+        """``model``: an MJCF or URDF file, relative to the scene file."""
+        model = self.get(t, "model", p, str)
+        model_path = (self.path.parent / model).resolve()
+        if model_path.suffix.lower() not in (".xml", ".urdf"):
+            raise self.fail(p + "model", f"expected an MJCF (.xml) or URDF (.urdf) file, got {model!r}")
+        if not model_path.is_file():
+            raise self.fail(p + "model", f"model file not found: {model_path}")
+        return model_path
 
     def couplings(self, items: Any, joints: tuple[str, ...]) -> tuple[Coupling, ...]:
         p = "robot.couplings"
@@ -225,6 +234,60 @@ class _Parser:
             bias=self.vector(t, "bias", p, 6, default=[0.0] * 6),
             drift_per_s=self.vector(t, "drift_per_s", p, 6, default=[0.0] * 6),
         )
+
+    def world(self, t: dict, joints: tuple[str, ...]) -> WorldSpec:
+        p, n = "world.", len(joints)
+        self.unknown_keys(t, {"model", "inertials", "friction_coulomb", "friction_viscous", "friction_stribeck",
+                              "stribeck_velocity", "torque_constant", "sensor_offset_m", "sensor_rotation_rad",
+                              "sensor_gain", "coloured_noise_std", "coloured_noise_tau_s", "temperature_drift",
+                              "temperature_rise_K", "temperature_tau_s", "shell_offset_m"}, p)
+        model_path = self.model_file(t, p) if "model" in t else None
+
+        def joint_vector(key: str, **kw) -> Any:
+            return self.vector(t, key, p, n, **kw) if key in t else None
+
+        shell = self.number(t, "shell_offset_m", p, default=0.0)
+        if not 0.0 <= shell <= 0.05:
+            raise self.fail(p + "shell_offset_m", f"expected 0 to 0.05 m, got {shell}")
+        return WorldSpec(
+            model_path=model_path, inertials=self.inertials(self.get(t, "inertials", p, dict, {})),
+            friction_coulomb=joint_vector("friction_coulomb", nonneg=True),
+            friction_viscous=joint_vector("friction_viscous", nonneg=True),
+            friction_stribeck=joint_vector("friction_stribeck", nonneg=True),
+            stribeck_velocity=self.number(t, "stribeck_velocity", p, positive=True, default=0.02),
+            torque_constant=joint_vector("torque_constant", positive=True),
+            sensor_offset=self.vector(t, "sensor_offset_m", p, 3, default=[0.0] * 3),
+            sensor_rotation=self.vector(t, "sensor_rotation_rad", p, 3, default=[0.0] * 3),
+            sensor_gain=self.matrix6(t, "sensor_gain", p),
+            coloured_noise_std=self.vector(t, "coloured_noise_std", p, 6, nonneg=True, default=[0.0] * 6),
+            coloured_noise_tau_s=self.number(t, "coloured_noise_tau_s", p, positive=True, default=1.0),
+            temperature_drift=self.vector(t, "temperature_drift", p, 6, default=[0.0] * 6),
+            temperature_rise_K=self.number(t, "temperature_rise_K", p, default=0.0),
+            temperature_tau_s=self.number(t, "temperature_tau_s", p, positive=True, default=600.0),
+            shell_offset=shell)
+
+    def inertials(self, table: dict) -> Any:
+        out = {}
+        for body, item in table.items():
+            q = f"world.inertials.{body}."
+            if not isinstance(item, dict):
+                raise self.fail(q[:-1], f"expected a table, got {type(item).__name__}")
+            self.unknown_keys(item, {"mass_scale", "com_offset_m", "inertia_scale"}, q)
+            out[body] = InertialError(self.number(item, "mass_scale", q, positive=True, default=1.0),
+                                      self.vector(item, "com_offset_m", q, 3, default=[0.0] * 3),
+                                      self.number(item, "inertia_scale", q, positive=True, default=1.0))
+        return out
+
+    def matrix6(self, t: dict, key: str, prefix: str) -> Any:
+        if key not in t:
+            return _frozen(np.eye(6))
+        rows = self.get(t, key, prefix, list)
+        if len(rows) != 6:
+            raise self.fail(prefix + key, f"expected 6 rows of 6 numbers, got {len(rows)} rows")
+        out = np.array([self.vector({f"{key}[{i}]": r}, f"{key}[{i}]", prefix, 6) for i, r in enumerate(rows)])
+        if abs(np.linalg.det(out)) < 1e-6:
+            raise self.fail(prefix + key, "the gain matrix is singular: no sensor reads like that")
+        return _frozen(out)
 
     def touchable(self, items: Any) -> tuple[TouchableLink, ...]:
         if items is None:

@@ -10,6 +10,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from .world_spec import IDEAL, WorldSpec
+
 SignConvention = Literal["base_on_arm", "arm_on_base"]
 CompensationLevel = Literal["bias", "gravity", "dynamics"]
 COMPENSATION_LEVELS: tuple[CompensationLevel, ...] = ("bias", "gravity", "dynamics")
@@ -99,6 +101,7 @@ class Scene:
     touchable: tuple[TouchableLink, ...]
     compensation: CompensationLevel
     devices: tuple[DeviceSpec, ...]
+    world: WorldSpec = IDEAL  # how the simulated world's arm differs from this model (``[world]``)
 
     @property
     def n_joints(self) -> int:

@@ -43,7 +43,9 @@ def random_pokes(model: ArmModel, q, rng: np.random.Generator, count: int, t0: f
         direction = _cone(-sp.normal, math.radians(max_angle_deg), rng)
         base_T_link = links[sp.link]
         point_link = base_T_link[:3, :3].T @ (sp.point - base_T_link[:3, 3])
-        probes.append(Probe(sp.link, point_link, direction, float(rng.uniform(f_min, f_max)), t0 + i * period))
+        normal_link = base_T_link[:3, :3].T @ sp.normal
+        probes.append(Probe(sp.link, point_link, direction, float(rng.uniform(f_min, f_max)), t0 + i * period,
+                            normal_link=normal_link, geom=sp.geom))
     return tuple(probes)
 
 

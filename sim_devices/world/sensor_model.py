@@ -1,11 +1,14 @@
-"""The simulated F/T sensor: bias, drift, per-axis Gaussian noise, quantization, saturation."""
+"""The simulated F/T sensor: gain and crosstalk, bias, drift (linear and thermal), white and coloured
+noise, quantization, saturation."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ftc_hw.scene import SensorSpec
+from ftc_hw.scene.world_spec import IDEAL, WorldSpec
 
 
 @dataclass(frozen=True)
@@ -15,19 +18,47 @@ class SensorReading:
 
 
 class FTSensorModel:
-    def __init__(self, spec: SensorSpec, rng: np.random.Generator, noise: bool = True) -> None:
+    """``reading = gain @ true + bias + drift t + thermal(t) + coloured + white``, quantized and clipped.
+    The gain, coloured noise and thermal drift are the world's (``[world]``); the rest the scene's sensor."""
+
+    def __init__(self, spec: SensorSpec, rng: np.random.Generator, noise: bool = True,
+                 world: WorldSpec = IDEAL) -> None:
         self.spec = spec
         self.rng = rng
         self.noise = noise
+        self.gain = None if np.array_equal(world.sensor_gain, np.eye(6)) else np.asarray(world.sensor_gain)
+        self.thermal = (np.asarray(world.temperature_drift) * world.temperature_rise_K
+                        if world.temperature_rise_K and np.any(world.temperature_drift) else None)
+        self.thermal_tau = world.temperature_tau_s
+        self.coloured_std = np.asarray(world.coloured_noise_std) if np.any(world.coloured_noise_std) else None
+        self.coloured_tau = world.coloured_noise_tau_s
+        self._coloured = np.zeros(6)
+        self._t_last: float | None = None
 
     def read(self, clean: np.ndarray, t: float) -> SensorReading:
         s = self.spec
-        w = clean + s.bias + s.drift_per_s * t
+        w = clean if self.gain is None else self.gain @ clean
+        w = w + s.bias + s.drift_per_s * t
+        if self.thermal is not None:  # the sensor warming from the run's start
+            w = w + self.thermal * (1.0 - math.exp(-t / self.thermal_tau))
         if self.noise:
             w = w + self.rng.normal(0.0, 1.0, 6) * s.noise_std
+            if self.coloured_std is not None:
+                w = w + self._coloured_step(t)
         q = s.quantization
         if np.any(q > 0):
             lsb = np.where(q > 0, q, 1.0)
             w = np.where(q > 0, np.round(w / lsb) * lsb, w)
         saturated = np.abs(w) >= s.range
         return SensorReading(np.clip(w, -s.range, s.range), saturated)
+
+    def _coloured_step(self, t: float) -> np.ndarray:
+        """First-order Gauss-Markov noise with the world's stationary std and correlation time."""
+        if self._t_last is None:
+            self._coloured = self.rng.normal(0.0, 1.0, 6) * self.coloured_std
+        else:
+            a = math.exp(-max(t - self._t_last, 0.0) / self.coloured_tau)
+            fresh = self.rng.normal(0.0, 1.0, 6) * self.coloured_std
+            self._coloured = a * self._coloured + math.sqrt(1.0 - a * a) * fresh
+        self._t_last = t
+        return self._coloured

@@ -22,9 +22,9 @@ from ftc_hw.model import (
     add_ft_sensors,
     attach_payload,
     descends,
-    load_spec,
 )
 from ftc_hw.model.arm import GEOM_KINDS
+from ftc_hw.model.true_arm import compile_true_arm, true_arm_spec
 from ftc_hw.scene import Scene
 
 from .sensor_model import FTSensorModel, SensorReading
@@ -42,6 +42,8 @@ class Probe:
     t_start: float  # s, scenario time (World.start_script)
     ramp_s: float = 0.05
     hold_s: float = 0.2
+    normal_link: np.ndarray | None = None  # outward surface normal at the point, link frame (None: -direction)
+    geom: str | None = None  # the surface geom the point is on (its shell offset applies)
 
     @property
     def t_end(self) -> float:
@@ -107,25 +109,31 @@ class World:
         self.setup = setup
         self.rng = np.random.default_rng(seed)
         self.noise = noise
-        spec = load_spec(scene)
+        spec = true_arm_spec(scene)
         add_ft_sensors(spec, scene)
         if setup.payload is not None:
             attach_payload(spec, scene, setup.payload)
         self._obstacle_bodies = [self._add_obstacle(spec, i, o) for i, o in enumerate(setup.obstacles)]
         self._add_couplings(spec, scene)
-        self.model = m = spec.compile()
+        self.model = m = compile_true_arm(scene, spec)
         # (geom id, spec) of the obstacles still to be withdrawn
         self._to_withdraw = [(m.geom(f"{b}_geom").id, o) for b, o in zip(self._obstacle_bodies, setup.obstacles,
                                                                             strict=True) if math.isfinite(o.until_s)]
         self._script_t0: float | None = 0.0  # world time of scenario time 0; None: the script is held
         self.data = mujoco.MjData(m)
-        r = scene.robot
+        r, w = scene.robot, scene.world
         self.joints = jm = JointMap(m, scene)
         # each scene joint's friction on the dof its motor drives (a coupling's first driven joint:
         # the others are tied to it), in that dof's units: b / ratio^2, f_c / |ratio|
         dofs, ratio = jm.dadr[jm.lead], jm.ratio[jm.lead]
-        m.dof_damping[dofs] = r.friction_viscous / ratio**2
-        m.dof_frictionloss[dofs] = r.friction_coulomb / np.abs(ratio)
+        viscous = r.friction_viscous if w.friction_viscous is None else w.friction_viscous
+        coulomb = r.friction_coulomb if w.friction_coulomb is None else w.friction_coulomb
+        m.dof_damping[dofs] = viscous / ratio**2
+        m.dof_frictionloss[dofs] = coulomb / np.abs(ratio)
+        self._stribeck_dofs = dofs
+        self._stribeck = None if w.friction_stribeck is None or not np.any(w.friction_stribeck) else (
+            w.friction_stribeck / np.abs(ratio), w.stribeck_velocity * np.abs(ratio))
+        self.torque_constant = r.torque_constant if w.torque_constant is None else w.torque_constant
         # MuJoCo's friction loss is a soft constraint: its default softness lets joints creep at a
         # fraction of the friction torque. The stiffest stable setting makes it Coulomb-like.
         m.dof_solref[dofs, 0] = 2.0 * m.opt.timestep
@@ -133,12 +141,13 @@ class World:
         # fraction of its friction torque, so the motor current falls short of friction by up to half.
         m.dof_solimp[dofs, 0] = 0.999
         m.dof_solimp[dofs, 1] = 0.9999
+        mujoco.mj_setConst(m, self.data)  # the differences applied to the compiled model reach its constants
         self._fadr = m.sensor(FORCE_SENSOR).adr[0]
         self._tadr = m.sensor(TORQUE_SENSOR).adr[0]
         self._sign = scene.sensor.reading_sign
         sensor_body = m.site_bodyid[m.site(scene.sensor.site).id]
         self._arm_bodies = {b for b in range(m.nbody) if descends(m, b, sensor_body)}
-        self.sensor = FTSensorModel(scene.sensor, self.rng, noise=noise)
+        self.sensor = FTSensorModel(scene.sensor, self.rng, noise=noise, world=w)
         self.dt = float(m.opt.timestep)
         ratio = 1.0 / (scene.sensor.rate_hz * self.dt)
         if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
@@ -231,6 +240,8 @@ class World:
             tau = np.zeros_like(tau)
         d.qfrc_applied[:] = 0.0
         jm.to_dofs(tau, d.qfrc_applied)
+        if self._stribeck is not None:
+            self._apply_stribeck()
         d.xfrc_applied[:] = 0.0
         probes = []
         ts = None if self._script_t0 is None else t - self._script_t0  # scenario time
@@ -239,7 +250,11 @@ class World:
             if mag <= 0.0:
                 continue
             bid = m.body(p.link).id
-            point = d.xmat[bid].reshape(3, 3) @ p.point_link + d.xpos[bid]
+            rot = d.xmat[bid].reshape(3, 3)
+            point = rot @ p.point_link + d.xpos[bid]
+            shell = self.scene.world.shell_of(p.geom) if p.geom else self.scene.world.shell_offset
+            if shell:  # the probe meets the true surface, outside the model's
+                point = point + shell * (rot @ p.normal_link if p.normal_link is not None else -p.direction)
             force = mag * p.direction
             d.xfrc_applied[bid, :3] += force
             d.xfrc_applied[bid, 3:] += np.cross(point - d.xipos[bid], force)
@@ -251,9 +266,16 @@ class World:
         wrench = np.empty(6)
         wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
         wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
-        current = tau / r.torque_constant
+        current = tau / self.torque_constant
         return WorldState(t=t, q=q, qd=qd, qdd=jm.joints_of(d.qacc), tau=tau, current=current,
                           wrench=self._sign * wrench, contacts=tuple(probes) + self._obstacle_contacts())
+
+    def _apply_stribeck(self) -> None:
+        """The friction above Coulomb near standstill (Stribeck): ``excess exp(-(v / vs)^2)``, against
+        the motion (smoothed through zero over a twentieth of vs)."""
+        excess, vs = self._stribeck
+        v = self.data.qvel[self._stribeck_dofs]
+        self.data.qfrc_applied[self._stribeck_dofs] -= excess * np.exp(-np.square(v / vs)) * np.tanh(v / (0.05 * vs))
 
     def _withdraw_obstacles(self, ts: float) -> None:
         m, d = self.model, self.data

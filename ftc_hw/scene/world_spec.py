@@ -1,0 +1,74 @@
+"""How the simulated world's arm differs from the pipeline's model: a scene's ``[world]`` table.
+
+The pipeline always works from ``[robot]`` and ``[sensor]``; the world (``ftc sim`` and every
+``--sim``) builds the *true* arm from them plus these differences. Empty (the default): the world is
+the model, the ``ideal`` reality. Units: SI; docs/reality.md lists every key.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+def _frozen(values) -> np.ndarray:
+    arr = np.array(values, dtype=float)
+    arr.flags.writeable = False
+    return arr
+
+
+@dataclass(frozen=True)
+class InertialError:
+    """One body's true inertials against the model's: mass x ``mass_scale``, centre of mass moved by
+    ``com_offset`` (m, the body's frame), rotational inertia about the centre x ``inertia_scale``."""
+
+    mass_scale: float = 1.0
+    com_offset: np.ndarray = field(default_factory=lambda: _frozen([0.0, 0.0, 0.0]))
+    inertia_scale: float = 1.0
+
+    @property
+    def is_exact(self) -> bool:
+        return self.mass_scale == 1.0 and self.inertia_scale == 1.0 and not np.any(self.com_offset)
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """The true arm, sensor and surface, as differences from the scene's model. ``None``: as modelled."""
+
+    model_path: Path | None = None  # MJCF or URDF of the true arm: the model's joint and body names
+    inertials: Mapping[str, InertialError] = field(default_factory=dict)
+    friction_coulomb: np.ndarray | None = None  # N m per scene joint
+    friction_viscous: np.ndarray | None = None  # N m s / rad
+    friction_stribeck: np.ndarray | None = None  # N m: breakaway friction above Coulomb at rest
+    stribeck_velocity: float = 0.02  # rad/s: the speed over which the Stribeck excess fades (exp(-(v/vs)^2))
+    torque_constant: np.ndarray | None = None  # N m / A at the joint: the motors' true constants
+    sensor_offset: np.ndarray = field(default_factory=lambda: _frozen([0.0, 0.0, 0.0]))  # m, sensor frame
+    sensor_rotation: np.ndarray = field(default_factory=lambda: _frozen([0.0, 0.0, 0.0]))  # rad, rotation vector
+    sensor_gain: np.ndarray = field(default_factory=lambda: _frozen(np.eye(6)))  # reading = gain @ true wrench
+    coloured_noise_std: np.ndarray = field(default_factory=lambda: _frozen([0.0] * 6))  # N, N m (stationary std)
+    coloured_noise_tau_s: float = 1.0  # s: correlation time of the coloured (first-order Gauss-Markov) noise
+    temperature_drift: np.ndarray = field(default_factory=lambda: _frozen([0.0] * 6))  # N/K, N m/K
+    temperature_rise_K: float = 0.0  # K: the sensor warms by this, 1 - exp(-t / tau), from the run's start
+    temperature_tau_s: float = 600.0  # s
+    shell_offset: float = 0.0  # m: the touched surface lies this far outside the model's primitives
+    shell_offsets: Mapping[str, float] = field(default_factory=dict)  # m, per geom
+
+    @property
+    def is_ideal(self) -> bool:
+        return (self.model_path is None and all(e.is_exact for e in self.inertials.values())
+                and self.friction_coulomb is None and self.friction_viscous is None
+                and (self.friction_stribeck is None or not np.any(self.friction_stribeck))
+                and self.torque_constant is None and not np.any(self.sensor_offset)
+                and not np.any(self.sensor_rotation) and np.array_equal(self.sensor_gain, np.eye(6))
+                and not np.any(self.coloured_noise_std)
+                and not (np.any(self.temperature_drift) and self.temperature_rise_K)
+                and self.shell_offset == 0.0 and not any(self.shell_offsets.values()))
+
+    def shell_of(self, geom: str) -> float:
+        """The shell offset (m) of one geom: its own if given, else the common one."""
+        return float(self.shell_offsets.get(geom, self.shell_offset))
+
+
+IDEAL = WorldSpec()

@@ -1,0 +1,170 @@
+"""Realities: seeded draws of how a real arm, sensor and shell differ from the scene's model.
+
+``ideal`` is the model itself (plus the scene's own ``[world]`` table, if it has one). ``typical``
+and ``harsh`` draw every difference uniformly within the tolerances below, on top of the scene's
+``[world]``; the draw is a function of the scene, the reality and the seed only. Where each tolerance
+comes from: docs/reality.md.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+import mujoco
+import numpy as np
+
+from ftc_hw.model.arm import SURFACE_GROUP
+from ftc_hw.model.build import descends
+from ftc_hw.model.true_arm import true_arm_spec
+from ftc_hw.scene import Scene
+from ftc_hw.scene.world_spec import InertialError, WorldSpec
+
+
+class Reality(StrEnum):
+    IDEAL = "ideal"
+    TYPICAL = "typical"
+    HARSH = "harsh"
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Half-widths of the uniform draws (a relative one is a fraction of the modelled value)."""
+
+    mass_rel: float  # each moving body's mass
+    com_m: float  # each axis of each moving body's centre of mass
+    inertia_rel: float  # each moving body's rotational inertia
+    friction_rel: float  # each joint's Coulomb and viscous friction (scale 1 +- this)
+    stribeck_rel: float  # each joint's breakaway excess, 0 .. this x its Coulomb friction
+    torque_constant_rel: float  # each motor's torque constant
+    mount_m: float  # each axis of the sensor's mount position
+    mount_rad: float  # each axis of the sensor's mount rotation (rotation vector)
+    gain_rel: float  # each axis' gain error
+    crosstalk_rel: float  # each off-diagonal term, relative to the column axis' gain
+    coloured_rel: float  # coloured noise std, 0 .. this x the white noise std
+    coloured_tau_s: float  # its correlation time
+    temperature_rise_K: float  # the sensor warms by 0 .. this during the run
+    thermal_rel_per_K: float  # thermal drift per K, +- this x the white noise std
+    shell_m: float  # each touchable geom's true surface lies 0.5 .. 1 x this outside its primitive
+
+
+TOLERANCES: dict[Reality, Tolerances] = {
+    Reality.TYPICAL: Tolerances(mass_rel=0.03, com_m=0.003, inertia_rel=0.10, friction_rel=0.30, stribeck_rel=0.3,
+                                torque_constant_rel=0.05, mount_m=0.001, mount_rad=math.radians(0.3),
+                                gain_rel=0.01, crosstalk_rel=0.005, coloured_rel=0.5, coloured_tau_s=1.0,
+                                temperature_rise_K=3.0, thermal_rel_per_K=0.3, shell_m=0.003),
+    Reality.HARSH: Tolerances(mass_rel=0.08, com_m=0.008, inertia_rel=0.25, friction_rel=0.60, stribeck_rel=0.6,
+                              torque_constant_rel=0.10, mount_m=0.003, mount_rad=math.radians(1.0),
+                              gain_rel=0.025, crosstalk_rel=0.015, coloured_rel=1.0, coloured_tau_s=3.0,
+                              temperature_rise_K=8.0, thermal_rel_per_K=0.6, shell_m=0.005),
+}
+
+DIFFERENCES = ("inertials", "friction", "torque_constant", "mount", "gain", "coloured_noise", "thermal", "shell")
+
+
+def with_reality(scene: Scene, reality: Reality | str, seed: int = 0,
+                 only: tuple[str, ...] | None = None) -> Scene:
+    """The scene whose ``world`` is a draw of ``reality`` (seeded) on top of its own ``[world]``.
+    ``only``: draw just these of :data:`DIFFERENCES` (the rest stay as the scene has them)."""
+    reality = Reality(reality)
+    if reality is Reality.IDEAL:
+        return scene
+    tol = TOLERANCES[reality]
+    rng = np.random.default_rng([seed, 21_000 + list(Reality).index(reality)])
+    drawn = _draw(scene, tol, rng)  # every difference drawn, so a subset keeps the same values
+    base = scene.world
+    keep = set(DIFFERENCES) if only is None else set(only)
+    unknown = keep - set(DIFFERENCES)
+    if unknown:
+        raise ValueError(f"unknown differences {sorted(unknown)} (known: {', '.join(DIFFERENCES)})")
+    changes: dict = {}
+    for name in keep:
+        changes.update(_compose(name, base, drawn))
+    return dataclasses.replace(scene, world=dataclasses.replace(base, **changes))
+
+
+def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator) -> WorldSpec:
+    r, s, w = scene.robot, scene.sensor, scene.world
+    n = scene.n_joints
+    coulomb = r.friction_coulomb if w.friction_coulomb is None else w.friction_coulomb
+    viscous = r.friction_viscous if w.friction_viscous is None else w.friction_viscous
+    stribeck = np.zeros(n) if w.friction_stribeck is None else w.friction_stribeck
+    kt = r.torque_constant if w.torque_constant is None else w.torque_constant
+    bodies, geoms = _moving_bodies_and_shells(scene)
+    inertials = {b: InertialError(1.0 + rng.uniform(-tol.mass_rel, tol.mass_rel),
+                                  rng.uniform(-tol.com_m, tol.com_m, 3),
+                                  1.0 + rng.uniform(-tol.inertia_rel, tol.inertia_rel)) for b in bodies}
+    gain = np.diag(1.0 + rng.uniform(-tol.gain_rel, tol.gain_rel, 6))
+    cross = rng.uniform(-tol.crosstalk_rel, tol.crosstalk_rel, (6, 6))
+    np.fill_diagonal(cross, 0.0)
+    white = np.sqrt(np.diag(s.noise_cov))
+    return WorldSpec(
+        inertials=inertials,
+        friction_coulomb=coulomb * (1.0 + rng.uniform(-tol.friction_rel, tol.friction_rel, n)),
+        friction_viscous=viscous * (1.0 + rng.uniform(-tol.friction_rel, tol.friction_rel, n)),
+        friction_stribeck=stribeck + coulomb * rng.uniform(0.0, tol.stribeck_rel, n),
+        torque_constant=kt * (1.0 + rng.uniform(-tol.torque_constant_rel, tol.torque_constant_rel, n)),
+        sensor_offset=rng.uniform(-tol.mount_m, tol.mount_m, 3),
+        sensor_rotation=rng.uniform(-tol.mount_rad, tol.mount_rad, 3),
+        sensor_gain=gain @ (np.eye(6) + cross),
+        coloured_noise_std=white * rng.uniform(0.0, tol.coloured_rel),
+        coloured_noise_tau_s=tol.coloured_tau_s,
+        temperature_drift=white * rng.uniform(-tol.thermal_rel_per_K, tol.thermal_rel_per_K, 6),
+        temperature_rise_K=float(rng.uniform(0.0, tol.temperature_rise_K)),
+        shell_offsets={g: float(rng.uniform(0.5, 1.0) * tol.shell_m) for g in geoms},
+    )
+
+
+def _compose(name: str, base: WorldSpec, d: WorldSpec) -> dict:
+    """The fields of difference ``name``: the draw on top of the scene's own ``[world]`` values."""
+    if name == "inertials":
+        merged = dict(base.inertials)
+        for b, e in d.inertials.items():
+            o = merged.get(b, InertialError())
+            merged[b] = InertialError(o.mass_scale * e.mass_scale, o.com_offset + e.com_offset,
+                                      o.inertia_scale * e.inertia_scale)
+        return {"inertials": merged}
+    if name == "friction":  # drawn about the scene's own true values already (_draw)
+        return {"friction_coulomb": d.friction_coulomb, "friction_viscous": d.friction_viscous,
+                "friction_stribeck": d.friction_stribeck}
+    if name == "torque_constant":
+        return {"torque_constant": d.torque_constant}
+    if name == "mount":
+        return {"sensor_offset": base.sensor_offset + d.sensor_offset,
+                "sensor_rotation": base.sensor_rotation + d.sensor_rotation}
+    if name == "gain":
+        return {"sensor_gain": d.sensor_gain @ base.sensor_gain}
+    if name == "coloured_noise":
+        return {"coloured_noise_std": np.maximum(base.coloured_noise_std, d.coloured_noise_std),
+                "coloured_noise_tau_s": d.coloured_noise_tau_s}
+    if name == "thermal":
+        return {"temperature_drift": base.temperature_drift + d.temperature_drift,
+                "temperature_rise_K": max(base.temperature_rise_K, d.temperature_rise_K)}
+    return {"shell_offsets": {g: base.shell_of(g) + v for g, v in d.shell_offsets.items()}}
+
+
+def _moving_bodies_and_shells(scene: Scene) -> tuple[list[str], list[str]]:
+    """The bodies the sensor carries that a joint moves, and their touchable primitive geoms."""
+    m = true_arm_spec(scene).compile()
+    sensor_body = int(m.site_bodyid[m.site(scene.sensor.site).id])
+    bodies, geoms = [], []
+    for b in range(1, m.nbody):
+        if not descends(m, b, sensor_body):
+            continue
+        if m.body_jntnum[b] > 0 or _has_moving_ancestor(m, b):
+            bodies.append(m.body(b).name)
+    arm = {m.body(b).id for b in range(m.nbody) if descends(m, b, sensor_body)}
+    for g in range(m.ngeom):
+        if (m.geom_group[g] == SURFACE_GROUP and int(m.geom_bodyid[g]) in arm
+                and m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH and m.geom(g).name):
+            geoms.append(m.geom(g).name)
+    return bodies, geoms
+
+
+def _has_moving_ancestor(m: mujoco.MjModel, b: int) -> bool:
+    while b > 0:
+        if m.body_jntnum[b] > 0:
+            return True
+        b = int(m.body_parentid[b])
+    return False
