@@ -73,10 +73,11 @@ class ContactPipeline:
                  p_false: float = 1e-9, n_on: int = 2, n_off: int = 5, update_period_s: float = 0.02,
                  qdd_tau: float = 0.002, extra_cov=None, track_slide: float | None = 0.01,
                  bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005,
-                 flag_uncertain: bool = True, gap_hold_s: float | None = 0.1) -> None:
+                 flag_uncertain: bool = True, gap_hold_s: float | None = 0.1, gain=None,
+                 inertials=None) -> None:
         self.scene = scene
-        model = ArmModel(scene, payload)
-        self.compensator = Compensator(model, level, bias)
+        model = ArmModel(scene, payload, inertials)
+        self.compensator = Compensator(model, level, bias, gain=gain)
         self.level = self.compensator.level
         self.solver: Solver = make_solver(model, method)
         self.residuals = JointResiduals(scene) if use_currents else None

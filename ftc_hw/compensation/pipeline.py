@@ -14,18 +14,25 @@ from ..scene import CompensationLevel
 
 class Compensator:
     def __init__(self, model: ArmModel, level: CompensationLevel | None = None, bias=None,
-                 payload: Payload | None = None) -> None:
+                 payload: Payload | None = None, gain=None) -> None:
+        """``gain``: the sensor's identified linear error on the arm's own loads, ``reading = gain @ loads +
+        bias`` (None: exact). It is what free-motion identification can tell (:mod:`ftc_hw.calibration.
+        free_motion`): a map of the loads the arm's motions make, not of every wrench, so it corrects
+        the predicted loads and leaves the contact's wrench as read."""
         if payload is not None and payload != model.payload:
-            model = ArmModel(model.scene, payload)
+            model = ArmModel(model.scene, payload, model.inertials)
         self.model = model
         self.level: CompensationLevel = level or model.scene.compensation
         if self.level not in ("bias", "gravity", "dynamics"):
             raise ValueError(f"level must be bias, gravity or dynamics, got {self.level!r}")
         self.bias = np.zeros(6) if bias is None else np.asarray(bias, dtype=float).reshape(6).copy()
+        self.gain = None if gain is None else np.asarray(gain, dtype=float).reshape(6, 6).copy()
 
     def loads(self, q, qd=None, qdd=None, joint_torques: bool = False):
-        """The arm's own wrench on the sensor and (optionally) the joint torques it needs."""
-        return self.model.arm_loads(q, qd, qdd, self.level, joint_torques)
+        """The arm's own wrench on the sensor as read (the gain applied) and, if asked, the joint
+        torques it needs."""
+        loads, tau = self.model.arm_loads(q, qd, qdd, self.level, joint_torques)
+        return (loads if self.gain is None else self.gain @ loads), tau
 
     def external(self, raw, q, qd=None, qdd=None) -> np.ndarray:
         """The external contact wrench (sensor frame, the scene's sign convention)."""

@@ -6,7 +6,7 @@ Frames (docs/conventions.md): ``base`` is the model's world frame; ``sensor`` is
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -14,6 +14,7 @@ import numpy as np
 
 from ..scene import CompensationLevel, Scene, SceneError
 from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, descends, load_spec
+from .inertials import body_params, set_body_params
 from .joint_map import JointMap
 
 GEOM_KINDS = {
@@ -71,9 +72,12 @@ class ArmModel:
     Not thread-safe: it owns one ``MjData`` scratch buffer. Make one per thread.
     """
 
-    def __init__(self, scene: Scene, payload: Payload | None = None) -> None:
+    def __init__(self, scene: Scene, payload: Payload | None = None,
+                 inertials: Mapping[str, np.ndarray] | None = None) -> None:
+        """``inertials``: identified corrections to bodies' 10 standard parameters (:mod:`.inertials`)."""
         self.scene = scene
         self.payload = payload
+        self.inertials = dict(inertials or {})
         spec = load_spec(scene)
         add_ft_sensors(spec, scene)
         if payload is not None:
@@ -86,6 +90,11 @@ class ArmModel:
         m.dof_damping[:] = 0.0
         m.dof_frictionloss[:] = 0.0
         self.data = mujoco.MjData(m)
+        if self.inertials:
+            for body, delta in self.inertials.items():
+                b = m.body(body).id
+                set_body_params(m, b, body_params(m, b) + np.asarray(delta, dtype=float), nearest=True)
+            mujoco.mj_setConst(m, self.data)
         self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
         self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
         self.site_id = m.site(scene.sensor.site).id

@@ -1,0 +1,215 @@
+"""Identification from contact-free motion: the arm's inertial parameters and the sensor's linear
+errors (gain, crosstalk, mount pose) from the F/T readings and the joint state, in one linear fit.
+
+    reading - nominal(q, qd, qdd) = bias + Y(q, qd, qdd) dpi + dG nominal(q, qd, qdd) + noise
+
+``Y`` is the base-wrench regressor of the moving links (:mod:`ftc_hw.model.inertials`), ``dpi`` their
+parameter corrections, ``dG`` the 6 x 6 linear error of the sensor (a small mount rotation and offset
+are such a map too). The fit is Bayesian least squares about the model: each parameter has a prior
+standard deviation (``Priors``), so what the motion cannot tell stays at the model's value and keeps
+its prior uncertainty; the verdict names those directions. Signals are low-passed forward and back
+(no lag) and thinned to about independent samples before the fit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from ..model import ArmModel
+from ..model.build import descends
+from ..model.inertials import N_PARAMS, PARAM_LABELS, body_params, wrench_regressor
+
+SMOOTH_S = 0.05  # s: the moving-average window, applied twice (a triangle 0.1 s wide, -3 dB near 9 Hz)
+TOLD = 0.5  # a direction is told by the data when its posterior std is below this fraction of its prior's
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Prior standard deviations: how far the true arm may plausibly be from the model."""
+
+    mass_rel: float = 0.10
+    com_m: float = 0.01
+    inertia_rel: float = 0.30
+    gain: float = 0.03  # each entry of dG
+    bias: float = 1e3  # N, N m: unknown
+
+
+@dataclass
+class MotionData:
+    """Contact-free motion: F/T readings and the joint state at their times."""
+
+    t: np.ndarray  # (N,) s
+    wrench: np.ndarray  # (N, 6) raw readings
+    q: np.ndarray  # (N, n) rad
+    qd: np.ndarray  # (N, n) rad/s
+
+
+@dataclass
+class FreeMotionFit:
+    bodies: list[str]
+    bias: np.ndarray  # (6,)
+    delta_pi: np.ndarray  # (len(bodies), 10)
+    gain: np.ndarray  # (6, 6): reading = gain @ true + bias
+    cov: np.ndarray  # posterior covariance of [bias, dpi, dG] (scaled back to SI)
+    labels: list[str]
+    prior_std: np.ndarray
+    residual_rms: np.ndarray  # (6,) after the fit, of the thinned samples
+    residual_rms_before: np.ndarray  # (6,) the nominal model's (its mean removed)
+    samples: int
+    untold: list[str] = field(default_factory=list)  # the directions the data could not tell
+    verdict: str = "good"
+    reasons: list[str] = field(default_factory=list)
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))
+
+
+def smooth(x: np.ndarray, n: int) -> np.ndarray:
+    """Zero-phase low pass along axis 0: a centred moving average of ``n`` samples, twice."""
+    if n <= 1:
+        return x.copy()
+    kernel = np.ones(n) / n
+    pad = n
+    out = np.pad(x, ((pad, pad), (0, 0)), mode="edge")
+    for _ in range(2):
+        out = np.stack([np.convolve(out[:, j], kernel, mode="same") for j in range(out.shape[1])], axis=1)
+    return out[pad:-pad]
+
+
+def prepare(data: MotionData, smooth_s: float = SMOOTH_S) -> tuple[np.ndarray, ...]:
+    """(t, wrench, q, qd, qdd): low-passed, qdd differentiated, thinned to one sample per window."""
+    dt = float(np.median(np.diff(data.t)))
+    n = max(1, int(round(smooth_s / dt)))
+    w, q, qd = smooth(data.wrench, n), smooth(data.q, n), smooth(data.qd, n)
+    qdd = np.gradient(qd, data.t, axis=0)
+    keep = slice(2 * n, len(data.t) - 2 * n, n)  # the ends see the padding
+    return data.t[keep], w[keep], q[keep], qd[keep], qdd[keep]
+
+
+class FreeMotionIdentifier:
+    def __init__(self, arm: ArmModel, priors: Priors | None = None, gain: bool = True) -> None:
+        self.arm = arm
+        self.priors = priors or Priors()
+        self.with_gain = gain
+        m = arm.model
+        self.body_ids = [b for b in range(1, m.nbody) if descends(m, b, arm.sensor_body) and _moves(m, b)]
+        self.bodies = [m.body(b).name for b in self.body_ids]
+        self.pi0 = np.concatenate([body_params(m, b) for b in self.body_ids])
+        self._data = mujoco.MjData(m)
+        self.labels = ([f"bias_{a}" for a in ("fx", "fy", "fz", "tx", "ty", "tz")]
+                       + [f"{b}.{p}" for b in self.bodies for p in PARAM_LABELS]
+                       + ([f"gain[{i},{j}]" for i in range(6) for j in range(6)] if gain else []))
+        self.prior_sqrt = self._prior()
+        self.prior_std = np.sqrt(np.sum(self.prior_sqrt**2, axis=1))
+
+    def _prior(self) -> np.ndarray:
+        """A square root ``L`` of the prior covariance (``x = L z``, ``z`` standard normal). Each body's
+        prior is independent in (mass, first moments, inertia about the centre of mass); carried to
+        the regressor's inertia about the body origin, moving the centre of mass moves that inertia too,
+        so the posterior keeps the inertia about the centre of mass near the model's."""
+        p = self.priors
+        blocks = [np.eye(6) * p.bias]
+        for k in range(len(self.bodies)):
+            pi = self.pi0[k * N_PARAMS:(k + 1) * N_PARAMS]
+            mass, h = pi[0], pi[1:4]
+            i_c = _inertia_at_com(pi)
+            std = np.array([p.mass_rel * mass, *([mass * p.com_m + p.mass_rel * np.linalg.norm(h)] * 3),
+                            *([p.inertia_rel * max(np.max(np.linalg.eigvalsh(i_c)), 1e-6)] * 6)])
+            blocks.append(_com_to_origin_jacobian(mass, h) @ np.diag(std))
+        if self.with_gain:
+            blocks.append(np.eye(36) * p.gain)
+        out = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
+        k = 0
+        for b in blocks:
+            out[k:k + b.shape[0], k:k + b.shape[0]] = b
+            k += b.shape[0]
+        return out
+
+    def rows(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(A, nominal): the fit's 6 x P rows and the model's reading (no bias) at one state."""
+        arm, m, d = self.arm, self.arm.model, self._data
+        nominal = arm.predicted_wrench(q, qd, qdd, "dynamics")
+        arm.joints.set_qpos(q, d.qpos)
+        arm.joints.set_dofs(qd, d.qvel)
+        arm.joints.set_dofs(qdd, d.qacc)
+        for stage in (mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_comVel, mujoco.mj_rnePostConstraint):
+            stage(m, d)
+        blocks = [np.eye(6), wrench_regressor(m, d, self.body_ids, arm.site_id, arm.sign)]
+        if self.with_gain:
+            blocks.append(np.kron(np.eye(6), nominal))  # row i: nominal_j at column 6 i + j
+        return np.hstack(blocks), nominal
+
+    def fit(self, data: MotionData) -> FreeMotionFit:
+        _, w, q, qd, qdd = prepare(data)
+        rows, resid = [], []
+        for k in range(len(w)):
+            a, nominal = self.rows(q[k], qd[k], qdd[k])
+            rows.append(a)
+            resid.append(w[k] - nominal)
+        a = np.vstack(rows)
+        y = np.concatenate(resid)
+        before = np.sqrt(np.mean(np.square(np.array(resid) - np.mean(resid, axis=0)), axis=0))
+        scale = np.sqrt(np.diag(self.arm.scene.sensor.noise_cov))
+        x, cov, r = None, None, None
+        for _ in range(2):  # the second pass weighs each axis by what the first left
+            weights = np.tile(1.0 / scale, len(w))
+            x, cov = _bayes(a * weights[:, None], y * weights, self.prior_sqrt)
+            r = (y - a @ x).reshape(-1, 6)
+            scale = np.maximum(1.4826 * np.median(np.abs(r - np.median(r, axis=0)), axis=0), scale * 0.1)
+        return self._result(x, cov, r, before, len(w))
+
+    def _result(self, x, cov, r, before, n) -> FreeMotionFit:
+        nb = len(self.bodies)
+        dpi = x[6:6 + N_PARAMS * nb].reshape(nb, N_PARAMS)
+        gain = np.eye(6) + (x[6 + N_PARAMS * nb:].reshape(6, 6) if self.with_gain else 0.0)
+        fit = FreeMotionFit(self.bodies, x[:6].copy(), dpi, gain, cov, self.labels, self.prior_std,
+                            np.sqrt(np.mean(r * r, axis=0)), before, n)
+        ratio = np.sqrt(np.diag(cov)) / self.prior_std
+        fit.untold = [lab for lab, v in zip(self.labels, ratio, strict=True) if v > TOLD and not lab.startswith("bias")]
+        if fit.untold:
+            fit.verdict = "poorly_excited"
+            fit.reasons.append(f"{len(fit.untold)} of {len(self.labels) - 6} parameters not told apart by this motion "
+                               f"(posterior std above {TOLD:g} x prior): they stay at the model's values")
+        return fit
+
+
+def _bayes(a: np.ndarray, y: np.ndarray, prior_sqrt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Minimise |y - a x|^2 + |z|^2 over x = L z (L = ``prior_sqrt``): the estimate and its posterior
+    covariance."""
+    b = a @ prior_sqrt
+    u, s, vt = np.linalg.svd(b, full_matrices=False)
+    z = vt.T @ (s / (s * s + 1.0) * (u.T @ y))
+    cov_z = vt.T @ np.diag(1.0 / (s * s + 1.0)) @ vt
+    return prior_sqrt @ z, prior_sqrt @ cov_z @ prior_sqrt.T
+
+
+def _inertia_at_com(pi: np.ndarray) -> np.ndarray:
+    mass, h = pi[0], pi[1:4]
+    i_o = np.array([[pi[4], pi[7], pi[8]], [pi[7], pi[5], pi[9]], [pi[8], pi[9], pi[6]]])
+    return i_o - (h @ h * np.eye(3) - np.outer(h, h)) / mass
+
+
+_SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def _com_to_origin_jacobian(mass: float, h: np.ndarray) -> np.ndarray:
+    """d(mass, h, I_origin) / d(mass, h, I_com) (10 x 10), from I_o = I_c + (|h|^2 1 - h h^T) / m."""
+    j = np.eye(N_PARAMS)
+    shift = (h @ h * np.eye(3) - np.outer(h, h))
+    for r, (a, b) in enumerate(_SYM):
+        j[4 + r, 0] = -shift[a, b] / mass**2
+        for c in range(3):
+            d_shift = 2 * h[c] * (a == b) - ((c == a) * h[b] + (c == b) * h[a])
+            j[4 + r, 1 + c] = d_shift / mass
+    return j
+
+
+def _moves(m: mujoco.MjModel, b: int) -> bool:
+    while b > 0:
+        if m.body_jntnum[b] > 0:
+            return True
+        b = int(m.body_parentid[b])
+    return False

@@ -1,0 +1,98 @@
+"""Link inertial parameters as identification sees them, and the base-wrench regressor.
+
+A body's 10 standard parameters, in its own frame: ``pi = [m, hx, hy, hz, Ixx, Iyy, Izz, Ixy, Ixz, Iyz]``
+with ``h = m c`` (first moments, c the centre of mass) and ``I`` the rotational inertia about the body
+frame's origin. The wrench the moving bodies put on the sensor is linear in them:
+``w = Y(q, qd, qdd) pi`` (:func:`wrench_regressor`), the classic base-wrench regressor.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+N_PARAMS = 10
+PARAM_LABELS = ("mass", "mx", "my", "mz", "Ixx", "Iyy", "Izz", "Ixy", "Ixz", "Iyz")
+
+
+class InertialsError(ValueError):
+    """Parameters that no rigid body has (a non-positive mass, an inertia that is not positive definite)."""
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def body_params(m: mujoco.MjModel, b: int) -> np.ndarray:
+    """The 10 standard parameters of body ``b`` of a compiled model."""
+    mass = float(m.body_mass[b])
+    c = np.array(m.body_ipos[b], dtype=float)
+    rot = np.empty(9)
+    mujoco.mju_quat2Mat(rot, m.body_iquat[b])
+    r = rot.reshape(3, 3)
+    i_c = r @ np.diag(m.body_inertia[b]) @ r.T
+    i_o = i_c + mass * (c @ c * np.eye(3) - np.outer(c, c))
+    return np.array([mass, *(mass * c), i_o[0, 0], i_o[1, 1], i_o[2, 2], i_o[0, 1], i_o[0, 2], i_o[1, 2]])
+
+
+def set_body_params(m: mujoco.MjModel, b: int, pi: np.ndarray, nearest: bool = False) -> None:
+    """Give body ``b`` the parameters ``pi``; :class:`InertialsError` if no rigid body has them, or
+    (``nearest``) the rigid body nearest in inertia: principal moments raised to a twentieth of the
+    largest and to the triangle inequality."""
+    mass = float(pi[0])
+    if not mass > 0:
+        raise InertialsError(f"body {m.body(b).name!r}: mass {mass:g} kg is not positive")
+    c = np.asarray(pi[1:4], dtype=float) / mass
+    i_o = np.array([[pi[4], pi[7], pi[8]], [pi[7], pi[5], pi[9]], [pi[8], pi[9], pi[6]]])
+    i_c = i_o - mass * (c @ c * np.eye(3) - np.outer(c, c))
+    principal, axes = np.linalg.eigh(i_c)
+    if nearest:
+        principal = np.maximum(principal, 0.05 * max(principal[2], 1e-9))
+        principal[0] = max(principal[0], principal[2] - principal[1])
+    if principal[0] <= 0 or principal[0] + principal[1] < principal[2] * (1 - 1e-9):
+        raise InertialsError(f"body {m.body(b).name!r}: the inertia about the centre of mass is not a rigid "
+                             f"body's (principal moments {principal})")
+    if np.linalg.det(axes) < 0:
+        axes[:, 0] = -axes[:, 0]
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, axes.reshape(-1))
+    m.body_mass[b] = mass
+    m.body_ipos[b] = c
+    m.body_iquat[b] = quat
+    m.body_inertia[b] = principal
+
+
+def _inertia_rows(v: np.ndarray) -> np.ndarray:
+    """``I v`` as a 3 x 6 matrix on (Ixx, Iyy, Izz, Ixy, Ixz, Iyz)."""
+    x, y, z = v
+    return np.array([[x, 0, 0, y, z, 0], [0, y, 0, x, 0, z], [0, 0, z, 0, x, y]], dtype=float)
+
+
+def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int], site: int,
+                     sign: float) -> np.ndarray:
+    """``Y`` (6 x 10 len(bodies)): the sensor reading (site frame, about the site, ``sign`` the scene's
+    reading sign) of each body's parameters, at the state in ``d``, which must have had
+    ``mj_kinematics``, ``mj_comPos``, ``mj_comVel`` and ``mj_rnePostConstraint`` (its accelerations
+    include minus gravity, as MuJoCo's recursive Newton-Euler counts it)."""
+    rot_s = d.site_xmat[site].reshape(3, 3)
+    p_s = d.site_xpos[site]
+    out = np.zeros((6, N_PARAMS * len(bodies)))
+    vel, acc = np.empty(6), np.empty(6)
+    for k, b in enumerate(bodies):
+        # XBODY: the body frame (BODY would be its inertial frame); 1: local orientation
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, vel, 1)
+        mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, acc, 1)
+        w, a = vel[:3], acc[3:]  # angular velocity; linear acceleration of the origin (minus gravity)
+        dw = acc[:3]
+        cols = np.zeros((6, N_PARAMS))  # the body's wrench about its origin, body frame
+        cols[:3, 0] = a
+        cols[:3, 1:4] = _skew(dw) + _skew(w) @ _skew(w)  # m (dw x c + w x (w x c)) = [dw]x h + [w]x [w]x h
+        cols[3:, 1:4] = -_skew(a)  # h x a = -[a]x h
+        cols[3:, 4:] = _inertia_rows(dw) + _skew(w) @ _inertia_rows(w)
+        r_b = d.xmat[b].reshape(3, 3)
+        f, t = r_b @ cols[:3], r_b @ cols[3:]
+        t = t + _skew(d.xpos[b] - p_s) @ f  # about the sensor origin
+        out[:3, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ f
+        out[3:, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ t
+    return sign * out
