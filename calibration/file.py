@@ -3,8 +3,9 @@ parameters with their standard errors, the fit's figures and the pose set.
 
 ``load_calibration(path, scene=..., sensor_serial=...)`` checks it against the setup it is meant for
 and raises :class:`CalibrationError` (with the file and the key) on anything wrong: schema, scene,
-sensor serial, missing or malformed values. ``cal.pipeline_kwargs()`` gives ``ContactPipeline`` /
-``Compensator`` their ``bias`` and ``payload``.
+sensor serial, missing or malformed values. ``cal.pipeline_kwargs(scene)`` gives ``ContactPipeline``
+everything the file estimates: bias, payload, and (:mod:`.applied`) the mount yaw, gravity tilt,
+arm-gravity corrections and ``[identification]`` (``ftc identify``: link inertials, the load gain).
 """
 from __future__ import annotations
 
@@ -20,7 +21,9 @@ import numpy as np
 import tomli_w
 
 from ftc_hw.model import Payload
-from ftc_hw.scene import Scene
+from ftc_hw.scene import Scene, load_scene
+
+from .applied import extras_kwargs, merge_inertials
 
 SCHEMA = 1
 KIND = "ftc-hw calibration"
@@ -28,6 +31,78 @@ KIND = "ftc-hw calibration"
 
 class CalibrationError(Exception):
     """A calibration file that cannot be used: malformed, another schema, scene or sensor."""
+
+
+@dataclass
+class Identification:
+    """``ftc identify``'s result: what the pipeline applies and how far to trust it."""
+
+    date: str
+    source: str  # the recording, or what the simulated run was
+    verdict: str
+    reasons: list[str]
+    gain: np.ndarray  # 6 x 6: the sensor's linear error on the arm's loads (reading = gain @ loads + bias)
+    inertials: dict[str, np.ndarray]  # body -> 10 standard-parameter corrections
+    untold: list[str] = field(default_factory=list)
+    figures: dict[str, Any] = field(default_factory=dict)  # residual RMS before/after, samples, stds
+    joints: dict[str, np.ndarray] = field(default_factory=dict)  # torque_constant, friction_viscous, _coulomb
+    # the posterior covariance of [10 per body of ``inertials`` (in its order), 36 of the gain (if fitted)]
+    covariance: np.ndarray | None = None
+    gain_fitted: bool = True
+
+    def model_error(self) -> dict[str, Any] | None:
+        """The pipeline's ``model_error`` keyword (:class:`ftc_hw.compensation.ModelError`)."""
+        if self.covariance is None:
+            return None
+        return {"bodies": list(self.inertials), "cov": self.covariance.copy(), "gain": self.gain_fitted}
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {"date": self.date, "source": self.source, "verdict": self.verdict, "reasons": list(self.reasons),
+               "load_gain": [_floats(r) for r in self.gain], "untold": list(self.untold),
+               "inertials": {k: _floats(v) for k, v in self.inertials.items()},
+               "figures": {k: _clean(v) for k, v in self.figures.items()}}
+        if self.joints:
+            out["joints"] = {k: _floats(v) for k, v in self.joints.items()}
+        if self.covariance is not None:
+            out["covariance"] = [_floats(r) for r in self.covariance]
+            out["gain_fitted"] = self.gain_fitted
+        return out
+
+    @staticmethod
+    def from_dict(data: Any, where: str) -> Identification:
+        if not isinstance(data, dict):
+            raise CalibrationError(f"{where}: expected a table")
+        rows = _get(data, "load_gain", list, where)
+        if len(rows) != 6:
+            raise CalibrationError(f"{where}: load_gain: expected 6 rows of 6 numbers")
+        gain = np.array([_vec({"row": r}, "row", 6, f"{where}: load_gain") for r in rows])
+        if abs(np.linalg.det(gain)) < 1e-6:
+            raise CalibrationError(f"{where}: load_gain: singular")
+        table = _get(data, "inertials", dict, where)
+        inertials = {str(k): _vec(table, k, 10, f"{where}: inertials") for k in table}
+        joints = {}
+        jt = data.get("joints", {})
+        for key in ("torque_constant", "friction_viscous", "friction_coulomb"):
+            if key in jt:
+                v = np.asarray(_get(jt, key, list, f"{where}: joints"), dtype=float)
+                if v.ndim != 1 or not np.all(np.isfinite(v)) or np.any(v < 0) or (key == "torque_constant"
+                                                                                  and np.any(v <= 0)):
+                    raise CalibrationError(f"{where}: joints: {key}: expected finite numbers >= 0 (> 0 for a "
+                                           f"torque constant), got {jt[key]!r}")
+                joints[key] = v
+        cov = None
+        if "covariance" in data:
+            n = 10 * len(inertials) + (36 if data.get("gain_fitted", True) else 0)
+            try:
+                cov = np.array(data["covariance"], dtype=float)
+            except (TypeError, ValueError):
+                cov = None
+            if cov is None or cov.shape != (n, n) or not np.all(np.isfinite(cov)):
+                raise CalibrationError(f"{where}: covariance: expected {n} x {n} finite numbers")
+        return Identification(str(data.get("date", "")), str(data.get("source", "")), str(data.get("verdict", "")),
+                              [str(r) for r in data.get("reasons", [])], gain, inertials,
+                              [str(u) for u in data.get("untold", [])], dict(data.get("figures", {})), joints,
+                              cov, bool(data.get("gain_fitted", True)))
 
 
 @dataclass
@@ -45,10 +120,33 @@ class Calibration:
     extras: dict[str, Any] = field(default_factory=dict)  # mount_yaw, gravity_tilt_*, arm_gravity_*
     fit: dict[str, Any] = field(default_factory=dict)  # residual_rms, condition_number, chi2, dof
     rezero: list[dict[str, Any]] = field(default_factory=list)  # {date, bias}: re-zero history
+    identification: Identification | None = None  # ftc identify's result
 
-    def pipeline_kwargs(self) -> dict[str, Any]:
-        """``ContactPipeline(scene, **cal.pipeline_kwargs())``."""
-        return {"bias": self.bias.copy(), "payload": self.payload}
+    def pipeline_kwargs(self, scene: Scene | None = None) -> dict[str, Any]:
+        """``ContactPipeline(scene, **cal.pipeline_kwargs(scene))``: everything the file estimates.
+        ``scene``: the one it was made for (None: the built-in scene of that name, when it has extras)."""
+        out: dict[str, Any] = {"bias": self.bias.copy(), "payload": self.payload}
+        extras = {}
+        if any(not isinstance(v, str) and np.any(np.asarray(v, dtype=float) != 0) for v in self.extras.values()):
+            if scene is None:
+                try:
+                    scene = load_scene(self.scene)
+                except ValueError as exc:
+                    raise CalibrationError(f"its corrections need the scene {self.scene!r}: {exc}") from None
+            extras = extras_kwargs(self.extras, scene)
+        out.update({k: v for k, v in extras.items() if k != "inertials"})
+        tables = [extras.get("inertials", {})]
+        if self.identification is not None:
+            tables.append(self.identification.inertials)
+            out["gain"] = self.identification.gain.copy()
+            if self.identification.joints:
+                out["joints"] = {k: v.copy() for k, v in self.identification.joints.items()}
+            if self.identification.covariance is not None:
+                out["model_error"] = self.identification.model_error()
+        inertials = merge_inertials(*tables)
+        if inertials:
+            out["inertials"] = inertials
+        return out
 
     def with_bias(self, bias, when: str | None = None) -> Calibration:
         """A copy with a new bias (a re-zero), the old one kept in the history."""
@@ -73,6 +171,8 @@ class Calibration:
         }
         if self.rezero:
             out["rezero"] = [{"date": r["date"], "bias": _floats(r["bias"])} for r in self.rezero]
+        if self.identification is not None:
+            out["identification"] = self.identification.to_dict()
         return out
 
 
@@ -170,7 +270,9 @@ def load_calibration(path: str | Path, scene: Scene | str | None = None,
                        payload=payload, std=dict(data.get("uncertainty", {})), verdict=str(data.get("verdict", "")),
                        reasons=list(data.get("reasons", [])), poses=q,
                        samples_per_pose=int(poses.get("samples_per_pose", 0)), extras=extras,
-                       fit=dict(data.get("fit", {})), rezero=list(data.get("rezero", [])))
+                       fit=dict(data.get("fit", {})), rezero=list(data.get("rezero", [])),
+                       identification=(Identification.from_dict(data["identification"], f"{where}: identification")
+                                       if "identification" in data else None))
 
 
 def calibration_from_fit(fit, scene: Scene, sensor_serial: str | None, poses: np.ndarray,

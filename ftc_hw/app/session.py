@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from rich.console import Console
 from rich.live import Live
 
@@ -25,7 +24,7 @@ from ftc_hw import __version__
 from ftc_hw.app.evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.app.view import LiveView, evaluation_table, stream_table
 from ftc_hw.bus import EVENTS_CONTACT, STREAM_EVENT_KINDS, Bus, ContactEvent, DeviceEvent, joints_topic, wrench_topic
-from ftc_hw.calibration.file import load_calibration
+from ftc_hw.calibration.file import CalibrationError, load_calibration
 from ftc_hw.devices.base import frozen_heap, responsive_readers
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import EventWriter, event_record, read_truth
@@ -92,26 +91,16 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any],
         cal = load_calibration(path, scene=scene, sensor_serial=None)
     except Exception as exc:  # noqa: BLE001 - its typed error (or an OS error): shown to the user
         raise MonitorSetupError(f"--calibration {path}: {exc}") from None
-    kwargs = {k: v for k, v in cal.pipeline_kwargs().items() if v is not None}
+    try:
+        kwargs = {k: v for k, v in cal.pipeline_kwargs(scene).items() if v is not None}
+    except (CalibrationError, ValueError) as exc:
+        raise MonitorSetupError(f"--calibration {path}: {exc}") from None
     text = Path(path).read_text(encoding="utf-8", errors="replace")
     meta = {"file": str(path), "content": text, "pipeline": pipeline_kwargs_to_json(kwargs)}
-    unused = unapplied_calibration(cal.extras)
-    if unused:
-        meta["unapplied"] = unused
+    applied = [k for k in ("frame", "gravity", "inertials", "gain") if k in kwargs]
+    if applied:
+        meta["applied"] = ", ".join(applied)
     return kwargs, meta
-
-
-def unapplied_calibration(extras: dict[str, Any]) -> str:
-    """The calibration's optional fits (mount yaw, gravity tilt, arm gravity corrections) that the
-    pipeline does not apply (it takes bias and payload), as text; '' when there are none."""
-    parts = []
-    for key, value in extras.items():
-        if isinstance(value, str):
-            continue
-        arr = np.atleast_1d(np.asarray(value, dtype=float))
-        if np.any(arr != 0.0):
-            parts.append(f"{key} = {', '.join(f'{x:.4g}' for x in arr)}")
-    return "; ".join(parts)
 
 
 class StopReflex:
@@ -188,10 +177,8 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
         raise MonitorSetupError(str(exc)) from None
     cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
     out = MonitorOutcome(0)
-    if cal_meta and cal_meta.get("unapplied"):
-        console.print(f"[yellow]warning[/]: {cfg.calibration} also fitted {cal_meta['unapplied']}; the pipeline "
-                      "applies its bias and payload only: if these matter, correct the scene (the sensor site's "
-                      "orientation, the gravity vector, the link masses)")
+    if cal_meta and cal_meta.get("applied"):
+        console.print(f"calibration {cfg.calibration}: bias, payload and its corrections ({cal_meta['applied']})")
     # readers that poll, and the reflex, while the pipeline computes; vendor C++ lines made readable
     with responsive_readers(), vendor_stderr() as vendor:
         out.vendor_lines = vendor.counts

@@ -14,11 +14,13 @@ from ..scene import CompensationLevel
 
 class Compensator:
     def __init__(self, model: ArmModel, level: CompensationLevel | None = None, bias=None,
-                 payload: Payload | None = None, gain=None) -> None:
+                 payload: Payload | None = None, gain=None, frame=None) -> None:
         """``gain``: the sensor's identified linear error on the arm's own loads, ``reading = gain @ loads +
         bias`` (None: exact). It is what free-motion identification can tell (:mod:`ftc_hw.calibration.
         free_motion`): a map of the loads the arm's motions make, not of every wrench, so it corrects
-        the predicted loads and leaves the contact's wrench as read."""
+        the predicted loads and leaves the contact's wrench as read. ``frame``: the sensor's reading of a
+        wrench given in the model's sensor frame (6 x 6, e.g. a calibrated mount yaw), undone on every
+        reading (None: the model's frame)."""
         if payload is not None and payload != model.payload:
             model = ArmModel(model.scene, payload, model.inertials)
         self.model = model
@@ -27,6 +29,8 @@ class Compensator:
             raise ValueError(f"level must be bias, gravity or dynamics, got {self.level!r}")
         self.bias = np.zeros(6) if bias is None else np.asarray(bias, dtype=float).reshape(6).copy()
         self.gain = None if gain is None else np.asarray(gain, dtype=float).reshape(6, 6).copy()
+        self.frame = None if frame is None else np.asarray(frame, dtype=float).reshape(6, 6).copy()
+        self.frame_inv = None if frame is None else np.linalg.inv(self.frame)
 
     def loads(self, q, qd=None, qdd=None, joint_torques: bool = False):
         """The arm's own wrench on the sensor as read (the gain applied) and, if asked, the joint
@@ -36,9 +40,15 @@ class Compensator:
 
     def external(self, raw, q, qd=None, qdd=None) -> np.ndarray:
         """The external contact wrench (sensor frame, the scene's sign convention)."""
-        return np.asarray(raw, dtype=float) - self.bias - self.loads(q, qd, qdd)[0]
+        return self.unbiased(raw) - self.loads(q, qd, qdd)[0]
+
+    def unbiased(self, raw) -> np.ndarray:
+        """The reading without its bias, in the model's sensor frame."""
+        w = np.asarray(raw, dtype=float) - self.bias
+        return w if self.frame_inv is None else self.frame_inv @ w
 
     def tare(self, raw, q, qd=None, qdd=None) -> None:
         """Re-zero: take the current reading as no-contact (the arm still and untouched). At the
         ``bias`` level this folds the arm's weight at this pose into the bias."""
-        self.bias = np.asarray(raw, dtype=float) - self.loads(q, qd, qdd)[0]
+        loads = self.loads(q, qd, qdd)[0]
+        self.bias = np.asarray(raw, dtype=float) - (loads if self.frame is None else self.frame @ loads)

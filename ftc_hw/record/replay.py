@@ -31,6 +31,8 @@ def pipeline_kwargs_to_json(kwargs: dict[str, Any]) -> str:
             out[k] = {"mass": v.mass, "com": list(v.com)}
         elif hasattr(v, "tolist"):
             out[k] = v.tolist()
+        elif isinstance(v, dict):  # inertials (body -> array), joints, model_error
+            out[k] = {b: (x.tolist() if hasattr(x, "tolist") else x) for b, x in v.items()}
         else:
             out[k] = v
     return json.dumps(out)

@@ -41,14 +41,3 @@ def test_monitor_detects_the_collision_and_nothing_else(world_feeder):
             if c and t in frames and frames[t].result.estimate is not None and frames[t].result.detection.active]
     assert errs and np.median(errs) < 0.03
     assert monitor.counters["errors"] == 0
-
-
-def test_calibration_fits_the_pipeline_does_not_apply_are_named():
-    """A calibration that also fitted a mount yaw and a gravity tilt: the monitor applies bias and
-    payload only, so it names the rest (shown as a warning) instead of dropping them silently."""
-    from ftc_hw.app.session import unapplied_calibration
-
-    assert unapplied_calibration({}) == ""
-    assert unapplied_calibration({"mount_yaw": 0.0}) == ""
-    text = unapplied_calibration({"mount_yaw": 0.0123, "gravity_tilt_x": 0.0, "gravity_tilt_y": -0.002})
-    assert "mount_yaw = 0.0123" in text and "gravity_tilt_y = -0.002" in text and "gravity_tilt_x" not in text

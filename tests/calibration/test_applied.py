@@ -1,0 +1,72 @@
+"""Everything a calibration estimates reaches the pipeline: its mount yaw, gravity tilt, arm-gravity
+corrections and identification predict, through the pipeline's compensator, what the calibration's
+own static model predicts."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from ftc_hw.calibration.arm_gravity import ArmGravityBasis
+from ftc_hw.calibration.file import (
+    Calibration,
+    CalibrationError,
+    Identification,
+    load_calibration,
+    save_calibration,
+)
+from ftc_hw.calibration.regressor import GeometryModel, predict
+from ftc_hw.model import ArmModel, Payload
+from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.record.replay import pipeline_kwargs_from_json, pipeline_kwargs_to_json
+from ftc_hw.scene import load_scene
+
+
+@pytest.mark.parametrize("name", ["ur5e", "dxl-arm"])
+def test_calibrated_extras_reach_the_compensator(name):
+    scene = load_scene(name)
+    gm = GeometryModel(ArmModel(scene))
+    basis = ArmGravityBasis(gm)
+    beta = np.linspace(0.01, 0.03, basis.v.shape[1])
+    payload = Payload(0.4, (0.0, 0.01, 0.04))
+    bias = np.array([1.0, -2.0, 3.0, 0.1, -0.2, 0.05])
+    extras = {"mount_yaw": 0.02, "gravity_tilt_x": 0.004, "gravity_tilt_y": -0.003}
+    extras.update({name_k: float(b) for name_k, b in zip(basis.names, beta, strict=True)})
+    cal = Calibration(scene=scene.name, sensor_serial=None, date="2026-11-26T00:00:00Z", bias=bias, payload=payload,
+                      extras=extras)
+    kwargs = cal.pipeline_kwargs(scene)
+    assert {"frame", "gravity", "inertials"} <= set(kwargs)
+    pipe = ContactPipeline(scene, level="gravity", **kwargs)
+    theta = np.concatenate([bias, [payload.mass], payload.mass * np.asarray(payload.com)])
+    rng = np.random.default_rng(0)
+    lo, hi = gm.arm.joint_limits()
+    for _ in range(5):
+        q = rng.uniform(np.maximum(lo, -2), np.minimum(hi, 2))
+        expected = predict(gm.at(q), theta, gm.gravity, gm.sign, extras["mount_yaw"],
+                           (extras["gravity_tilt_x"], extras["gravity_tilt_y"]), basis.delta(beta))
+        # what the pipeline leaves of that reading is nothing: it predicts the same load
+        np.testing.assert_allclose(pipe.compensator.external(expected, q), np.zeros(6), atol=1e-9)
+    plain = ContactPipeline(scene, level="gravity", bias=bias, payload=payload)
+    assert np.abs(plain.compensator.external(expected, q)).max() > 1e-3  # the corrections matter
+
+
+def test_identification_round_trips_through_the_file_and_the_recording(tmp_path):
+    scene = load_scene("ur5e")
+    gain = np.eye(6)
+    gain[3, 4] = 0.004
+    ident = Identification("2026-11-26T00:00:00Z", "run.mcap", "poorly_excited", ["why"], gain,
+                           {"forearm": np.arange(10) * 1e-3}, ["wrist_3.Ixx"], {"samples": 100})
+    cal = Calibration(scene="ur5e", sensor_serial=None, date="2026-11-26T00:00:00Z", bias=np.zeros(6), payload=None,
+                      identification=ident)
+    back = load_calibration(save_calibration(cal, tmp_path / "cal.toml"), scene=scene)
+    np.testing.assert_allclose(back.identification.gain, gain)
+    np.testing.assert_allclose(back.identification.inertials["forearm"], np.arange(10) * 1e-3)
+    assert back.identification.untold == ["wrist_3.Ixx"]
+    kwargs = back.pipeline_kwargs(scene)
+    restored = pipeline_kwargs_from_json(pipeline_kwargs_to_json(kwargs))
+    pipe = ContactPipeline(scene, **restored)
+    np.testing.assert_allclose(pipe.compensator.gain, gain)
+    bad = dataclasses.replace(cal, identification=dataclasses.replace(ident, gain=np.zeros((6, 6))))
+    with pytest.raises(CalibrationError, match="load_gain"):
+        load_calibration(save_calibration(bad, tmp_path / "bad.toml"))
