@@ -12,6 +12,7 @@ its prior uncertainty; the verdict names those directions. Signals are low-passe
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import mujoco
@@ -19,10 +20,17 @@ import numpy as np
 
 from ..model import ArmModel
 from ..model.build import descends
-from ..model.inertials import N_PARAMS, PARAM_LABELS, body_params, wrench_regressor
+from ..model.inertials import N_PARAMS, PARAM_LABELS, body_params, model_rows
 
+HUBER_K = 1.345
+MIN_SEGMENT_SAMPLES = 5  # thinned samples: a stretch shorter than 8 x this many raw ones is left out
+MIN_SAMPLES = 200
 SMOOTH_S = 0.05  # s: the moving-average window, applied twice (a triangle 0.1 s wide, -3 dB near 9 Hz)
 TOLD = 0.5  # a direction is told by the data when its posterior std is below this fraction of its prior's
+
+
+class IdentificationError(ValueError):
+    """Not enough free motion to identify anything."""
 
 
 @dataclass(frozen=True)
@@ -32,7 +40,7 @@ class Priors:
     mass_rel: float = 0.10
     com_m: float = 0.01
     inertia_rel: float = 0.30
-    gain: float = 0.03  # each entry of dG
+    gain: float = 2.0  # each entry of dG, in units of the scene's sensor accuracy (range-scaled off the diagonal)
     bias: float = 1e3  # N, N m: unknown
 
 
@@ -44,6 +52,7 @@ class MotionData:
     wrench: np.ndarray  # (N, 6) raw readings
     q: np.ndarray  # (N, n) rad
     qd: np.ndarray  # (N, n) rad/s
+    current: np.ndarray | None = None  # (N, n) A, the motor currents (joint friction needs them)
 
 
 @dataclass
@@ -79,14 +88,18 @@ def smooth(x: np.ndarray, n: int) -> np.ndarray:
     return out[pad:-pad]
 
 
-def prepare(data: MotionData, smooth_s: float = SMOOTH_S) -> tuple[np.ndarray, ...]:
-    """(t, wrench, q, qd, qdd): low-passed, qdd differentiated, thinned to one sample per window."""
+def prepare(data: MotionData, smooth_s: float = SMOOTH_S, with_current: bool = False) -> tuple[np.ndarray, ...]:
+    """(t, wrench, q, qd, qdd[, current]): low-passed, qdd differentiated, thinned to one sample per
+    window."""
     dt = float(np.median(np.diff(data.t)))
     n = max(1, int(round(smooth_s / dt)))
     w, q, qd = smooth(data.wrench, n), smooth(data.q, n), smooth(data.qd, n)
     qdd = np.gradient(qd, data.t, axis=0)
     keep = slice(2 * n, len(data.t) - 2 * n, n)  # the ends see the padding
-    return data.t[keep], w[keep], q[keep], qd[keep], qdd[keep]
+    out = (data.t[keep], w[keep], q[keep], qd[keep], qdd[keep])
+    if with_current:
+        out += (smooth(data.current, n)[keep],)
+    return out
 
 
 class FreeMotionIdentifier:
@@ -120,7 +133,9 @@ class FreeMotionIdentifier:
                             *([p.inertia_rel * max(np.max(np.linalg.eigvalsh(i_c)), 1e-6)] * 6)])
             blocks.append(_com_to_origin_jacobian(mass, h) @ np.diag(std))
         if self.with_gain:
-            blocks.append(np.eye(36) * p.gain)
+            full = np.asarray(self.arm.scene.sensor.range, dtype=float)
+            scale = p.gain * max(self.arm.scene.sensor.accuracy, 1e-4) * full[:, None] / full[None, :]
+            blocks.append(np.diag(scale.reshape(-1)))
         out = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
         k = 0
         for b in blocks:
@@ -130,36 +145,44 @@ class FreeMotionIdentifier:
 
     def rows(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, nominal): the fit's 6 x P rows and the model's reading (no bias) at one state."""
-        arm, m, d = self.arm, self.arm.model, self._data
-        nominal = arm.predicted_wrench(q, qd, qdd, "dynamics")
-        arm.joints.set_qpos(q, d.qpos)
-        arm.joints.set_dofs(qd, d.qvel)
-        arm.joints.set_dofs(qdd, d.qacc)
-        for stage in (mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_comVel, mujoco.mj_rnePostConstraint):
-            stage(m, d)
-        blocks = [np.eye(6), wrench_regressor(m, d, self.body_ids, arm.site_id, arm.sign)]
-        if self.with_gain:
-            blocks.append(np.kron(np.eye(6), nominal))  # row i: nominal_j at column 6 i + j
-        return np.hstack(blocks), nominal
+        a, nominal = model_rows(self.arm, self._data, self.body_ids, q, qd, qdd, self.with_gain)
+        return np.hstack([np.eye(6), a]), nominal
 
-    def fit(self, data: MotionData) -> FreeMotionFit:
-        _, w, q, qd, qdd = prepare(data)
+    def fit(self, data: MotionData | Sequence[MotionData]) -> FreeMotionFit:
+        """Fit one stretch of free motion, or several (each low-passed on its own: gaps between them,
+        contacts cut out, are never smoothed across)."""
         rows, resid = [], []
-        for k in range(len(w)):
-            a, nominal = self.rows(q[k], qd[k], qdd[k])
-            rows.append(a)
-            resid.append(w[k] - nominal)
+        for segment in [data] if isinstance(data, MotionData) else data:
+            if len(segment.t) < 8 * MIN_SEGMENT_SAMPLES:
+                continue
+            _, w, q, qd, qdd = prepare(segment)
+            for k in range(len(w)):
+                a, nominal = self.rows(q[k], qd[k], qdd[k])
+                rows.append(a)
+                resid.append(w[k] - nominal)
+        if len(rows) < MIN_SAMPLES:
+            raise IdentificationError(f"{len(rows)} usable samples of free motion (at least {MIN_SAMPLES} needed: "
+                                      f"{MIN_SAMPLES * SMOOTH_S:g} s)")
         a = np.vstack(rows)
         y = np.concatenate(resid)
         before = np.sqrt(np.mean(np.square(np.array(resid) - np.mean(resid, axis=0)), axis=0))
+        x, cov, r = self._irls(a, y)
+        return self._result(x, cov, r, before, len(rows))
+
+    def _irls(self, a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each axis weighed by its robust residual scale, each sample-axis by Huber's weight: a
+        contact the recording did not mark, a glitch, weigh little."""
         scale = np.sqrt(np.diag(self.arm.scene.sensor.noise_cov))
-        x, cov, r = None, None, None
-        for _ in range(2):  # the second pass weighs each axis by what the first left
-            weights = np.tile(1.0 / scale, len(w))
+        huber = np.ones_like(y)
+        x = cov = r = None
+        for _ in range(4):
+            weights = np.tile(1.0 / scale, len(y) // 6) * np.sqrt(huber)
             x, cov = _bayes(a * weights[:, None], y * weights, self.prior_sqrt)
             r = (y - a @ x).reshape(-1, 6)
             scale = np.maximum(1.4826 * np.median(np.abs(r - np.median(r, axis=0)), axis=0), scale * 0.1)
-        return self._result(x, cov, r, before, len(w))
+            u = np.abs(r / scale).reshape(-1)
+            huber = np.where(u <= HUBER_K, 1.0, HUBER_K / np.maximum(u, 1e-12))
+        return x, cov, r
 
     def _result(self, x, cov, r, before, n) -> FreeMotionFit:
         nb = len(self.bodies)

@@ -63,6 +63,22 @@ def set_body_params(m: mujoco.MjModel, b: int, pi: np.ndarray, nearest: bool = F
     m.body_inertia[b] = principal
 
 
+def keep_com_inertia(pi: np.ndarray, d_mass: float, d_first: np.ndarray) -> np.ndarray:
+    """The 10-parameter correction that changes a body's mass and first moments by ``d_mass``,
+    ``d_first`` and keeps its inertia about its (moved) centre of mass."""
+    mass, h = float(pi[0]), np.asarray(pi[1:4], dtype=float)
+    new_mass, new_h = mass + float(d_mass), h + np.asarray(d_first, dtype=float)
+
+    def shift(m: float, first: np.ndarray) -> np.ndarray:
+        s = (first @ first * np.eye(3) - np.outer(first, first)) / m
+        return np.array([s[0, 0], s[1, 1], s[2, 2], s[0, 1], s[0, 2], s[1, 2]])
+
+    out = np.zeros(N_PARAMS)
+    out[0], out[1:4] = new_mass - mass, new_h - h
+    out[4:] = shift(new_mass, new_h) - shift(mass, h)
+    return out
+
+
 def _inertia_rows(v: np.ndarray) -> np.ndarray:
     """``I v`` as a 3 x 6 matrix on (Ixx, Iyy, Izz, Ixy, Ixz, Iyz)."""
     x, y, z = v
@@ -96,3 +112,22 @@ def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int],
         out[:3, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ f
         out[3:, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ t
     return sign * out
+
+
+def model_rows(arm, data: mujoco.MjData, bodies: Sequence[int], q, qd, qdd,
+               gain: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``(A, nominal)`` at one state: the reading's derivatives with respect to the bodies' parameters
+    (6 x 10 len(bodies)) and, with ``gain``, to the sensor's 6 x 6 linear error on the loads (36 more
+    columns, row-major), and the model's reading (no bias). ``arm``: an :class:`~.arm.ArmModel`;
+    ``data``: a scratch ``MjData`` of its model."""
+    m = arm.model
+    nominal = arm.predicted_wrench(q, qd, qdd, "dynamics")
+    arm.joints.set_qpos(q, data.qpos)
+    arm.joints.set_dofs(qd, data.qvel)
+    arm.joints.set_dofs(qdd, data.qacc)
+    for stage in (mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_comVel, mujoco.mj_rnePostConstraint):
+        stage(m, data)
+    a = wrench_regressor(m, data, bodies, arm.site_id, arm.sign)
+    if gain:
+        a = np.hstack([a, np.kron(np.eye(6), nominal)])  # row i: nominal_j at column 6 i + j
+    return a, nominal

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from ftc_hw.calibration.excitation import FADE_S, plan_excitation
+from ftc_hw.calibration.excitation import REST_S as EXCITATION_REST_S
 from ftc_hw.geometry.kinds import KINDS
 from ftc_hw.geometry.solid import inside_local
 from ftc_hw.model import ArmModel, Payload
@@ -198,6 +200,12 @@ def build_payload_poses(scene: Scene, model: ArmModel, rng: np.random.Generator,
     return ScenarioSetup(PointToPoint(np.array(poses), 1.5, 1.5), payload=Payload(0.5, (0.0, 0.0, 0.05)))
 
 
+def build_excitation(scene: Scene, model: ArmModel, rng: np.random.Generator, duration: float) -> ScenarioSetup:
+    """The planned excitation for identification (ftc identify --plan), filling the run."""
+    plan = plan_excitation(scene, max(duration - EXCITATION_REST_S, 2 * FADE_S + 1.0), seed=int(rng.integers(2**31)))
+    return ScenarioSetup(plan.excitation)
+
+
 SCENARIOS: dict[str, ScenarioInfo] = {s.name: s for s in [
     ScenarioInfo("hold", "the arm holds its home pose; nothing touches it", build_hold),
     ScenarioInfo("static-pokes", "the arm holds its home pose; a probe pokes random surface points "
@@ -208,6 +216,8 @@ SCENARIOS: dict[str, ScenarioInfo] = {s.name: s for s in [
     ScenarioInfo("sweep-with-collision", "the sweep; the most distal link hits a compliant obstacle "
                  "(about 40 N peak) once per swing, on every swing that ends within the run",
                  build_sweep_with_collision),
+    ScenarioInfo("excitation", "a planned identification motion: every joint on a Fourier series about home, "
+                 "within its limits, 1 rad/s and clear of self-collision (ftc identify --plan)", build_excitation),
     ScenarioInfo("payload-poses", "a 0.5 kg payload on the flange; the arm moves through static poses",
                  build_payload_poses),
 ]}

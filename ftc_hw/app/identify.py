@@ -1,0 +1,253 @@
+"""``ftc identify``: the arm's inertial parameters and the sensor's linear error on the arm's loads,
+from contact-free motion, into the calibration file (:mod:`ftc_hw.calibration.free_motion`).
+
+From a recording (``ftc monitor --record``): the pipeline's inputs, with the contacts it reported,
+the lost streams and the interpolated-over-gap frames cut out (``--keep-contacts`` keeps the
+contacts and leaves them to the fit's robust weights). With ``--sim``: the scene's emulated devices
+run a contact-free scenario (the ordinary ``sweep``, or ``excitation``, a planned motion) recorded
+through the same monitor, then identified the same way.
+
+Exit codes: 0 identified (verdict good), 4 identified but poorly excited (the file is written; the
+verdict names what the motion could not tell), 1 nothing usable, 2 bad arguments.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+
+from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE
+from ftc_hw.calibration.applied import merge_inertials
+from ftc_hw.calibration.file import (
+    Calibration,
+    CalibrationError,
+    Identification,
+    load_calibration,
+    now_iso,
+    save_calibration,
+)
+from ftc_hw.calibration.free_motion import FreeMotionFit, FreeMotionIdentifier, IdentificationError, MotionData
+from ftc_hw.calibration.joint_friction import JointFit, fit_joint_friction
+from ftc_hw.model import ArmModel
+from ftc_hw.monitor import MONITOR_INPUT
+from ftc_hw.record.reader import Recording, RecordingError, read_recording
+from ftc_hw.scene import Scene
+
+from .session import MonitorConfig, MonitorSetupError, run_monitor
+
+CONTACT_MARGIN_S = 0.3  # cut this much before a reported contact and after its end
+MIN_SEGMENT_S = 0.5
+MAX_JOINT_GAP_NS = 20_000_000  # a longer joint gap is cut; shorter ones the low pass spans
+FREE_SCENARIOS = ("sweep", "excitation", "hold")
+
+
+@dataclass
+class IdentifyOptions:
+    out: Path | None = None  # None: calibration-<scene>.toml
+    calibration: Path | None = None  # the file to start from (default: ``out`` if it exists)
+    json_path: Path | None = None
+    keep_contacts: bool = False
+    gain: bool = True
+
+
+def motion_segments(rec: Recording, keep_contacts: bool = False) -> tuple[list[MotionData], dict[str, int]]:
+    """The recording's stretches of free motion, and how many frames each rule cut."""
+    frames = [m.frame for m in rec.messages if m.topic == MONITOR_INPUT]
+    if not frames:
+        raise IdentificationError(f"{rec.path}: no {MONITOR_INPUT} messages (record with ftc monitor --record)")
+    cut = np.zeros(len(frames), dtype=bool)
+    t = np.array([f.t_host_ns for f in frames], dtype=np.int64)
+    counts = {"frames": len(frames), "contact": 0, "stream_lost": 0, "joint_gap": 0, "saturated": 0, "tare": 0}
+    spans = _spans(rec, "contact") if not keep_contacts else []
+    for name, rule in (("contact", spans), ("stream_lost", _spans(rec, "lost"))):
+        for a, b in rule:
+            inside = (t >= a) & (t <= b) & ~cut
+            counts[name] += int(inside.sum())
+            cut |= inside
+    flags = (("joint_gap", [f.joint_gap_ns > MAX_JOINT_GAP_NS for f in frames]),
+             ("saturated", [f.saturated for f in frames]), ("tare", [f.tare for f in frames]))
+    for name, flag in flags:
+        f = np.array(flag) & ~cut
+        counts[name] = int(f.sum())
+        cut |= f
+    return _split(frames, t, cut), counts
+
+
+def _spans(rec: Recording, what: str) -> list[tuple[int, int]]:
+    """(start, end) host ns of each reported contact (with margins) or lost stream."""
+    margin = int(CONTACT_MARGIN_S * 1e9)
+    out, open_at = [], {}
+    for m in rec.messages:
+        ev = m.frame
+        if what == "contact" and m.topic == EVENTS_CONTACT:
+            if ev.kind == "onset":
+                open_at[ev.contact_id] = ev.t_host_ns - margin
+            elif ev.kind == "offset":
+                out.append((open_at.pop(ev.contact_id, ev.t_host_ns - margin), ev.t_host_ns + margin))
+        elif what == "lost" and m.topic == EVENTS_DEVICE and ev.kind.endswith(("_lost", "_back")):
+            stream = ev.kind.split("_")[0]
+            if ev.kind.endswith("_lost"):
+                open_at[stream] = ev.t_host_ns - margin
+            else:
+                out.append((open_at.pop(stream, ev.t_host_ns - margin), ev.t_host_ns + margin))
+    end = rec.messages[-1].log_time if rec.messages else 0
+    out += [(a, max(end, a) + margin) for a in open_at.values()]  # still open at the end
+    return out
+
+
+def _split(frames: list, t: np.ndarray, cut: np.ndarray) -> list[MotionData]:
+    dt = np.diff(t)
+    step = float(np.median(dt)) if len(dt) else 1.0
+    breaks = np.flatnonzero(cut | np.r_[False, dt > 3 * step])
+    out, start = [], 0
+    for stop in [*breaks.tolist(), len(frames)]:
+        seg = [k for k in range(start, stop) if not cut[k]]
+        start = stop + (1 if stop < len(frames) and cut[stop] else 0)
+        if len(seg) < 2 or (t[seg[-1]] - t[seg[0]]) * 1e-9 < MIN_SEGMENT_S:
+            continue
+        out.append(MotionData(t[seg] * 1e-9, np.array([frames[k].wrench for k in seg]),
+                              np.array([frames[k].q for k in seg]), np.array([frames[k].qd for k in seg]),
+                              np.array([frames[k].current for k in seg])))
+    return out
+
+
+def base_calibration(scene: Scene, opts: IdentifyOptions) -> Calibration | None:
+    """The calibration to start from: ``--calibration``, else ``--out`` if it exists."""
+    path = opts.calibration or (opts.out if opts.out.exists() else None)
+    return None if path is None else load_calibration(path, scene=scene)
+
+
+def identify(scene: Scene, segments: list[MotionData], base: Calibration | None, source: str,
+             gain: bool = True) -> tuple[Calibration, FreeMotionFit]:
+    """Fit on top of ``base`` (its payload, corrections and frame) and return the updated calibration."""
+    kwargs = base.pipeline_kwargs(scene) if base is not None else {}
+    model_scene = scene if "gravity" not in kwargs else dataclasses.replace(scene, gravity=kwargs["gravity"])
+    arm = ArmModel(model_scene, kwargs.get("payload"), kwargs.get("inertials"))
+    frame = kwargs.get("frame")
+    if frame is not None:  # fit in the model's sensor frame
+        inv = np.linalg.inv(frame)
+        segments = [dataclasses.replace(s, wrench=s.wrench @ inv.T) for s in segments]
+    fit = FreeMotionIdentifier(arm, gain=gain).fit(segments)
+    joints = _joints(arm, fit, segments)
+    ident = Identification(now_iso(), source, fit.verdict, list(fit.reasons), fit.gain,
+                           {b: d for b, d in zip(fit.bodies, fit.delta_pi, strict=True)}, list(fit.untold),
+                           {"samples": fit.samples, "residual_rms_before": fit.residual_rms_before.tolist(),
+                            "residual_rms": fit.residual_rms.tolist(),
+                            "parameters": fit.labels, "std": fit.std.tolist(), "prior_std": fit.prior_std.tolist(),
+                            **({} if joints is None else _joint_figures(joints))},
+                           {} if joints is None else {"torque_constant": joints.torque_constant,
+                                                      "friction_viscous": joints.friction_viscous,
+                                                      "friction_coulomb": joints.friction_coulomb},
+                           fit.cov[6:, 6:].copy(), gain)
+    bias = fit.bias if frame is None else frame @ fit.bias
+    if base is None:
+        cal = Calibration(scene=scene.name, sensor_serial=None, date=now_iso(), bias=bias, payload=None,
+                          verdict=fit.verdict, reasons=list(fit.reasons), identification=ident)
+    else:
+        cal = dataclasses.replace(base.with_bias(bias), identification=ident)
+    return cal, fit
+
+
+def _joints(arm: ArmModel, fit: FreeMotionFit, segments: list[MotionData]) -> JointFit | None:
+    """Joint friction and torque constants with the identified model, when the currents were recorded."""
+    if any(s.current is None or not np.any(s.current) for s in segments):
+        return None
+    model = ArmModel(arm.scene, arm.payload, merge_inertials(arm.inertials, dict(zip(fit.bodies, fit.delta_pi,
+                                                                                        strict=True))))
+    return fit_joint_friction(model, segments)
+
+
+def _joint_figures(j: JointFit) -> dict[str, Any]:
+    return {"joints_fitted": j.fitted.tolist(), "joint_residual_rms_before_Nm": j.residual_rms_before.tolist(),
+            "joint_residual_rms_Nm": j.residual_rms.tolist(), "joint_std": j.std.tolist()}
+
+
+def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *, sim: bool = False,
+                 scenario: str = "sweep", duration: float = 120.0, seed: int = 0, reality: str = "ideal",
+                 console: Console | None = None) -> int:
+    console = console or Console()
+    if opts.out is None:
+        opts = dataclasses.replace(opts, out=Path(f"calibration-{scene.name}.toml"))
+    try:
+        base = base_calibration(scene, opts)
+        with tempfile.TemporaryDirectory(prefix="ftc-identify-") as tmp:
+            if sim:
+                recording = _record_sim(scene, scenario, duration, seed, reality, Path(tmp) / "run.mcap", console)
+            rec = read_recording(recording)
+            segments, counts = motion_segments(rec, keep_contacts=opts.keep_contacts or sim)
+        source = (f"ftc identify --sim: {scenario}, {duration:g} s, reality {reality}, seed {seed}" if sim
+                  else str(recording))
+        cal, fit = identify(scene, segments, base, source, gain=opts.gain)
+    except (IdentificationError, RecordingError, CalibrationError, MonitorSetupError, OSError) as exc:
+        console.print(f"[red]cannot identify:[/] {exc}")
+        return 1
+    save_calibration(cal, opts.out)
+    _report(console, fit, counts, segments, opts.out, base is not None)
+    _report_joints(console, scene, cal.identification)
+    if opts.json_path is not None:
+        figures = _figures(fit, counts, segments) | {"joints": {k: v.tolist() for k, v in
+                                                                 cal.identification.joints.items()}}
+        opts.json_path.write_text(json.dumps(figures, indent=2))
+    return 0 if fit.verdict == "good" else 4
+
+
+def _record_sim(scene: Scene, scenario: str, duration: float, seed: int, reality: str, path: Path,
+                console: Console) -> Path:
+    if scenario not in FREE_SCENARIOS:
+        raise IdentificationError(f"--scenario {scenario}: identification needs free motion "
+                                  f"({', '.join(FREE_SCENARIOS)})")
+    console.print(f"recording {duration:g} s of [cyan]{scenario}[/] on the emulated devices (reality {reality}) ...")
+    cfg = MonitorConfig(str(scene.path), sim=True, scenario=scenario, seed=seed, duration=duration, record=path,
+                        view=False, reality=reality, title="ftc identify")
+    run_monitor(cfg, console)  # its alarms are the untrained model's: the scenario has no contact
+    return path
+
+
+def _figures(fit: FreeMotionFit, counts: dict[str, int], segments: list[MotionData]) -> dict[str, Any]:
+    return {"verdict": fit.verdict, "reasons": fit.reasons, "untold": fit.untold, "samples": fit.samples,
+            "segments": len(segments), "seconds": float(sum(s.t[-1] - s.t[0] for s in segments)), "cut": counts,
+            "residual_rms_before": fit.residual_rms_before.tolist(), "residual_rms": fit.residual_rms.tolist(),
+            "gain": fit.gain.tolist(), "bias": fit.bias.tolist(),
+            "inertials": {b: d.tolist() for b, d in zip(fit.bodies, fit.delta_pi, strict=True)}}
+
+
+def _report_joints(console: Console, scene: Scene, ident: Identification) -> None:
+    if not ident.joints:
+        console.print("joint friction and torque constants: not fitted (no motor currents recorded)")
+        return
+    fitted = ident.figures.get("joints_fitted", [])
+    r = scene.robot
+    for j, name in enumerate(scene.robot.joints):
+        if not (j < len(fitted) and fitted[j]):
+            console.print(f"  {name}: moved too little to fit its friction: the scene's values kept")
+            continue
+        jt = ident.joints
+        console.print(f"  {name}: torque constant {jt['torque_constant'][j]:.3g} N m/A (scene "
+                      f"{r.torque_constant[j]:.3g}), viscous {jt['friction_viscous'][j]:.3g} N m s/rad "
+                      f"({r.friction_viscous[j]:.3g}), Coulomb {jt['friction_coulomb'][j]:.3g} N m "
+                      f"({r.friction_coulomb[j]:.3g})")
+
+
+def _report(console: Console, fit: FreeMotionFit, counts: dict[str, int], segments: list[MotionData], out: Path,
+            updated: bool) -> None:
+    seconds = sum(s.t[-1] - s.t[0] for s in segments)
+    cuts = ", ".join(f"{k} {v}" for k, v in counts.items() if k != "frames" and v)
+    console.print(f"free motion: {seconds:.1f} s in {len(segments)} stretches ({fit.samples} samples); "
+                  f"frames cut: {cuts or 'none'} of {counts['frames']}")
+    axes = ("fx", "fy", "fz", "tx", "ty", "tz")
+    console.print("residual RMS, model -> identified: " + ", ".join(
+        f"{a} {b:.3g} -> {c:.3g}" for a, b, c in zip(axes, fit.residual_rms_before, fit.residual_rms, strict=True))
+        + " (N, N m)")
+    colour = "green" if fit.verdict == "good" else "yellow"
+    console.print(f"verdict: [{colour}]{fit.verdict}[/]" + ("".join(f"\n  - {r}" for r in fit.reasons)))
+    if fit.untold:
+        shown = ", ".join(fit.untold[:12]) + (f", ... ({len(fit.untold)} in all)" if len(fit.untold) > 12 else "")
+        console.print(f"  not told by this motion: {shown}")
+    console.print(f"{'updated' if updated else 'wrote'} {out} (bias, identification); ftc monitor --calibration "
+                  f"{out} applies it")

@@ -1,0 +1,57 @@
+"""``ftc identify``: arguments to :mod:`ftc_hw.app.identify`."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import typer
+
+from ftc_hw.app.identify import IdentifyOptions, run_identify
+from ftc_hw.app.view import make_console
+from ftc_hw.calibration.excitation import plan_excitation
+from ftc_hw.record.reader import RecordingError, read_recording
+from ftc_hw.record.replay import ReplayError, recorded_scene
+
+from .common import scene_or_exit
+
+
+def run_identify_command(recording: Path | None, scene_name: str | None, *, sim: bool, plan: bool,
+                         plan_file: Path | None, scenario: str | None, duration: float, seed: int, reality: str,
+                         opts: IdentifyOptions) -> int:
+    console = make_console()
+    if (recording is None) == (not sim and not plan_file):
+        raise typer.BadParameter("give a recording (FILE.mcap), or --sim, or --plan-file", param_hint="RECORDING")
+    if recording is not None and (sim or plan_file):
+        raise typer.BadParameter("a recording, or --sim / --plan-file, not both", param_hint="RECORDING")
+    if recording is not None:
+        scene = scene_or_exit(scene_name) if scene_name else _recorded(recording)
+        return run_identify(scene, recording, opts, console=console)
+    if scene_name is None:
+        raise typer.BadParameter("--sim and --plan-file need --scene", param_hint="--scene")
+    scene = scene_or_exit(scene_name)
+    if plan_file is not None:
+        return write_plan(scene, plan_file, duration, seed, console)
+    return run_identify(scene, None, opts, sim=True, scenario=scenario or ("excitation" if plan else "sweep"),
+                        duration=duration, seed=seed, reality=reality, console=console)
+
+
+def _recorded(path: Path):
+    try:
+        return recorded_scene(read_recording(path, topics=set()))
+    except (RecordingError, ReplayError, OSError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+
+
+def write_plan(scene, path: Path, duration: float, seed: int, console) -> int:
+    """The planned excitation as CSV (t s, then q rad per joint at 125 Hz, a UR controller's servoj rate),
+    for an arm that takes no commands from here: play it on the controller while ftc monitor --record runs."""
+    with console.status("planning the excitation"):
+        plan = plan_excitation(scene, duration, seed=seed)
+    t, q, _, _ = plan.excitation.samples(125.0)
+    header = "t_s," + ",".join(f"{j}_rad" for j in scene.robot.joints)
+    np.savetxt(path, np.column_stack([t, q]), delimiter=",", header=header, comments="", fmt="%.6f")
+    console.print(f"wrote {path}: {len(t)} samples, {t[-1]:.1f} s, peak joint speed {plan.max_speed:.2f} rad/s, "
+                  f"{plan.told} parameter directions told; chosen of {plan.candidates} candidates "
+                  f"({plan.rejected['self_collision']} self-colliding)")
+    return 0

@@ -1,0 +1,95 @@
+"""``ftc identify``: free motion cut from a recording (contacts, lost streams, long joint gaps), the fit
+written into the calibration file on top of what it had, and the planned excitation within its limits."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ftc_hw.app.identify import IdentifyOptions, identify, motion_segments
+from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, ContactEvent, DeviceEvent
+from ftc_hw.calibration.excitation import SelfCollision, plan_excitation
+from ftc_hw.calibration.file import Calibration, load_calibration, save_calibration
+from ftc_hw.calibration.free_motion import IdentificationError
+from ftc_hw.model import ArmModel, Payload
+from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
+from ftc_hw.record.reader import RecordedMessage, Recording
+from ftc_hw.scene import load_scene
+
+SCENE = load_scene("dxl-arm")
+
+
+def _recording(seconds: float = 40.0, rate: float = 100.0, true_arm: ArmModel | None = None) -> Recording:
+    """A dxl-arm recording of every joint moving, read through ``true_arm``: a contact at 10-11 s, the
+    sensor lost at 20-21 s, a 50 ms joint gap at 30 s."""
+    arm = true_arm or ArmModel(SCENE)
+    t = np.arange(0.0, seconds, 1.0 / rate)
+    home = np.asarray(SCENE.robot.home)
+    w = 2 * np.pi * np.array([0.13, 0.21, 0.17, 0.29, 0.0])
+    amp = np.array([0.8, 0.5, 0.5, 0.6, 0.0])
+    rec = Recording(Path("synthetic.mcap"), complete=True)
+    for k, tk in enumerate(t):
+        q = home + amp * np.sin(w * tk)
+        qd, qdd = amp * w * np.cos(w * tk), -amp * w * w * np.sin(w * tk)
+        wrench = arm.predicted_wrench(q, qd, qdd) + np.array([0.2, -0.1, 0.3, 0.01, 0.02, -0.01])
+        ns = int(tk * 1e9)
+        gap = 50_000_000 if 30.0 <= tk < 30.05 else 0
+        frame = PipelineInput(ns, ns, k, "ft", wrench, q, qd, np.zeros(5), joint_gap_ns=gap)
+        rec.messages.append(RecordedMessage(MONITOR_INPUT, ns, ns, frame))
+        for at, topic, ev in ((10.0, EVENTS_CONTACT, "onset"), (11.0, EVENTS_CONTACT, "offset"),
+                              (20.0, EVENTS_DEVICE, "sensor_lost"), (21.0, EVENTS_DEVICE, "sensor_back")):
+            if abs(tk - at) < 0.5 / rate:
+                frame = (ContactEvent.make(ns, ev, "link4", np.zeros(3), np.ones(3), contact_id=1)
+                         if topic == EVENTS_CONTACT else DeviceEvent(ns, "ft", ev, ""))
+                rec.messages.append(RecordedMessage(topic, ns, ns, frame))
+    return rec
+
+
+def test_free_motion_is_cut_where_the_recording_says_it_was_not_free():
+    segments, counts = motion_segments(_recording())
+    assert counts["contact"] == pytest.approx(160, abs=2)  # 1 s of contact plus 0.3 s either side, at 100 Hz
+    assert counts["stream_lost"] == pytest.approx(160, abs=2)
+    assert counts["joint_gap"] == 5
+    assert len(segments) == 4
+    starts = sorted(s.t[0] for s in segments)
+    assert starts[1] == pytest.approx(11.31, abs=0.02) and starts[2] == pytest.approx(21.31, abs=0.02)
+    kept, counts = motion_segments(_recording(), keep_contacts=True)
+    assert counts["contact"] == 0 and len(kept) == 3
+
+
+def test_identification_goes_into_the_calibration_file_on_top_of_its_payload(tmp_path):
+    payload = Payload(0.2, (0.0, 0.0, 0.03))
+    delta = {"link4": np.array([0.02, 0.001, 0.0, 0.0005, 0, 0, 0, 0, 0, 0])}
+    rec = _recording(true_arm=ArmModel(SCENE, payload, delta))
+    base = Calibration(scene=SCENE.name, sensor_serial=None, date="2026-11-26T00:00:00Z", bias=np.zeros(6),
+                       payload=payload)
+    segments, _ = motion_segments(rec)
+    cal, fit = identify(SCENE, segments, base, "synthetic.mcap")
+    assert fit.residual_rms_before[3:].max() > 3 * fit.residual_rms[3:].max()
+    assert cal.payload == payload and cal.identification is not None
+    np.testing.assert_allclose(cal.bias[:3], [0.2, -0.1, 0.3], atol=0.05)
+    back = load_calibration(save_calibration(cal, tmp_path / "cal.toml"), scene=SCENE)
+    assert back.identification.source == "synthetic.mcap" and back.rezero  # the old bias kept in the history
+    assert "inertials" in back.pipeline_kwargs(SCENE) and "gain" in back.pipeline_kwargs(SCENE)
+
+
+def test_too_little_free_motion_is_a_clear_error():
+    with pytest.raises(IdentificationError, match="usable samples"):
+        identify(SCENE, motion_segments(_recording(seconds=3.0))[0], None, "short.mcap")
+    assert IdentifyOptions().out is None
+
+
+@pytest.mark.parametrize("name", ["ur5e", "dxl-arm"])
+def test_planned_excitation_stays_within_limits_and_tells_more_than_the_sweep(name):
+    scene = load_scene(name)
+    plan = plan_excitation(scene, 60.0, candidates=6, seed=1)
+    t, q, qd, _ = plan.excitation.samples(50.0)
+    lo, hi = ArmModel(scene).joint_limits()
+    assert np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9)
+    assert np.abs(qd).max() <= 1.0 + 1e-6
+    np.testing.assert_allclose(q[0], scene.robot.home, atol=1e-12)  # starts and ends at rest at home
+    np.testing.assert_allclose(q[-1], scene.robot.home, atol=1e-3)
+    assert np.abs(qd[-1]).max() < 1e-2
+    assert not SelfCollision(scene).any(q[::25])
+    assert plan.told > (20 if name == "ur5e" else 10)
