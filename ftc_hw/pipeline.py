@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .bus import ContactEvent
-from .compensation import Compensator, JointResiduals, QddEstimator, RecentPeak
+from .compensation import Compensator, JointResiduals, ModelError, QddEstimator, RecentPeak
 from .detection import ContactDetector, Detection
 from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
@@ -74,13 +74,23 @@ class ContactPipeline:
                  qdd_tau: float = 0.002, extra_cov=None, track_slide: float | None = 0.01,
                  bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005,
                  flag_uncertain: bool = True, gap_hold_s: float | None = 0.1, gain=None,
-                 inertials=None) -> None:
+                 inertials=None, frame=None, gravity=None, joints=None, model_error=None) -> None:
+        """Calibrated corrections (``Calibration.pipeline_kwargs``): ``gain`` the sensor's error on the
+        arm's loads, ``inertials`` link inertial corrections, ``frame`` the sensor's true frame (a
+        mount yaw), ``gravity`` a tilted gravity vector (m/s^2, base frame), ``joints`` identified
+        ``torque_constant``, ``friction_viscous``, ``friction_coulomb`` (per joint), ``model_error`` the
+        identification's parameter covariance (:class:`~ftc_hw.compensation.ModelError`)."""
         self.scene = scene
-        model = ArmModel(scene, payload, inertials)
-        self.compensator = Compensator(model, level, bias, gain=gain)
+        model_scene = scene if gravity is None else replace(scene, gravity=np.asarray(gravity, dtype=float))
+        if joints:
+            model_scene = replace(model_scene, robot=replace(
+                model_scene.robot, **{k: np.asarray(v, dtype=float) for k, v in joints.items()}))
+        model = ArmModel(model_scene, payload, inertials)
+        self.compensator = Compensator(model, level, bias, gain=gain, frame=frame)
+        self.identified_error = None if model_error is None else ModelError.from_kwargs(model, model_error)
         self.level = self.compensator.level
         self.solver: Solver = make_solver(model, method)
-        self.residuals = JointResiduals(scene) if use_currents else None
+        self.residuals = JointResiduals(model_scene) if use_currents else None
         self.qdd = QddEstimator(scene.n_joints, qdd_tau)
         self.extra_cov = None if extra_cov is None else np.asarray(extra_cov, dtype=float).reshape(6, 6)
         cov = scene.sensor.noise_cov + (np.zeros((6, 6)) if self.extra_cov is None else self.extra_cov)
@@ -109,12 +119,15 @@ class ContactPipeline:
         # reaction to it (None: never re-weigh; see _impact_solve)
         self.impact_window_ns = None if impact_window_s is None else int(impact_window_s * 1e9)
         self._noise_inv = np.linalg.inv(scene.sensor.noise_cov)
-        self._kt = np.asarray(scene.robot.torque_constant, dtype=float)
+        self._kt = np.asarray(model_scene.robot.torque_constant, dtype=float)
         self._pre_current: deque[np.ndarray] = deque(maxlen=3)  # the last frames before a contact
         self._impact_dtau: np.ndarray | None = None
         self._impact_seed: ContactEstimate | None = None  # the last impact estimate of this contact
         # an event whose point is less certain than the touched link is big says nothing of where
         self._link_reach = link_reach(model) if flag_uncertain else None
+        self._surface = float(scene.robot.surface_tolerance)
+        self._gain_std = gain_std_of(scene)
+        self._sensor_pose = model.base_T_sensor
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
         self.lag_gain = 3.0  # the lag error exceeds the change over the window: 3 covers it with margin
         # Joint state interpolated over missed joint samples hides the motion in between: a transient
@@ -153,6 +166,8 @@ class ContactPipeline:
         (taken by host time ``t_ns``): the bias is then known to 1/samples of the sensor's noise."""
         zero = np.zeros(self.scene.n_joints)
         self.compensator.tare(raw_mean, q, zero, zero)
+        if self.identified_error is not None:
+            self.identified_error.set_tare(q)
         if self.track is not None:
             self.track.set_bias(1.0 / max(int(samples), 1), t_ns)
 
@@ -177,9 +192,15 @@ class ContactPipeline:
         # the joint torques come free with the inverse dynamics; at the gravity level they cost an
         # extra pass, paid only in contact (below)
         loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau and need_dyn)
-        external = np.asarray(raw, dtype=float) - self.compensator.bias - loads
+        external = self.compensator.unbiased(raw) - loads
         model_error = None if lag_error is None else self._model_error(t_clock, lag_error)
-        det = self.detector.update(t_ns, external, model_error if held is None else self._model_error(t_clock, held))
+        judged = model_error if held is None else self._model_error(t_clock, held)
+        if self.identified_error is not None:  # what the identified model may still get wrong
+            z = np.zeros_like(q)
+            rows = self.identified_error.rows(t_ns, q, z if qd is None else qd, z if qdd is None else qdd)
+            model_error = rows if model_error is None else np.vstack([model_error, rows])
+            judged = rows if judged is None else np.vstack([judged, rows])
+        det = self.detector.update(t_ns, external, judged)
         self._impact_dtau = None
         if current is not None and qdd_estimated:
             if not det.active:
@@ -209,13 +230,13 @@ class ContactPipeline:
                 self._last_estimate = estimate
                 if self.track is not None:
                     self.track.update(t_ns, estimate, q, self._solved_poses())
-            events.extend(self._contact_events(t_ns, det, estimate, external))
+            events.extend(self._contact_events(t_ns, det, estimate, external, q))
         if self.track is not None:
             self._prev = (t_ns, external, q.copy(), model_error, saturated)
         return FrameResult(t_ns, external, det, estimate, tau_ext, tuple(events))
 
     def _contact_events(self, t_ns: int, det: Detection, estimate: ContactEstimate | None,
-                        external: np.ndarray) -> list[ContactEvent]:
+                        external: np.ndarray, q: np.ndarray) -> list[ContactEvent]:
         """This frame's onset, update or offset, stamped with the contact's id and figures."""
         track = self.track if self.track is not None and self.track.active else None
         if det.change == "onset":
@@ -223,7 +244,8 @@ class ContactPipeline:
             self._contact = _ContactRun(self._contact.contact_id + 1, onset, onset)
             self._contact.add(t_ns, external)
             self._last_update_ns = t_ns
-            ev = self._event(onset, "onset", estimate, det.probability, track, self._link_reach)
+            ev = self._systematic(self._event(onset, "onset", estimate, det.probability, track, self._link_reach),
+                                  external, q)
             self._contact.onset_link = ev.link
         elif det.change == "offset":
             return [self.close_contact(t_ns, det.probability)]
@@ -231,9 +253,30 @@ class ContactPipeline:
             self._contact.add(t_ns, external)
             if t_ns - self._last_update_ns < self.update_period_ns:
                 return []
-            ev = self._event(t_ns, "update", estimate, det.probability, track, self._link_reach)
+            ev = self._systematic(self._event(t_ns, "update", estimate, det.probability, track, self._link_reach),
+                                  external, q)
             self._last_update_ns = t_ns
         return [self._contact.stamp(ev)]
+
+    def _systematic(self, ev: ContactEvent, external: np.ndarray, q: np.ndarray) -> ContactEvent:
+        """The event's point uncertainty with what no number of frames averages away: the real shell's
+        distance from the model's (the scene's surface tolerance, every axis) and the sensor's gain and
+        crosstalk error on the contact's own wrench (``gain_std``: 1 sigma per entry), carried to the
+        point across the force's line: ``dc = ([f]x dm - [f]x [c]x df) / |f|^2`` (sensor frame)."""
+        f = np.asarray(ev.force, dtype=float)
+        f2 = float(f @ f)
+        if "no_estimate" in ev.flags or f2 == 0.0:
+            return ev
+        var = np.full(3, self._surface**2)
+        b_T_s = self._sensor_pose(q)
+        r = b_T_s[:3, :3]
+        f_s, c_s = r.T @ f, r.T @ (np.asarray(ev.point, dtype=float) - b_T_s[:3, 3])
+        sigma_w = np.sqrt((self._gain_std**2) @ (np.asarray(external, dtype=float) ** 2))  # per wrench axis
+        k = np.hstack([-_skew(f_s) @ _skew(c_s), _skew(f_s)]) / f2
+        cov = r @ (k * sigma_w**2) @ k.T @ r.T
+        var += np.maximum(np.diag(cov), 0.0)
+        std = np.sqrt(np.asarray(ev.point_std, dtype=float) ** 2 + var)
+        return replace(ev, point_std=std)
 
     def restart_motion(self) -> None:
         """The joint stream was lost and is back: what was estimated from its past (the acceleration,
@@ -414,6 +457,21 @@ class ContactPipeline:
         flags = (*e.flags, "no_estimate") if e is not None else ("no_estimate",)
         link = e.link if e is not None and e.link else "unknown"
         return ContactEvent.make(t_ns, kind, link, z, z, z, flags=flags, probability=probability)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def gain_std_of(scene: Scene) -> np.ndarray:
+    """1 sigma of each entry of the sensor's linear error on a contact's wrench (6 x 6): the scene's
+    ``sensor.accuracy`` (relative; an off-diagonal term scaled by the two axes' ranges, as crosstalk is
+    specified in per cent of full scale). Not the identification's posterior: free motion tells the
+    error only on the arm's own loads (its weight along z, the moments of gravity), and what it tells
+    there leans on the link masses it fits beside (measured, ur5e typical: coverage 0.77 with the
+    posterior, 0.89 with the accuracy)."""
+    rng = np.asarray(scene.sensor.range, dtype=float)
+    return scene.sensor.accuracy * rng[:, None] / rng[None, :]
 
 
 def _with_uncertain(flags: tuple[str, ...], link: str, std: np.ndarray,

@@ -158,7 +158,8 @@ class _Parser:
     def robot(self, t: dict) -> RobotSpec:
         p = "robot."
         self.unknown_keys(t, {"model", "joints", "home", "flange", "torque_constant", "friction_viscous",
-                              "friction_coulomb", "kp", "kd", "current_noise_std", "couplings"}, p)
+                              "friction_coulomb", "kp", "kd", "current_noise_std", "couplings",
+                              "surface_tolerance_m"}, p)
         model_path = self.model_file(t, p)
         joints = self.get(t, "joints", p, list)
         if not joints or not all(isinstance(j, str) and j for j in joints):
@@ -178,7 +179,14 @@ class _Parser:
             kd=self.vector(t, "kd", p, n, nonneg=True, default=[10.0] * n),
             current_noise_std=self.vector(t, "current_noise_std", p, n, nonneg=True, default=[0.0] * n),
             couplings=self.couplings(t.get("couplings", []), tuple(joints)),
+            surface_tolerance=self.tolerance(t, p),
         )
+
+    def tolerance(self, t: dict, p: str) -> float:
+        value = self.number(t, "surface_tolerance_m", p, default=0.0)
+        if not 0.0 <= value <= 0.05:
+            raise self.fail(p + "surface_tolerance_m", f"expected 0 to 0.05 m, got {value}")
+        return value
 
     def model_file(self, t: dict, p: str) -> Path:
         """``model``: an MJCF or URDF file, relative to the scene file."""
@@ -223,7 +231,10 @@ class _Parser:
     def sensor(self, t: dict) -> SensorSpec:
         p = "sensor."
         self.unknown_keys(t, {"site", "reports", "range", "noise_std", "quantization", "rate_hz", "bias",
-                              "drift_per_s"}, p)
+                              "drift_per_s", "accuracy"}, p)
+        accuracy = self.number(t, "accuracy", p, default=0.005)
+        if not 0.0 <= accuracy <= 0.2:
+            raise self.fail(p + "accuracy", f"expected 0 to 0.2 (relative), got {accuracy}")
         return SensorSpec(
             site=self.get(t, "site", p, str),
             reports=self.choice(t, "reports", p, SIGN_CONVENTIONS),  # type: ignore[arg-type]
@@ -233,6 +244,7 @@ class _Parser:
             rate_hz=self.number(t, "rate_hz", p, positive=True),
             bias=self.vector(t, "bias", p, 6, default=[0.0] * 6),
             drift_per_s=self.vector(t, "drift_per_s", p, 6, default=[0.0] * 6),
+            accuracy=accuracy,
         )
 
     def world(self, t: dict, joints: tuple[str, ...]) -> WorldSpec:

@@ -48,6 +48,7 @@ class RobotSpec:
     kd: np.ndarray  # N m s / rad
     current_noise_std: np.ndarray  # A, the simulated current sensor's noise
     couplings: tuple[Coupling, ...] = ()  # scene joints that drive several model joints
+    surface_tolerance: float = 0.0  # m, 1 sigma: how far the real shell may lie from the model's surfaces
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,8 @@ class SensorSpec:
     rate_hz: float
     bias: np.ndarray  # the simulated sensor's bias (the world's truth; calibration estimates it)
     drift_per_s: np.ndarray
+    # 1 sigma, relative: each gain and crosstalk term (crosstalk in units of the two axes' ranges)
+    accuracy: float = 0.005
 
     @property
     def noise_cov(self) -> np.ndarray:

@@ -41,7 +41,7 @@ class Tolerances:
     mount_m: float  # each axis of the sensor's mount position
     mount_rad: float  # each axis of the sensor's mount rotation (rotation vector)
     gain_rel: float  # each axis' gain error
-    crosstalk_rel: float  # each off-diagonal term, relative to the column axis' gain
+    crosstalk_rel: float  # each off-diagonal term (i, j), in units of range_i / range_j
     coloured_rel: float  # coloured noise std, 0 .. this x the white noise std
     coloured_tau_s: float  # its correlation time
     temperature_rise_K: float  # the sensor warms by 0 .. this during the run
@@ -96,7 +96,9 @@ def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator) -> WorldSpec:
                                   rng.uniform(-tol.com_m, tol.com_m, 3),
                                   1.0 + rng.uniform(-tol.inertia_rel, tol.inertia_rel)) for b in bodies}
     gain = np.diag(1.0 + rng.uniform(-tol.gain_rel, tol.gain_rel, 6))
-    cross = rng.uniform(-tol.crosstalk_rel, tol.crosstalk_rel, (6, 6))
+    # crosstalk is specified in per cent of full scale: term (i, j) in units of range_i / range_j
+    full = np.asarray(s.range, dtype=float)
+    cross = rng.uniform(-tol.crosstalk_rel, tol.crosstalk_rel, (6, 6)) * full[:, None] / full[None, :]
     np.fill_diagonal(cross, 0.0)
     white = np.sqrt(np.diag(s.noise_cov))
     return WorldSpec(
