@@ -25,7 +25,7 @@ from ftc_hw.devices.registry import role_of
 from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import COMPENSATION_LEVELS, Scene, builtin_names, load_scene
-from ftc_hw.sim_devices.world import World
+from ftc_hw.sim_devices.world import World, with_reality
 from ftc_hw.sim_devices.world.scenarios import SCENARIOS
 
 SPEEDS = (0.5, 1.0, 2.0)
@@ -43,6 +43,7 @@ class Recording:
     contact: np.ndarray  # (N,) truth
     point: np.ndarray  # (N, 3) truth (strongest contact), zeros when none
     link: list
+    force: np.ndarray | None = None  # (N,) N, truth: the strongest contact's force magnitude
 
 
 def arm_rate(scene: Scene) -> float:
@@ -52,14 +53,18 @@ def arm_rate(scene: Scene) -> float:
     return scene.sensor.rate_hz
 
 
-def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int) -> Recording:
+def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int,
+           world_scene: Scene | None = None) -> Recording:
+    """What the devices would deliver from ``scenario`` (built on ``scene``'s model) in a world of
+    ``world_scene`` (a reality drawn from ``scene``; default: ``scene``, the ideal world)."""
     model = ArmModel(scene)
     rng = np.random.default_rng(seed)
-    setup = SCENARIOS[scenario].build(scene, model, rng, duration, speed=speed)
-    world = World(scene, setup, seed=seed)
+    params = {"speed": speed} if scenario.startswith("sweep") else {}
+    setup = SCENARIOS[scenario].build(scene, model, rng, duration, **params)
+    world = World(world_scene or scene, setup, seed=seed)
     joint_every = max(1, round(1.0 / (arm_rate(scene) * world.dt)))
     jt, jq, jqd, jcur = [], [], [], []
-    ft_t, ft_w, ft_sat, truth_c, truth_p, truth_l = [], [], [], [], [], []
+    ft_t, ft_w, ft_sat, truth_c, truth_p, truth_l, truth_f = [], [], [], [], [], [], []
     n_steps = int(round(duration / world.dt))
     for _ in range(n_steps):
         s = world.step()
@@ -77,6 +82,7 @@ def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int
             truth_c.append(main is not None)
             truth_p.append(main.point if main is not None else np.zeros(3))
             truth_l.append(main.link if main is not None else None)
+            truth_f.append(float(np.linalg.norm(main.force)) if main is not None else 0.0)
     t = np.array(ft_t)
     jt_a = np.array(jt)
 
@@ -85,7 +91,7 @@ def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int
         return np.stack([np.interp(t, jt_a, v[:, j]) for j in range(v.shape[1])], axis=1)
 
     return Recording(t, np.array(ft_w), np.array(ft_sat), interp(jq), interp(jqd), interp(jcur),
-                     np.array(truth_c), np.array(truth_p), truth_l)
+                     np.array(truth_c), np.array(truth_p), truth_l, np.array(truth_f))
 
 
 def evaluate(scene: Scene, rec: Recording, level: str) -> dict:
@@ -147,24 +153,27 @@ def _episodes(t: np.ndarray, contact: np.ndarray, merge_s: float) -> list[tuple[
 
 
 def run(json_path: Path | None = None, plot_path: Path | None = None, minutes: float = 1.0, seed: int = 0,
-        scenes: list[str] | None = None, speeds: tuple[float, ...] = SPEEDS) -> dict:
+        scenes: list[str] | None = None, speeds: tuple[float, ...] = SPEEDS, reality: str = "typical") -> dict:
+    """``reality``: the world the recordings come from (one seeded draw: ``seed``)."""
 
     console = table_console()
     results: dict = {}
     for name in scenes or builtin_names():
         scene = load_scene(name)
+        world = with_reality(scene, reality, seed)
         per_level: dict[str, dict] = {level: {"runs": []} for level in COMPENSATION_LEVELS}
         for speed in speeds:
-            free = record(scene, "sweep", minutes * 60.0, speed, seed)
-            hits = record(scene, "sweep-with-collision", minutes * 60.0, speed, seed)
+            free = record(scene, "sweep", minutes * 60.0, speed, seed, world)
+            hits = record(scene, "sweep-with-collision", minutes * 60.0, speed, seed, world)
             for level in COMPENSATION_LEVELS:
                 a = evaluate(scene, free, level)
                 b = evaluate(scene, hits, level)
                 per_level[level]["runs"].append({"speed": speed, "free": a, "collision": b})
         results[name] = {level: _summarize(v["runs"]) | {"runs": v["runs"]} for level, v in per_level.items()}
-    results["meta"] = {"minutes_per_scenario": minutes, "speeds": list(speeds), "seed": seed,
+    results["meta"] = {"minutes_per_scenario": minutes, "speeds": list(speeds), "seed": seed, "reality": reality,
                        "python": platform.python_version(), "cpus": __import__("os").cpu_count()}
-    table = Table(title=f"compensation levels ({minutes:g} simulated min per scenario and speed x {list(speeds)})")
+    table = Table(title=f"compensation levels ({minutes:g} simulated min per scenario and speed x {list(speeds)}; "
+                        f"world: {reality}, seed {seed})")
     for c in ("scene", "level", "free-motion RMS N", "false alarms/min", "detect delay ms (med)", "detected",
               "pos err mm (med)", "cost us med", "cost us p99"):
         table.add_column(c, justify="left" if c in ("scene", "level") else "right")

@@ -251,11 +251,32 @@ def bench_compensation(
     minutes: Annotated[float, typer.Option(min=0.05, help="Simulated minutes per scenario and speed.")] = 1.0,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.typical)] = RealityChoice.typical,
 ) -> None:
     """Compensation levels on moving sweeps: free-motion error, false alarms, detection delay, cost."""
     from ftc_hw.bench.compensation import run  # lazy: CLI start-up
 
-    run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene)
+    run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene, reality=reality.value)
+
+
+@bench_app.command("reality")
+def bench_reality(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    plot: Annotated[Optional[Path], typer.Option(help="Draw the main columns to this PNG.")] = None,  # noqa: UP045
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every built-in).")] = None,  # noqa: UP045
+    draws: Annotated[int, typer.Option(min=1, help="Seeded draws of the world per column.")] = 5,
+    free_minutes: Annotated[float, typer.Option(min=0.1, help="Simulated minutes of free sweep per draw.")] = 2.0,
+    contact_minutes: Annotated[float, typer.Option(min=0.1, help="Simulated minutes of each contact scenario "
+                                                   "per draw.")] = 1.0,
+    identify_minutes: Annotated[float, typer.Option(min=0.2, help="Minutes of motion identification uses.")] = 2.0,
+    costs: Annotated[bool, typer.Option("--costs/--no-costs", help="Also each difference on its own.")] = True,
+    workers: Annotated[Optional[int], typer.Option(min=1, help="Processes (default: one per CPU).")] = None,  # noqa: UP045
+) -> None:
+    """Reality gap: ideal, typical and harsh worlds, with and without identification, and each difference's cost."""
+    from ftc_hw.bench.reality import run  # lazy: CLI start-up
+
+    run(json_path=json_path, plot_path=plot, scenes=scene, draws=draws, free_minutes=free_minutes,
+        contact_minutes=contact_minutes, identify_minutes=identify_minutes, costs=costs, workers=workers)
 
 
 @bench_app.command("isolation")
@@ -292,6 +313,43 @@ def bench_arms(
     from ftc_hw.bench.arms import run  # lazy: CLI start-up
 
     run(json_path=json_path, duration=duration, stops=stops)
+
+
+@app.command()
+def identify(
+    recording: Annotated[Optional[Path], typer.Argument(help="An MCAP recording (ftc monitor --record) of the "  # noqa: UP045
+                                                             "arm moving.")] = None,
+    scene: Annotated[Optional[str], typer.Option(  # noqa: UP045
+        help="Built-in scene or scene file (default: the recording's).")] = None,
+    sim: Annotated[bool, typer.Option("--sim", help="Record the emulated devices first, then identify.")] = False,
+    plan: Annotated[bool, typer.Option("--plan", help="With --sim: the planned excitation (scenario excitation) "
+                                       "instead of the ordinary sweep.")] = False,
+    plan_file: Annotated[Optional[Path], typer.Option(help="Write the planned excitation as CSV (t, q at 125 Hz) "  # noqa: UP045
+                                                      "for a controller to play, and exit.")] = None,
+    scenario: Annotated[Optional[str], typer.Option(help="With --sim: a contact-free scenario (sweep, excitation, "  # noqa: UP045
+                                                    "hold).")] = None,
+    duration: Annotated[float, typer.Option(min=5.0, help="With --sim or --plan-file: seconds of motion.")] = 120.0,
+    seed: Annotated[int, typer.Option(help="Random seed (the plan, the simulated world).")] = 0,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.typical, "With --sim: ")] = RealityChoice.typical,
+    calibration: Annotated[Optional[Path], typer.Option(help="Start from this calibration (default: --out if it "  # noqa: UP045
+                                                        "exists).")] = None,
+    out: Annotated[Optional[Path], typer.Option(  # noqa: UP045
+        help="Calibration file to write (default calibration-SCENE.toml).")] = None,
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures as JSON.")] = None,  # noqa: UP045
+    keep_contacts: Annotated[bool, typer.Option("--keep-contacts", help="Keep the recording's reported contacts "
+                                                "(robust weights instead of cutting them out).")] = False,
+    gain: Annotated[bool, typer.Option("--gain/--no-gain", help="Also fit the sensor's linear error on the "
+                                       "arm's loads (gain, crosstalk, mount).")] = True,
+) -> None:
+    """Identify the arm's inertial parameters and the sensor's errors from free motion, into the calibration."""
+    from ftc_hw.app.identify import IdentifyOptions  # lazy: CLI start-up
+    from ftc_hw.cli.identify import run_identify_command  # lazy: CLI start-up
+
+    opts = IdentifyOptions(out=out, calibration=calibration, json_path=json_path, keep_contacts=keep_contacts,
+                           gain=gain)
+    raise typer.Exit(run_identify_command(recording, scene, sim=sim, plan=plan, plan_file=plan_file,
+                                          scenario=scenario, duration=duration, seed=seed, reality=reality.value,
+                                          opts=opts))
 
 
 @app.command()
