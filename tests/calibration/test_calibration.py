@@ -45,6 +45,17 @@ def identifier() -> Identifier:
 
 
 @pytest.fixture(scope="module")
+def full_options() -> FitOptions:
+    return FitOptions(yaw=True, tilt=True, arm_gravity=True, q_std=TICK / np.sqrt(12))
+
+
+@pytest.fixture(scope="module")
+def plan16_full(identifier, full_options):
+    """16 poses planned for the fit with every optional parameter (planning it costs ~10 s: once)."""
+    return plan_poses(SCENE, Identifier(identifier.gm, full_options), 16, seed=0)
+
+
+@pytest.fixture(scope="module")
 def plan12(identifier):
     return plan_poses(SCENE, identifier, 12, seed=0)
 
@@ -190,14 +201,12 @@ def test_rotations_about_gravity_only_are_poorly_excited_naming_the_com(identifi
     assert good.poorly_excited == []
 
 
-def test_optional_mount_yaw_gravity_tilt_and_arm_gravity_parameters(identifier):
+def test_optional_mount_yaw_gravity_tilt_and_arm_gravity_parameters(identifier, full_options, plan16_full):
     """Zero in the world (the model is exact there): estimated within 3 standard errors of zero, and the
     payload still meets the acceptance with the extra parameters free."""
-    opts = FitOptions(yaw=True, tilt=True, arm_gravity=True, q_std=TICK / np.sqrt(12))
-    ident = Identifier(identifier.gm, opts)
+    ident = Identifier(identifier.gm, full_options)
     assert ident.basis is not None and len(ident.basis.names) >= 1
-    plan = plan_poses(SCENE, ident, 16, seed=0)
-    samples = [s for s, _ in run_world(plan.q, seed=4)]
+    samples = [s for s, _ in run_world(plan16_full.q, seed=4)]
     fit = ident.fit(samples)
     assert fit.verdict == "good", fit.reasons
     for name in fit.names[10:]:
@@ -206,7 +215,8 @@ def test_optional_mount_yaw_gravity_tilt_and_arm_gravity_parameters(identifier):
     assert np.linalg.norm(fit.com - np.array(PAYLOAD.com)) <= 0.001
 
 
-def test_a_direction_the_poses_never_excite_is_reported_poorly_excited_not_inconsistent(identifier, monkeypatch):
+def test_a_direction_the_poses_never_excite_is_reported_poorly_excited_not_inconsistent(identifier, monkeypatch,
+                                                                                        full_options, plan16_full):
     """An arm-gravity basis drawn with the gripper free keeps a direction only the gripper excites; the
     plan holds the gripper at home. The fit must not diverge along it (it once did: 2000-sigma
     residuals, a negative mass, verdict "inconsistent"): it says which parameters the poses cannot
@@ -215,11 +225,10 @@ def test_a_direction_the_poses_never_excite_is_reported_poorly_excited_not_incon
     from ftc_hw.calibration.regressor import predict
 
     gm = identifier.gm
-    opts = FitOptions(yaw=True, tilt=True, arm_gravity=True, q_std=TICK / np.sqrt(12))
-    pinned = Identifier(gm, opts)
-    plan = plan_poses(SCENE, pinned, 16, seed=0)
+    pinned = Identifier(gm, full_options)
+    plan = plan16_full  # planned with the gripper pinned at home
     monkeypatch.setattr(arm_gravity, "joint_limits", lambda g: g.arm.joint_limits())
-    free = Identifier(gm, opts)
+    free = Identifier(gm, full_options)
     assert len(free.basis.names) == len(pinned.basis.names) + 1
     theta = np.concatenate([SCENE.sensor.bias, [PAYLOAD.mass], PAYLOAD.mass * np.array(PAYLOAD.com)])
     rng = np.random.default_rng(7)
