@@ -132,6 +132,7 @@ class LiveMonitor:
         self._lags: deque[int] = deque(maxlen=20_000)  # ns from a frame's arrival to its judgement
         self.lost_after_ns = {"sensor": int(ft_lost_s * 1e9), "arm": int(arm_lost_s * 1e9)}
         self._rx_ns: dict[str, int | None] = {"sensor": None, "arm": None}  # host time of the newest frame
+        self._arm_back_t: int | None = None  # aligned time of the first joint sample after a loss
         self.lost: set[str] = set()
         self.losses: list[list] = []  # [stream, t_lost_ns, t_back_ns or None]
         self._source = {"sensor": ft_source, "arm": arm_source}
@@ -219,7 +220,9 @@ class LiveMonitor:
             if stream not in self.lost and now - rx > after:
                 self._lose(stream, now, rx)
             elif stream == "arm" and stream in self.lost and now - rx <= after:
-                self._back(stream, min(rx, now))
+                back = self._arm_back_t if self._arm_back_t is not None else rx
+                self._arm_back_t = None
+                self._back(stream, min(back, now))
 
     def _lose(self, stream: str, now: int, rx: int) -> None:
         self.lost.add(stream)
@@ -270,6 +273,8 @@ class LiveMonitor:
         """A JointFrame: kept with its aligned time for interpolation at the F/T samples."""
         self._rx_ns["arm"] = time.monotonic_ns()  # the worker's check sees it back
         t = self._aligned(self._arm_clock, frame)
+        if "arm" in self.lost and self._arm_back_t is None:
+            self._arm_back_t = t  # back from this sample's time: F/T frames after it are judged with it
         x = np.concatenate([frame.q, frame.qd, frame.current])
         with self._joint_lock:
             if self._joint_t and t <= self._joint_t[-1]:
