@@ -165,6 +165,8 @@ class FreeMotionIdentifier:
                                       f"{MIN_SAMPLES * SMOOTH_S:g} s)")
         a = np.vstack(rows)
         y = np.concatenate(resid)
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(y))):
+            raise IdentificationError("the motion data hold NaN or Inf (repeated time stamps, a broken frame?)")
         before = np.sqrt(np.mean(np.square(np.array(resid) - np.mean(resid, axis=0)), axis=0))
         x, cov, r = self._irls(a, y)
         return self._result(x, cov, r, before, len(rows))

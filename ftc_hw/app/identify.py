@@ -107,7 +107,10 @@ def _split(frames: list, t: np.ndarray, cut: np.ndarray) -> list[MotionData]:
     breaks = np.flatnonzero(cut | np.r_[False, dt > 3 * step])
     out, start = [], 0
     for stop in [*breaks.tolist(), len(frames)]:
-        seg = [k for k in range(start, stop) if not cut[k]]
+        seg = []
+        for k in range(start, stop):  # strictly increasing times: a repeated stamp would divide by zero
+            if not cut[k] and (not seg or t[k] > t[seg[-1]]):
+                seg.append(k)
         start = stop + (1 if stop < len(frames) and cut[stop] else 0)
         if len(seg) < 2 or (t[seg[-1]] - t[seg[0]]) * 1e-9 < MIN_SEGMENT_S:
             continue
@@ -184,7 +187,8 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
         source = (f"ftc identify --sim: {scenario}, {duration:g} s, reality {reality}, seed {seed}" if sim
                   else str(recording))
         cal, fit = identify(scene, segments, base, source, gain=opts.gain)
-    except (IdentificationError, RecordingError, CalibrationError, MonitorSetupError, OSError) as exc:
+    except (IdentificationError, RecordingError, CalibrationError, MonitorSetupError, OSError,
+            np.linalg.LinAlgError) as exc:
         console.print(f"[red]cannot identify:[/] {exc}")
         return 1
     save_calibration(cal, opts.out)

@@ -97,7 +97,7 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any],
         raise MonitorSetupError(f"--calibration {path}: {exc}") from None
     text = Path(path).read_text(encoding="utf-8", errors="replace")
     meta = {"file": str(path), "content": text, "pipeline": pipeline_kwargs_to_json(kwargs)}
-    applied = [k for k in ("frame", "gravity", "inertials", "gain") if k in kwargs]
+    applied = [k for k in ("frame", "gravity", "inertials", "gain", "joints", "model_error") if k in kwargs]
     if applied:
         meta["applied"] = ", ".join(applied)
     return kwargs, meta
@@ -178,7 +178,8 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
     cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
     out = MonitorOutcome(0)
     if cal_meta and cal_meta.get("applied"):
-        console.print(f"calibration {cfg.calibration}: bias, payload and its corrections ({cal_meta['applied']})")
+        console.print(f"calibration {cfg.calibration}: bias{', payload' if cal_kwargs.get('payload') else ''} and "
+                      f"its corrections ({cal_meta['applied']})")
     # readers that poll, and the reflex, while the pipeline computes; vendor C++ lines made readable
     with responsive_readers(), vendor_stderr() as vendor:
         out.vendor_lines = vendor.counts

@@ -93,3 +93,15 @@ def test_planned_excitation_stays_within_limits_and_tells_more_than_the_sweep(na
     assert np.abs(qd[-1]).max() < 1e-2
     assert not SelfCollision(scene).any(q[::25])
     assert plan.told > (20 if name == "ur5e" else 10)
+
+
+def test_repeated_time_stamps_are_dropped_not_divided_by():
+    rec = _recording(seconds=30.0)
+    frames = [m for m in rec.messages if m.topic == MONITOR_INPUT]
+    for m in frames[100:3000:7]:  # every 7th frame stamped like the one before it
+        prev = frames[frames.index(m) - 1]
+        object.__setattr__(m.frame, "t_host_ns", prev.frame.t_host_ns)
+    segments, _ = motion_segments(rec)
+    assert all(np.all(np.diff(s.t) > 0) for s in segments)
+    cal, fit = identify(SCENE, segments, None, "stamped.mcap")
+    assert np.all(np.isfinite(fit.residual_rms)) and cal.identification is not None
