@@ -1,0 +1,35 @@
+"""``ftc bench reality``'s bookkeeping on made-up runs: false alarms outside true contacts, detection of
+the contacts above 10 N only, errors and coverage over the unflagged events, the worst draw."""
+from __future__ import annotations
+
+import numpy as np
+
+from ftc_hw.bench.reality import _combine, _summarize
+
+
+def _run(onsets, points, contact_spans=((1.0, 1.3, 30.0), (2.0, 2.3, 5.0))):
+    t = np.arange(0.0, 4.0, 0.001)
+    contact = np.zeros_like(t, dtype=bool)
+    force = np.zeros_like(t)
+    for a, b, f in contact_spans:
+        inside = (t >= a) & (t <= b)
+        contact |= inside
+        force[inside] = f
+    return {"t": t, "contact": contact, "force": force, "resid": np.tile([0.3, 0.4, 0.0, 0.01, 0.0, 0.0], (10, 1)),
+            "stat": np.linspace(0.0, 10.0, 100), "onsets": list(onsets), "points": list(points), "threshold": 50.0}
+
+
+def test_summary_counts_what_the_issue_asks():
+    free = _run([0.5], [], contact_spans=())  # one alarm with nothing touching
+    hits = _run([1.002, 2.004, 3.5], [(2.0, True, True, True), (4.0, False, True, True), (90.0, False, False, False)])
+    s = _summarize(free, [hits])
+    assert s["false_alarms"] == 2  # 0.5 s in the free run, 3.5 s in the contact run
+    assert s["contacts_over_10N"] == 1 and s["detected_over_10N"] == 1  # the 5 N contact is not counted
+    assert abs(s["delay_ms_median"] - 3.0) < 1e-9  # (2 + 4) / 2 ms: every detected contact's delay
+    assert s["pos_err_mm_median"] == 3.0 and s["coverage95"] == 0.5  # unflagged only: 2 and 4 mm
+    assert abs(s["flagged_share"] - 1 / 3) < 1e-12 and abs(s["link_right"] - 2 / 3) < 1e-12
+    assert abs(s["residual_rms_N"] - 0.5) < 1e-12 and abs(s["residual_rms_Nm"] - 0.01) < 1e-12
+    worse = dict(s, coverage95=0.2, pos_err_mm_median=9.0)
+    c = _combine([s, worse])
+    assert c["coverage95_worst"] == 0.2 and c["pos_err_mm_median_worst"] == 9.0 and c["draws"] == 2
+    assert c["false_alarms"] == 4 and abs(c["false_alarms_per_min"] - 4 / (2 * s["free_minutes"])) < 1e-12
