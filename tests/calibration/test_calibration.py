@@ -174,14 +174,14 @@ def test_twelve_planned_poses_are_at_least_as_accurate_as_35_random(identifier, 
 
     def errors(poses, n):
         out = []
-        for _ in range(15):
+        for _ in range(10):
             f = identifier.fit(synthetic(identifier, poses, rng, n=n))
             e = np.concatenate([f.bias, [f.mass], f.com]) - truth
             out.append([abs(e[6]), np.linalg.norm(e[7:10]), np.linalg.norm(e[:3]), np.linalg.norm(e[3:6])])
         return np.sqrt(np.mean(np.square(out), axis=0))
 
     e_plan, e_rand = errors(plan12.q, 100), errors(randoms[0], n_random)
-    # 15 repeats estimate an RMS within ~20 %: the planned design must not be worse beyond that
+    # 10 seeded repeats estimate an RMS within ~25 %: the planned design must not be worse than 1.2 x
     assert np.all(e_plan <= 1.2 * e_rand), (e_plan, e_rand)
     assert e_plan[0] < e_rand[0]  # the mass, where planning matters most, is clearly better
 
