@@ -19,8 +19,8 @@ import mujoco
 import numpy as np
 
 from ..model import ArmModel
-from ..model.build import descends
-from ..model.inertials import N_PARAMS, PARAM_LABELS, body_params, model_rows
+from ..model.build import descends, moves
+from ..model.inertials import N_PARAMS, PARAM_LABELS, body_params, inertia_at_com, model_rows
 
 HUBER_K = 1.345
 MIN_SEGMENT_SAMPLES = 5  # thinned samples: a stretch shorter than 8 x this many raw ones is left out
@@ -108,7 +108,7 @@ class FreeMotionIdentifier:
         self.priors = priors or Priors()
         self.with_gain = gain
         m = arm.model
-        self.body_ids = [b for b in range(1, m.nbody) if descends(m, b, arm.sensor_body) and _moves(m, b)]
+        self.body_ids = [b for b in range(1, m.nbody) if descends(m, b, arm.sensor_body) and moves(m, b)]
         self.bodies = [m.body(b).name for b in self.body_ids]
         self.pi0 = np.concatenate([body_params(m, b) for b in self.body_ids])
         self._data = mujoco.MjData(m)
@@ -128,7 +128,7 @@ class FreeMotionIdentifier:
         for k in range(len(self.bodies)):
             pi = self.pi0[k * N_PARAMS:(k + 1) * N_PARAMS]
             mass, h = pi[0], pi[1:4]
-            i_c = _inertia_at_com(pi)
+            i_c = inertia_at_com(pi)
             std = np.array([p.mass_rel * mass, *([mass * p.com_m + p.mass_rel * np.linalg.norm(h)] * 3),
                             *([p.inertia_rel * max(np.max(np.linalg.eigvalsh(i_c)), 1e-6)] * 6)])
             blocks.append(_com_to_origin_jacobian(mass, h) @ np.diag(std))
@@ -211,12 +211,6 @@ def _bayes(a: np.ndarray, y: np.ndarray, prior_sqrt: np.ndarray) -> tuple[np.nda
     return prior_sqrt @ z, prior_sqrt @ cov_z @ prior_sqrt.T
 
 
-def _inertia_at_com(pi: np.ndarray) -> np.ndarray:
-    mass, h = pi[0], pi[1:4]
-    i_o = np.array([[pi[4], pi[7], pi[8]], [pi[7], pi[5], pi[9]], [pi[8], pi[9], pi[6]]])
-    return i_o - (h @ h * np.eye(3) - np.outer(h, h)) / mass
-
-
 _SYM = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
@@ -230,11 +224,3 @@ def _com_to_origin_jacobian(mass: float, h: np.ndarray) -> np.ndarray:
             d_shift = 2 * h[c] * (a == b) - ((c == a) * h[b] + (c == b) * h[a])
             j[4 + r, 1 + c] = d_shift / mass
     return j
-
-
-def _moves(m: mujoco.MjModel, b: int) -> bool:
-    while b > 0:
-        if m.body_jntnum[b] > 0:
-            return True
-        b = int(m.body_parentid[b])
-    return False

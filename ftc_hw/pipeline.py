@@ -15,6 +15,7 @@ from .detection import ContactDetector, Detection
 from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
 from .model.arm import link_reach
+from .model.inertials import skew
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, Solver, make_solver
 from .tracking import FUSED_FLAGS, ContactTrack, fuse_point, link_pose, report
@@ -272,7 +273,7 @@ class ContactPipeline:
         r = b_T_s[:3, :3]
         f_s, c_s = r.T @ f, r.T @ (np.asarray(ev.point, dtype=float) - b_T_s[:3, 3])
         sigma_w = np.sqrt((self._gain_std**2) @ (np.asarray(external, dtype=float) ** 2))  # per wrench axis
-        k = np.hstack([-_skew(f_s) @ _skew(c_s), _skew(f_s)]) / f2
+        k = np.hstack([-skew(f_s) @ skew(c_s), skew(f_s)]) / f2
         cov = r @ (k * sigma_w**2) @ k.T @ r.T
         var += np.maximum(np.diag(cov), 0.0)
         std = np.sqrt(np.asarray(ev.point_std, dtype=float) ** 2 + var)
@@ -457,10 +458,6 @@ class ContactPipeline:
         flags = (*e.flags, "no_estimate") if e is not None else ("no_estimate",)
         link = e.link if e is not None and e.link else "unknown"
         return ContactEvent.make(t_ns, kind, link, z, z, z, flags=flags, probability=probability)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def gain_std_of(scene: Scene) -> np.ndarray:

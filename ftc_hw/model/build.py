@@ -70,6 +70,15 @@ def attach_payload(spec: mujoco.MjSpec, scene: Scene, payload: Payload) -> None:
     body.inertia = [i, i, i]
 
 
+def moves(m: mujoco.MjModel, body: int) -> bool:
+    """True when a joint moves ``body``: its own, or one of an ancestor's."""
+    while body > 0:
+        if m.body_jntnum[body] > 0:
+            return True
+        body = int(m.body_parentid[body])
+    return False
+
+
 def descends(m: mujoco.MjModel, body: int, ancestor: int) -> bool:
     """True when ``body`` is ``ancestor`` or in its subtree (the bodies whose loads it carries)."""
     while True:

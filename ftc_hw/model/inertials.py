@@ -20,8 +20,16 @@ class InertialsError(ValueError):
     """Parameters that no rigid body has (a non-positive mass, an inertia that is not positive definite)."""
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
+def skew(v: np.ndarray) -> np.ndarray:
+    """``[v]x``: the matrix of ``v x``."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def inertia_at_com(pi: np.ndarray) -> np.ndarray:
+    """The rotational inertia about the centre of mass (3 x 3, body frame) of parameters ``pi``."""
+    mass, h = float(pi[0]), np.asarray(pi[1:4], dtype=float)
+    i_o = np.array([[pi[4], pi[7], pi[8]], [pi[7], pi[5], pi[9]], [pi[8], pi[9], pi[6]]])
+    return i_o - (h @ h * np.eye(3) - np.outer(h, h)) / mass
 
 
 def body_params(m: mujoco.MjModel, b: int) -> np.ndarray:
@@ -44,8 +52,7 @@ def set_body_params(m: mujoco.MjModel, b: int, pi: np.ndarray, nearest: bool = F
     if not mass > 0:
         raise InertialsError(f"body {m.body(b).name!r}: mass {mass:g} kg is not positive")
     c = np.asarray(pi[1:4], dtype=float) / mass
-    i_o = np.array([[pi[4], pi[7], pi[8]], [pi[7], pi[5], pi[9]], [pi[8], pi[9], pi[6]]])
-    i_c = i_o - mass * (c @ c * np.eye(3) - np.outer(c, c))
+    i_c = inertia_at_com(pi)
     principal, axes = np.linalg.eigh(i_c)
     if nearest:
         principal = np.maximum(principal, 0.05 * max(principal[2], 1e-9))
@@ -103,12 +110,12 @@ def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int],
         dw = acc[:3]
         cols = np.zeros((6, N_PARAMS))  # the body's wrench about its origin, body frame
         cols[:3, 0] = a
-        cols[:3, 1:4] = _skew(dw) + _skew(w) @ _skew(w)  # m (dw x c + w x (w x c)) = [dw]x h + [w]x [w]x h
-        cols[3:, 1:4] = -_skew(a)  # h x a = -[a]x h
-        cols[3:, 4:] = _inertia_rows(dw) + _skew(w) @ _inertia_rows(w)
+        cols[:3, 1:4] = skew(dw) + skew(w) @ skew(w)  # m (dw x c + w x (w x c)) = [dw]x h + [w]x [w]x h
+        cols[3:, 1:4] = -skew(a)  # h x a = -[a]x h
+        cols[3:, 4:] = _inertia_rows(dw) + skew(w) @ _inertia_rows(w)
         r_b = d.xmat[b].reshape(3, 3)
         f, t = r_b @ cols[:3], r_b @ cols[3:]
-        t = t + _skew(d.xpos[b] - p_s) @ f  # about the sensor origin
+        t = t + skew(d.xpos[b] - p_s) @ f  # about the sensor origin
         out[:3, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ f
         out[3:, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ t
     return sign * out

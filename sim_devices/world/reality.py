@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from ftc_hw.model.arm import SURFACE_GROUP
-from ftc_hw.model.build import descends
+from ftc_hw.model.build import descends, moves
 from ftc_hw.model.true_arm import true_arm_spec
 from ftc_hw.scene import Scene
 from ftc_hw.scene.world_spec import InertialError, WorldSpec
@@ -150,23 +150,9 @@ def _moving_bodies_and_shells(scene: Scene) -> tuple[list[str], list[str]]:
     """The bodies the sensor carries that a joint moves, and their touchable primitive geoms."""
     m = true_arm_spec(scene).compile()
     sensor_body = int(m.site_bodyid[m.site(scene.sensor.site).id])
-    bodies, geoms = [], []
-    for b in range(1, m.nbody):
-        if not descends(m, b, sensor_body):
-            continue
-        if m.body_jntnum[b] > 0 or _has_moving_ancestor(m, b):
-            bodies.append(m.body(b).name)
-    arm = {m.body(b).id for b in range(m.nbody) if descends(m, b, sensor_body)}
-    for g in range(m.ngeom):
-        if (m.geom_group[g] == SURFACE_GROUP and int(m.geom_bodyid[g]) in arm
-                and m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH and m.geom(g).name):
-            geoms.append(m.geom(g).name)
+    arm = [b for b in range(1, m.nbody) if descends(m, b, sensor_body)]
+    bodies = [m.body(b).name for b in arm if moves(m, b)]
+    geoms = [m.geom(g).name for g in range(m.ngeom)
+             if m.geom_group[g] == SURFACE_GROUP and int(m.geom_bodyid[g]) in arm
+             and m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH and m.geom(g).name]
     return bodies, geoms
-
-
-def _has_moving_ancestor(m: mujoco.MjModel, b: int) -> bool:
-    while b > 0:
-        if m.body_jntnum[b] > 0:
-            return True
-        b = int(m.body_parentid[b])
-    return False
