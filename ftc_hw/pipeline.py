@@ -126,7 +126,7 @@ class ContactPipeline:
         self._impact_seed: ContactEstimate | None = None  # the last impact estimate of this contact
         # an event whose point is less certain than the touched link is big says nothing of where
         self._link_reach = link_reach(model) if flag_uncertain else None
-        self._surface = float(scene.robot.surface_tolerance)
+        self._surface = model.surface_tolerance  # m, 1 sigma per link (the scene's, and a mesh fit's)
         self._gain_std = gain_std_of(scene)
         self._sensor_pose = model.base_T_sensor
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
@@ -261,14 +261,14 @@ class ContactPipeline:
 
     def _systematic(self, ev: ContactEvent, external: np.ndarray, q: np.ndarray) -> ContactEvent:
         """The event's point uncertainty with what no number of frames averages away: the real shell's
-        distance from the model's (the scene's surface tolerance, every axis) and the sensor's gain and
+        distance from the model's (the touched link's surface tolerance, every axis) and the sensor's gain and
         crosstalk error on the contact's own wrench (``gain_std``: 1 sigma per entry), carried to the
         point across the force's line: ``dc = ([f]x dm - [f]x [c]x df) / |f|^2`` (sensor frame)."""
         f = np.asarray(ev.force, dtype=float)
         f2 = float(f @ f)
         if "no_estimate" in ev.flags or f2 == 0.0:
             return ev
-        var = np.full(3, self._surface**2)
+        var = np.full(3, self._surface(ev.link) ** 2)
         b_T_s = self._sensor_pose(q)
         r = b_T_s[:3, :3]
         f_s, c_s = r.T @ f, r.T @ (np.asarray(ev.point, dtype=float) - b_T_s[:3, 3])

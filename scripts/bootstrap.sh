@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Creates (or refreshes) the project's virtual environment in .venv and installs ftc-hw into it,
-# then compiles its numba kernels into numba's on-disk cache (`ftc warm`, a progress line per step).
+# fetches the vendor meshes the built-in scenes name, then compiles its numba kernels into numba's
+# on-disk cache (`ftc warm`, a progress line per step).
 # Re-runs pip only when pyproject.toml changed since the last successful install, and the warm-up
 # only after an install or when a source file is newer than the last warm-up (numba's cache index
 # then recompiles just the kernels whose sources changed).
@@ -24,10 +25,13 @@ stamp="$venv/.ftc-installed"
 want="$(cat "$root/pyproject.toml" | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "[bootstrap] installing ftc-hw and its dependencies into .venv" >&2
-  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip >&2
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$root[test]" >&2
   echo "$want" > "$stamp"
   rm -f "$venv/.ftc-warmed"  # numba itself may have changed
+fi
+# The vendor meshes the built-in scenes name (the simulated world's true shell): fetched once, ~30 MB.
+if ! "$venv/bin/ftc" scenes --fetch-meshes >/dev/null; then
+  echo "[bootstrap] warning: vendor meshes not fetched; simulated worlds use primitive shells (ftc scenes --fetch-meshes)" >&2
 fi
 warmed="$venv/.ftc-warmed"
 sources=("$root/ftc_hw" "$root/sim_devices" "$root/calibration" "$root/devices")

@@ -31,7 +31,7 @@ from ftc_hw.compensation.pipeline import Compensator
 from ftc_hw.compensation.residuals import JointResiduals
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import load_scene
-from ftc_hw.sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
+from ftc_hw.sim_devices.world import Probe, ScenarioSetup, Sinusoid, World, with_reality
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
 from ftc_hw.solver import ContactSolver
 
@@ -40,11 +40,13 @@ DISCRIMINABLE_SIGMA = 4.0
 EXACT_CHI2 = 1e-6  # a noise-free crossing fits the wrench exactly
 
 
-def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | None = None) -> dict:
+def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | None = None,
+             reality: str = "ideal") -> dict:
     """Counts and shares over the two-link cases among ``n_cases`` sampled contacts (stopping early
-    once ``max_discriminable`` discriminable ones were seen)."""
+    once ``max_discriminable`` discriminable ones were seen), in a world of ``reality`` (seeded draw)."""
 
     scene = load_scene(scene_name)
+    world_scene = with_reality(scene, reality, seed)
     model = ArmModel(scene)
     solver = ContactSolver(model)
     residuals = JointResiduals(scene)
@@ -71,7 +73,7 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
         local = np.linalg.inv(model.kinematics(q)[sp.link]) @ np.append(sp.point, 1.0)
         fmag = float(np.linalg.norm(force))
         probe = Probe(sp.link, local[:3], force / fmag, fmag, t_start=t_eval - 0.15, ramp_s=0.05, hold_s=0.3)
-        world = World(scene, ScenarioSetup(motion, probes=(probe,)), seed=counts["two_link"] + seed * 100_000)
+        world = World(world_scene, ScenarioSetup(motion, probes=(probe,)), seed=counts["two_link"] + seed * 100_000)
         state = reading = None
         for state, reading in world.run(t_eval):  # noqa: B007 - the last sample is the one we want
             pass
@@ -117,11 +119,12 @@ def evaluate(scene_name: str, n_cases: int, seed: int, max_discriminable: int | 
                 "ambiguous_without_share": share("ambiguous_without", "two_link")}
 
 
-def run(json_path: Path | None = None, cases: int = 400, seed: int = 0, scenes: list[str] | None = None) -> dict:
+def run(json_path: Path | None = None, cases: int = 400, seed: int = 0, scenes: list[str] | None = None,
+        reality: str = "typical") -> dict:
 
-    results = {name: evaluate(name, cases, seed) for name in scenes or SCENES}
+    results = {name: evaluate(name, cases, seed, reality=reality) for name in scenes or SCENES}
     table = Table(title=f"link isolation by motor currents, force line crossing two links ({cases} sampled contacts "
-                        "per scene)")
+                        f"per scene, reality {reality}, no identification)")
     for col in ("scene", "two-link cases", "without currents: flagged", "unflagged wrong", "right with currents",
                 "flagged", "silently wrong", "rigid (no joint between)", "right where a joint separates",
                 "discriminable (>4 sigma)", "right among discriminable"):

@@ -82,10 +82,16 @@ def main(
 
 
 @app.command()
-def scenes() -> None:
+def scenes(
+    fetch_meshes: Annotated[bool, typer.Option(
+        "--fetch-meshes", help="Fetch the vendor meshes the built-in scenes name (the simulated world's true "
+        "shell; ~/.cache/ftc-hw/vendor or $FTC_VENDOR_DIR), then list.")] = False,
+) -> None:
     """List the built-in scenes, one line each."""
-    from ftc_hw.cli.scenes import list_scenes  # lazy: CLI start-up
+    from ftc_hw.cli.scenes import fetch_all_meshes, list_scenes  # lazy: CLI start-up
 
+    if fetch_meshes:
+        fetch_all_meshes()
     list_scenes()
 
 
@@ -285,11 +291,12 @@ def bench_isolation(
     cases: Annotated[int, typer.Option(min=50, help="Sampled contacts per scene (two-link ones are kept).")] = 400,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: ur5e, dxl-arm).")] = None,  # noqa: UP045
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.typical)] = RealityChoice.typical,
 ) -> None:
     """Link isolation by motor currents when the force line crosses two links: right, flagged, wrong."""
     from ftc_hw.bench.isolation import run  # lazy: CLI start-up
 
-    run(json_path=json_path, cases=cases, seed=seed, scenes=scene)
+    run(json_path=json_path, cases=cases, seed=seed, scenes=scene, reality=reality.value)
 
 
 @bench_app.command("devices")

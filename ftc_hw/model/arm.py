@@ -13,9 +13,10 @@ import mujoco
 import numpy as np
 
 from ..scene import CompensationLevel, Scene, SceneError
-from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, descends, load_spec
+from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, descends, load_spec_and_fits
 from .inertials import body_params, set_body_params
 from .joint_map import JointMap
+from .mesh_fit import SURFACE_GROUP
 
 GEOM_KINDS = {
     mujoco.mjtGeom.mjGEOM_PLANE: "plane",
@@ -25,7 +26,6 @@ GEOM_KINDS = {
     mujoco.mjtGeom.mjGEOM_CYLINDER: "cylinder",
     mujoco.mjtGeom.mjGEOM_BOX: "box",
 }
-SURFACE_GROUP = 1  # MJCF geom group that holds the touchable surfaces
 
 
 @dataclass(frozen=True)
@@ -78,7 +78,7 @@ class ArmModel:
         self.scene = scene
         self.payload = payload
         self.inertials = dict(inertials or {})
-        spec = load_spec(scene)
+        spec, self.mesh_fits = load_spec_and_fits(scene)
         add_ft_sensors(spec, scene)
         if payload is not None:
             attach_payload(spec, scene, payload)
@@ -140,6 +140,12 @@ class ArmModel:
                 raise SceneError(self.scene.path, "touchable.link",
                                  f"link {t.link!r} has no surface geoms (group {SURFACE_GROUP})")
         return tuple(out)
+
+    def surface_tolerance(self, link: str) -> float:
+        """1 sigma (m) of the real shell's distance from the model's surface on ``link``: the scene's
+        ``surface_tolerance_m`` and, where the link's surface was fitted to meshes, the fit's RMS."""
+        fit = max((f.rms_m for f in self.mesh_fits if f.link == link), default=0.0)
+        return math.hypot(self.scene.robot.surface_tolerance, fit)
 
     def moving_joints(self, body: str | int) -> np.ndarray:
         """Which scene joints move ``body`` (name or id; bool per joint): those with a model joint on it

@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from ..scene import Scene, SceneError
+from .mesh_fit import MeshFit, fit_mesh_surfaces, prepare_user_model
 
 FORCE_SENSOR = "ftc_force"
 TORQUE_SENSOR = "ftc_torque"
@@ -26,13 +28,33 @@ class Payload:
             raise ValueError(f"payload centre of mass must be 3 finite numbers in m, got {self.com}")
 
 
-def load_spec(scene: Scene) -> mujoco.MjSpec:
+def load_spec(scene: Scene, fit_meshes: bool = True) -> mujoco.MjSpec:
+    """The scene's robot file as a MuJoCo spec: a URDF's sensor site and flange made sites, touchable
+    collision geoms in the surface group, and (``fit_meshes``) touchable meshes fitted by primitives
+    (:mod:`.mesh_fit`; the world keeps the meshes: they are its true shell)."""
+    return load_spec_and_fits(scene, fit_meshes)[0]
+
+
+def load_spec_and_fits(scene: Scene, fit_meshes: bool = True) -> tuple[mujoco.MjSpec, tuple[MeshFit, ...]]:
     path = scene.robot.model_path
+    spec = parse_spec(scene, path, "robot.model")
+    prepare_user_model(spec, scene, urdf=path.suffix.lower() == ".urdf")
+    fits: tuple[MeshFit, ...] = ()
+    if fit_meshes:
+        try:
+            fits = fit_mesh_surfaces(spec, scene)
+        except ValueError as exc:
+            raise SceneError(scene.path, "robot.model",
+                             f"MuJoCo cannot fit primitives to {path.name}'s meshes: {exc}") from exc
+    return spec, fits
+
+
+def parse_spec(scene: Scene, path: Path, key: str) -> mujoco.MjSpec:
     try:
         # MuJoCo's parser reads both MJCF and URDF.
         spec = mujoco.MjSpec.from_file(str(path))
     except Exception as exc:  # mujoco raises ValueError with the parser's message
-        raise SceneError(scene.path, "robot.model", f"MuJoCo cannot load {path.name}: {exc}") from exc
+        raise SceneError(scene.path, key, f"MuJoCo cannot load {path.name}: {exc}") from exc
     spec.option.gravity = np.asarray(scene.gravity, dtype=float)
     return spec
 

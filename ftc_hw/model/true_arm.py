@@ -12,8 +12,9 @@ import numpy as np
 
 from ..scene import Scene, SceneError
 from ..scene.world_spec import WorldSpec
-from .arm import SURFACE_GROUP
-from .build import descends, load_spec
+from .build import descends, load_spec, parse_spec
+from .mesh_fit import SURFACE_GROUP, prepare_user_model
+from .vendor_shell import attach_vendor_shell
 
 _INFLATED_AXES = {  # per geom type: which size entries grow by the shell offset
     mujoco.mjtGeom.mjGEOM_SPHERE: (0,), mujoco.mjtGeom.mjGEOM_CAPSULE: (0,),
@@ -27,14 +28,13 @@ def true_arm_spec(scene: Scene) -> mujoco.MjSpec:
     touchable link and every ``[world.inertials]`` entry, the sensor site."""
     world = scene.world
     if world.model_path is None:
-        spec = load_spec(scene)
+        spec = load_spec(scene, fit_meshes=False)  # a mesh is the true shell, not its fit
     else:
-        try:
-            spec = mujoco.MjSpec.from_file(str(world.model_path))
-        except Exception as exc:  # mujoco raises ValueError with the parser's message
-            raise SceneError(scene.path, "world.model", f"MuJoCo cannot load {world.model_path.name}: {exc}") from exc
-        spec.option.gravity = np.asarray(scene.gravity, dtype=float)
+        spec = parse_spec(scene, world.model_path, "world.model")
+        prepare_user_model(spec, scene, urdf=world.model_path.suffix.lower() == ".urdf")
         _check_same_arm(scene, spec)
+    if world.vendor_shell is not None:
+        attach_vendor_shell(spec, scene, world.vendor_shell)
     for body in world.inertials:
         if spec.body(body) is None:
             raise SceneError(scene.path, f"world.inertials.{body}", f"no body {body!r} in the world's arm")

@@ -21,6 +21,7 @@ from .schema import (
     TouchableLink,
     _frozen,
 )
+from .vendor import VENDOR_SHELLS
 from .world_spec import IDEAL, InertialError, WorldSpec
 
 SCHEMA_VERSION = 1
@@ -159,7 +160,7 @@ class _Parser:
         p = "robot."
         self.unknown_keys(t, {"model", "joints", "home", "flange", "torque_constant", "friction_viscous",
                               "friction_coulomb", "kp", "kd", "current_noise_std", "couplings",
-                              "surface_tolerance_m"}, p)
+                              "surface_tolerance_m", "vendor_shell"}, p)
         model_path = self.model_file(t, p)
         joints = self.get(t, "joints", p, list)
         if not joints or not all(isinstance(j, str) and j for j in joints):
@@ -180,7 +181,15 @@ class _Parser:
             current_noise_std=self.vector(t, "current_noise_std", p, n, nonneg=True, default=[0.0] * n),
             couplings=self.couplings(t.get("couplings", []), tuple(joints)),
             surface_tolerance=self.tolerance(t, p),
+            vendor_shell=self.vendor_shell(t, p),
         )
+
+    def vendor_shell(self, t: dict, p: str) -> str | None:
+        """``vendor_shell``: one of :data:`VENDOR_SHELLS` (its meshes are fetched by ``ftc scenes meshes``)."""
+        name = self.get(t, "vendor_shell", p, str, None)
+        if name is not None and name not in VENDOR_SHELLS:
+            raise self.fail(p + "vendor_shell", f"unknown vendor shell {name!r} (known: {', '.join(VENDOR_SHELLS)})")
+        return name
 
     def tolerance(self, t: dict, p: str) -> float:
         value = self.number(t, "surface_tolerance_m", p, default=0.0)
@@ -252,7 +261,8 @@ class _Parser:
         self.unknown_keys(t, {"model", "inertials", "friction_coulomb", "friction_viscous", "friction_stribeck",
                               "stribeck_velocity", "torque_constant", "sensor_offset_m", "sensor_rotation_rad",
                               "sensor_gain", "coloured_noise_std", "coloured_noise_tau_s", "temperature_drift",
-                              "temperature_rise_K", "temperature_tau_s", "shell_offset_m"}, p)
+                              "temperature_rise_K", "temperature_tau_s", "shell_offset_m",
+                              "vendor_shell"}, p)
         model_path = self.model_file(t, p) if "model" in t else None
 
         def joint_vector(key: str, **kw) -> Any:
@@ -276,7 +286,7 @@ class _Parser:
             temperature_drift=self.vector(t, "temperature_drift", p, 6, default=[0.0] * 6),
             temperature_rise_K=self.number(t, "temperature_rise_K", p, default=0.0),
             temperature_tau_s=self.number(t, "temperature_tau_s", p, positive=True, default=600.0),
-            shell_offset=shell)
+            shell_offset=shell, vendor_shell=self.vendor_shell(t, p))
 
     def inertials(self, table: dict) -> Any:
         out = {}

@@ -49,6 +49,7 @@ class RobotSpec:
     current_noise_std: np.ndarray  # A, the simulated current sensor's noise
     couplings: tuple[Coupling, ...] = ()  # scene joints that drive several model joints
     surface_tolerance: float = 0.0  # m, 1 sigma: how far the real shell may lie from the model's surfaces
+    vendor_shell: str | None = None  # the vendor's meshes of this arm (ftc_hw.scene.vendor), if any
 
 
 @dataclass(frozen=True)

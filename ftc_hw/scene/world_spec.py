@@ -54,6 +54,7 @@ class WorldSpec:
     temperature_tau_s: float = 600.0  # s
     shell_offset: float = 0.0  # m: the touched surface lies this far outside the model's primitives
     shell_offsets: Mapping[str, float] = field(default_factory=dict)  # m, per geom
+    vendor_shell: str | None = None  # the vendor's meshes (ftc_hw.scene.vendor) are the touched surface
 
     @property
     def is_ideal(self) -> bool:
@@ -64,7 +65,8 @@ class WorldSpec:
                 and not np.any(self.sensor_rotation) and np.array_equal(self.sensor_gain, np.eye(6))
                 and not np.any(self.coloured_noise_std)
                 and not (np.any(self.temperature_drift) and self.temperature_rise_K)
-                and self.shell_offset == 0.0 and not any(self.shell_offsets.values()))
+                and self.shell_offset == 0.0 and not any(self.shell_offsets.values())
+                and self.vendor_shell is None)
 
     def shell_of(self, geom: str) -> float:
         """The shell offset (m) of one geom: its own if given, else the common one."""

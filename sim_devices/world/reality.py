@@ -19,6 +19,7 @@ from ftc_hw.model.arm import SURFACE_GROUP
 from ftc_hw.model.build import descends, moves
 from ftc_hw.model.true_arm import true_arm_spec
 from ftc_hw.scene import Scene
+from ftc_hw.scene.vendor import VENDOR_SHELLS, shell_fetched
 from ftc_hw.scene.world_spec import InertialError, WorldSpec
 
 
@@ -81,7 +82,31 @@ def with_reality(scene: Scene, reality: Reality | str, seed: int = 0,
     changes: dict = {}
     for name in keep:
         changes.update(_compose(name, base, drawn))
+    if "shell" in keep:
+        changes.update(_vendor_shell(scene, changes["shell_offsets"]))
     return dataclasses.replace(scene, world=dataclasses.replace(base, **changes))
+
+
+def _vendor_shell(scene: Scene, offsets: dict[str, float]) -> dict:
+    """The scene's vendor meshes as the shell, where fetched (``ftc scenes meshes``): no drawn offset
+    on the bodies they cover. Not fetched: the drawn offsets stay (``shell_source`` says which)."""
+    name = scene.robot.vendor_shell
+    if name is None or scene.world.vendor_shell is not None or not shell_fetched(name):
+        return {}
+    covered = set(VENDOR_SHELLS[name].bodies)
+    _, bodies_of = _moving_bodies_and_shells(scene)
+    return {"vendor_shell": name, "shell_offsets": {g: v for g, v in offsets.items() if bodies_of[g] not in covered}}
+
+
+def shell_source(scene: Scene) -> str:
+    """What a world's touched surface is: the vendor's meshes, primitives with offsets, or the model."""
+    w = scene.world
+    if w.vendor_shell is not None:
+        return f"{w.vendor_shell} meshes"
+    if w.shell_offset or any(w.shell_offsets.values()):
+        missing = scene.robot.vendor_shell is not None and not shell_fetched(scene.robot.vendor_shell)
+        return "primitives + offset" + (" (vendor meshes not fetched: ftc scenes meshes)" if missing else "")
+    return "the model's primitives"
 
 
 def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator) -> WorldSpec:
@@ -146,13 +171,14 @@ def _compose(name: str, base: WorldSpec, d: WorldSpec) -> dict:
     return {"shell_offsets": {g: base.shell_of(g) + v for g, v in d.shell_offsets.items()}}
 
 
-def _moving_bodies_and_shells(scene: Scene) -> tuple[list[str], list[str]]:
-    """The bodies the sensor carries that a joint moves, and their touchable primitive geoms."""
+def _moving_bodies_and_shells(scene: Scene) -> tuple[list[str], dict[str, str]]:
+    """The bodies the sensor carries that a joint moves, and the touchable primitive geoms of the
+    bodies it carries (geom -> body)."""
     m = true_arm_spec(scene).compile()
     sensor_body = int(m.site_bodyid[m.site(scene.sensor.site).id])
     arm = [b for b in range(1, m.nbody) if descends(m, b, sensor_body)]
     bodies = [m.body(b).name for b in arm if moves(m, b)]
-    geoms = [m.geom(g).name for g in range(m.ngeom)
+    geoms = {m.geom(g).name: m.body(int(m.geom_bodyid[g])).name for g in range(m.ngeom)
              if m.geom_group[g] == SURFACE_GROUP and int(m.geom_bodyid[g]) in arm
-             and m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH and m.geom(g).name]
+             and m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH and m.geom(g).name}
     return bodies, geoms

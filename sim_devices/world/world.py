@@ -6,6 +6,7 @@ wrench and the contacts all belong to the same instant: the state before the int
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -29,6 +30,7 @@ from ftc_hw.scene import Scene
 
 from .sensor_model import FTSensorModel, SensorReading
 from .trajectory import Hold, Trajectory
+from .true_shell import mesh_point, shell_meshes
 
 
 @dataclass(frozen=True)
@@ -44,6 +46,7 @@ class Probe:
     hold_s: float = 0.2
     normal_link: np.ndarray | None = None  # outward surface normal at the point, link frame (None: -direction)
     geom: str | None = None  # the surface geom the point is on (its shell offset applies)
+    on_true_shell: bool = False  # point_link was moved onto the true arm's mesh shell (no offset applies)
 
     @property
     def t_end(self) -> float:
@@ -162,6 +165,8 @@ class World:
         q0, _, _ = self._reference.reference(0.0)
         jm.set_qpos(np.asarray(q0, dtype=float), self.data.qpos)
         mujoco.mj_forward(m, self.data)
+        self.probes_off_mesh = 0  # probes of a mesh-shelled link whose ray missed it: pressed on the model
+        self.setup = dataclasses.replace(setup, probes=tuple(self._on_true_shell(p) for p in setup.probes))
         self.steps = 0
         self.state: WorldState = self._step()
 
@@ -187,6 +192,19 @@ class World:
                 eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=name, name2=c.drives[0])
                 eq.data[:5] = [0.0, ratio / c.ratios[0], 0.0, 0.0, 0.0]
                 eq.solref = [2.0 * dt, 1.0]
+
+    def _on_true_shell(self, p: Probe) -> Probe:
+        """The probe moved onto its link's mesh shell, where the true arm has one."""
+        m, d = self.model, self.data
+        body = m.body(p.link).id
+        if not shell_meshes(m, body):
+            return p
+        outward = p.normal_link if p.normal_link is not None else -(d.xmat[body].reshape(3, 3).T @ p.direction)
+        point = mesh_point(m, d, body, np.asarray(p.point_link, dtype=float), np.asarray(outward, dtype=float))
+        if point is None:
+            self.probes_off_mesh += 1
+            return p
+        return dataclasses.replace(p, point_link=point, on_true_shell=True)
 
     def _q(self) -> np.ndarray:
         return self.joints.joints_of(self.data.qpos, self.joints.qadr)
@@ -253,7 +271,7 @@ class World:
             rot = d.xmat[bid].reshape(3, 3)
             point = rot @ p.point_link + d.xpos[bid]
             shell = self.scene.world.shell_of(p.geom) if p.geom else self.scene.world.shell_offset
-            if shell:  # the probe meets the true surface, outside the model's
+            if shell and not p.on_true_shell:  # the probe meets the true surface, outside the model's
                 point = point + shell * (rot @ p.normal_link if p.normal_link is not None else -p.direction)
             force = mag * p.direction
             d.xfrc_applied[bid, :3] += force

@@ -21,13 +21,16 @@ def _run(onsets, points, contact_spans=((1.0, 1.3, 30.0), (2.0, 2.3, 5.0))):
 
 def test_summary_counts_what_the_issue_asks():
     free = _run([0.5], [], contact_spans=())  # one alarm with nothing touching
-    hits = _run([1.002, 2.004, 3.5], [(2.0, True, True, True), (4.0, False, True, True), (90.0, False, False, False)])
+    hits = _run([1.002, 2.004, 3.5], [(2.0, True, True, True, 1.0), (4.0, False, True, True, np.nan),
+                                      (90.0, False, False, False, 5.0)])
     s = _summarize(free, [hits])
     assert s["false_alarms"] == 2  # 0.5 s in the free run, 3.5 s in the contact run
     assert s["contacts_over_10N"] == 1 and s["detected_over_10N"] == 1  # the 5 N contact is not counted
     assert abs(s["delay_ms_median"] - 3.0) < 1e-9  # (2 + 4) / 2 ms: every detected contact's delay
     assert s["pos_err_mm_median"] == 3.0 and s["coverage95"] == 0.5  # unflagged only: 2 and 4 mm
     assert abs(s["flagged_share"] - 1 / 3) < 1e-12 and abs(s["link_right"] - 2 / 3) < 1e-12
+    # on the meshes: 1 mm, and the miss keeps its primitive's 4 mm
+    assert s["pos_err_mm_median_mesh"] == 2.5 and s["mesh_misses"] == 1
     assert abs(s["residual_rms_N"] - 0.5) < 1e-12 and abs(s["residual_rms_Nm"] - 0.01) < 1e-12
     worse = dict(s, coverage95=0.2, pos_err_mm_median=9.0)
     c = _combine([s, worse])

@@ -144,13 +144,6 @@ def test_bench_solver_compares_the_magnitude_with_the_force_reading_on_many_case
     assert bad.exit_code != 0 and "magnitude-cases" in bad.output
 
 
-def test_demo_ends_by_itself_with_a_summary(clean_or_loaded):
-    r = runner.invoke(app, ["demo", "--duration", "3"])
-    clean_or_loaded(r.exit_code, r.output)
-    assert "contacts: detected against ground truth" in r.output and "false alarms" in r.output
-    assert "summary: 1/1 contacts detected" in r.output, r.output[-3000:]  # the 3 s run's one collision
-
-
 def test_devices_probe_says_what_it_tried():
     r = runner.invoke(app, ["devices", "probe", "--address", "127.0.0.98", "--timeout", "0.2"])
     assert r.exit_code == 1, r.output

@@ -1,0 +1,60 @@
+"""Vendors' meshes of a robot's shell, as data: where a package on the index ships them, which of the
+vendor model's bodies is which of ours, and where ``ftc scenes meshes`` puts them on this machine.
+
+The simulated world uses them as the true touched surface (``[world] vendor_shell``, or a reality
+draw for a scene whose ``[robot] vendor_shell`` names one); the pipeline keeps the scene's primitives.
+Nothing here downloads: ``ftc_hw.app.vendor_meshes`` does.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class VendorShell:
+    name: str
+    requirement: str  # pip requirement of the package that ships the meshes
+    root: str  # the robot's folder inside the package's wheel
+    model: str  # the vendor's MuJoCo model, relative to ``root``: its kinematics place the meshes
+    licence: str  # the package's licence, and the file of it that is copied along
+    licence_file: str  # path inside the wheel
+    bodies: Mapping[str, str]  # our body -> the vendor model's body, whose visual meshes are the shell
+    base_yaw: float  # rad: the vendor's base frame is ours turned by this about z (same joint zeros)
+
+
+VENDOR_SHELLS: dict[str, VendorShell] = {
+    "robosuite-ur5e": VendorShell(
+        name="robosuite-ur5e",
+        requirement="robosuite==1.5.2",
+        root="robosuite/models/assets/robots/ur5e",
+        model="robot.xml",
+        licence="MIT (robosuite 1.5.2; the meshes are Universal Robots' UR5e meshes)",
+        licence_file="robosuite-1.5.2.dist-info/licenses/LICENSE",
+        # the visual meshes (what a hand touches); the collision meshes are UR's coarser hulls, up to
+        # 40 mm outside the upper arm's tube
+        bodies={"base": "fixed_base_link", "shoulder": "shoulder_link", "upper_arm": "upper_arm_link",
+                "forearm": "forearm_link", "wrist_1": "wrist_1_link", "wrist_2": "wrist_2_link",
+                "wrist_3": "wrist_3_link"},
+        base_yaw=math.pi,  # ROS-style base_link vs the DH base: joint anchors agree to 0.5 mm turned by pi
+    ),
+}
+
+
+def vendor_root() -> Path:
+    """Where fetched vendor meshes live: ``$FTC_VENDOR_DIR``, else ``~/.cache/ftc-hw/vendor``."""
+    env = os.environ.get("FTC_VENDOR_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "ftc-hw" / "vendor"
+
+
+def shell_model(name: str) -> Path:
+    """The fetched vendor model file of shell ``name`` (it may not exist: :func:`shell_fetched`)."""
+    shell = VENDOR_SHELLS[name]
+    return vendor_root() / name / shell.model
+
+
+def shell_fetched(name: str) -> bool:
+    return name in VENDOR_SHELLS and shell_model(name).is_file()
