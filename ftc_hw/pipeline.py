@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .bus import ContactEvent
-from .compensation import Compensator, JointResiduals, ModelError, QddEstimator, RecentPeak
+from .compensation import Compensator, JointResiduals, ModelError, OnlineRefiner, QddEstimator, RecentPeak
 from .detection import ContactDetector, Detection
 from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
@@ -75,12 +75,15 @@ class ContactPipeline:
                  qdd_tau: float = 0.002, extra_cov=None, track_slide: float | None = 0.01,
                  bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005,
                  flag_uncertain: bool = True, gap_hold_s: float | None = 0.1, gain=None,
-                 inertials=None, frame=None, gravity=None, joints=None, model_error=None) -> None:
+                 inertials=None, frame=None, gravity=None, joints=None, model_error=None,
+                 refine: bool = False) -> None:
         """Calibrated corrections (``Calibration.pipeline_kwargs``): ``gain`` the sensor's error on the
         arm's loads, ``inertials`` link inertial corrections, ``frame`` the sensor's true frame (a
         mount yaw), ``gravity`` a tilted gravity vector (m/s^2, base frame), ``joints`` identified
         ``torque_constant``, ``friction_viscous``, ``friction_coulomb`` (per joint), ``model_error`` the
-        identification's parameter covariance (:class:`~ftc_hw.compensation.ModelError`)."""
+        identification's parameter covariance (:class:`~ftc_hw.compensation.ModelError`). ``refine``: with
+        a ``model_error``, keep refining the identified parameters while the arm moves free
+        (:class:`~ftc_hw.compensation.OnlineRefiner`; ``refiner.drift()`` says how far they moved)."""
         self.scene = scene
         model_scene = scene if gravity is None else replace(scene, gravity=np.asarray(gravity, dtype=float))
         if joints:
@@ -89,6 +92,8 @@ class ContactPipeline:
         model = ArmModel(model_scene, payload, inertials)
         self.compensator = Compensator(model, level, bias, gain=gain, frame=frame)
         self.identified_error = None if model_error is None else ModelError.from_kwargs(model, model_error)
+        self.refiner = (OnlineRefiner(self.compensator, self.identified_error, scene.sensor.noise_cov)
+                        if refine and self.identified_error is not None else None)
         self.level = self.compensator.level
         self.solver: Solver = make_solver(model, method)
         self.residuals = JointResiduals(model_scene) if use_currents else None
@@ -169,6 +174,8 @@ class ContactPipeline:
         self.compensator.tare(raw_mean, q, zero, zero)
         if self.identified_error is not None:
             self.identified_error.set_tare(q)
+        if self.refiner is not None:
+            self.refiner.set_tare(raw_mean, q)
         if self.track is not None:
             self.track.set_bias(1.0 / max(int(samples), 1), t_ns)
 
@@ -234,6 +241,11 @@ class ContactPipeline:
             events.extend(self._contact_events(t_ns, det, estimate, external, q))
         if self.track is not None:
             self._prev = (t_ns, external, q.copy(), model_error, saturated)
+        if self.refiner is not None and qd is not None and qdd is not None:
+            if det.active or det.change == "offset" or saturated:
+                self.refiner.touched(t_ns)
+            elif det.d2 < 0.5 * self.detector.on:  # clearly nothing touching (a rising contact stays out)
+                self.refiner.observe(t_ns, external, q, qd, qdd)
         return FrameResult(t_ns, external, det, estimate, tau_ext, tuple(events))
 
     def _contact_events(self, t_ns: int, det: Detection, estimate: ContactEstimate | None,

@@ -25,6 +25,7 @@ from ftc_hw.app.evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_
 from ftc_hw.app.view import LiveView, evaluation_table, stream_table
 from ftc_hw.bus import EVENTS_CONTACT, STREAM_EVENT_KINDS, Bus, ContactEvent, DeviceEvent, joints_topic, wrench_topic
 from ftc_hw.calibration.file import CalibrationError, load_calibration
+from ftc_hw.compensation import Drift
 from ftc_hw.devices.base import frozen_heap, responsive_readers
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import EventWriter, event_record, read_truth
@@ -68,6 +69,7 @@ class MonitorConfig:
     device_overrides: tuple[str, ...] = ()  # NAME.KEY=VALUE (--device), applied after the rig file
     rig: Path | None = None  # a rig file (--rig): a table of keys per device name
     reality: str = "ideal"  # with sim: how the world's arm differs from the model (ideal, typical, harsh)
+    refine: bool = False  # keep refining the calibration's identified model while the arm moves free
 
 
 @dataclass
@@ -79,6 +81,7 @@ class MonitorOutcome:
     reflex: dict[str, Any] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
     t_closed_ns: int = 0  # when the adapters were closed
+    drift: Drift | None = None  # with refine: how far the refined model moved from the calibration's
     stream_events: list[dict[str, Any]] = field(default_factory=list)  # sensor_lost, arm_back, ...
     faults: list[tuple[str, float]] = field(default_factory=list)  # (fault, scenario time s when done)
     vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
@@ -256,6 +259,11 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         ev_sub = bus.subscribe("events/", maxsize=None)
         tare_s = None if cal_kwargs else 0.1
         pipeline_kwargs = {**cal_kwargs, **({"level": cfg.level} if cfg.level else {})}
+        if cfg.refine and "model_error" in cal_kwargs:
+            pipeline_kwargs["refine"] = True
+        elif cfg.refine:
+            console.print("[yellow]--refine: the calibration holds no identification (ftc identify): nothing to "
+                          "refine[/]")
         console.print("loading the pipeline (its compiled kernels) ...")
         monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
         recorder = None
@@ -319,6 +327,9 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                 reflex.close()
         pump()
         _finish(cfg, scene, monitor, reflex, world, truth_path, recorder, out)
+        if monitor.pipeline.refiner is not None:
+            out.drift = monitor.pipeline.refiner.drift()
+            console.print(out.drift.summary())
         _judge_degraded(monitor, rig.adapters, out, cfg.sim)
         _summary(console, cfg, bus, topics, out, rig.adapters, recorder, world)
     return out

@@ -189,6 +189,9 @@ def monitor(
     device: DeviceOption = None,
     rig: RigOption = None,
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
+    refine: Annotated[bool, typer.Option("--refine", help="Keep refining the calibration's identified model "
+                                         "(ftc identify) while the arm moves free, and say at the end how far it "
+                                         "drifted (docs/reality.md).")] = False,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
@@ -197,7 +200,7 @@ def monitor(
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
                                          reflex.value if reflex else None, events, truth, noise, view, level.value,
                                          tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
-                                         reality=reality.value))
+                                         reality=reality.value, refine=refine))
 
 
 @app.command()

@@ -54,14 +54,17 @@ class ModelError:
         self._tare = self._regressor(q, z, z)
         self._t = None
 
+    def rows_regressor(self, q, qd, qdd) -> np.ndarray:
+        """The regressor of this state less the tare's (6 x parameters): the reading's change with the
+        parameters, as the tared pipeline sees it."""
+        a = self._regressor(q, qd, qdd)
+        return a if self._tare is None else a - self._tare
+
     def rows(self, t_ns: int, q, qd, qdd) -> np.ndarray:
         """Six covariance rows (6 x 6) of the model's wrench error at this state."""
         if self._t is not None and t_ns - self._t < self.refresh_ns:
             return self._rows
-        a = self._regressor(q, qd, qdd)
-        if self._tare is not None:
-            a = a - self._tare
-        d = a @ self.factor  # 6 x r
+        d = self.rows_regressor(q, qd, qdd) @ self.factor  # 6 x r
         cov = d @ d.T
         vals, vecs = np.linalg.eigh(cov)
         self._rows = np.ascontiguousarray((vecs * np.sqrt(np.maximum(vals, 0.0))).T)
