@@ -21,6 +21,11 @@ from .free_motion import HUBER_K, MotionData, prepare
 MIN_SPEED = 0.05  # rad/s
 V_EPS = 0.01  # rad/s: the Coulomb term's smoothing, as the joint residuals use it
 MIN_MOVING = 50  # thinned samples in motion a joint needs to be fitted
+# a fitted torque constant is kept only within this factor of the scene's and told to this relative
+# std: a joint whose load is mostly its own friction (a vertical axis: no gravity torque) cannot tell
+# the current's scale from the friction's, and the fit slides toward zero for all three
+KT_RANGE = (0.5, 2.0)
+KT_REL_STD = 0.1
 
 
 @dataclass
@@ -32,6 +37,7 @@ class JointFit:
     fitted: np.ndarray  # (n,) bool: the joint moved enough to be fitted (else the scene's values)
     residual_rms_before: np.ndarray  # N m per joint, scene's values
     residual_rms: np.ndarray  # N m per joint
+    untold: np.ndarray | None = None  # (n,) bool: it moved, but its torque constant was not told (scene's kept)
 
 
 def fit_joint_friction(arm: ArmModel, segments: Sequence[MotionData]) -> JointFit:
@@ -48,7 +54,8 @@ def fit_joint_friction(arm: ArmModel, segments: Sequence[MotionData]) -> JointFi
     cur = np.array([x[1] for x in rows])
     tau = np.array([x[2] for x in rows])
     n = len(kt0)
-    out = JointFit(kt0.copy(), b0.copy(), fc0.copy(), np.zeros((n, 3)), np.zeros(n, bool), np.zeros(n), np.zeros(n))
+    out = JointFit(kt0.copy(), b0.copy(), fc0.copy(), np.zeros((n, 3)), np.zeros(n, bool), np.zeros(n), np.zeros(n),
+                   np.zeros(n, bool))
     for j in range(n):
         moving = np.abs(qd[:, j]) > MIN_SPEED
         v = qd[moving, j]
@@ -58,6 +65,9 @@ def fit_joint_friction(arm: ArmModel, segments: Sequence[MotionData]) -> JointFi
             continue
         a = np.column_stack([kt0[j] * cur[moving, j], -v, -np.tanh(v / V_EPS)])
         x, cov, resid = _huber_ls(a, tau[moving, j])
+        if not (KT_RANGE[0] <= x[0] <= KT_RANGE[1]) or np.sqrt(cov[0, 0]) > KT_REL_STD * abs(x[0]):
+            out.untold[j] = True
+            continue
         out.torque_constant[j] = kt0[j] * x[0]
         out.friction_viscous[j], out.friction_coulomb[j] = x[1], x[2]
         out.std[j] = np.sqrt(np.diag(cov)) * np.array([kt0[j], 1.0, 1.0])

@@ -120,6 +120,7 @@ Build = Callable[[DeviceSpec, Bus, Any, "Scene | None", dict[str, Any]], Adapter
 class AdapterKind:
     role: Role
     build: Build  # (device, bus, endpoint, scene, overrides) -> the adapter, not opened
+    moves_on_goals: bool = False  # an arm whose protocol takes goal positions (the wizard and ftc identify move it)
 
 
 def _ft(build: Callable[[DeviceSpec, Bus, Mapping[str, Any], dict[str, Any]], FTAdapter]) -> AdapterKind:
@@ -133,7 +134,7 @@ def _arm(cls: type[DynamixelArm] | type[URArm]) -> AdapterKind:
     def make(device: DeviceSpec, bus: Bus, endpoint: Any, scene: Scene | None, overrides: dict[str, Any]) -> Adapter:
         return cls.from_spec(device, bus, endpoint, scene=scene, **overrides)
 
-    return AdapterKind("arm", make)
+    return AdapterKind("arm", make, cls.moves_on_goals)
 
 
 ADAPTERS: dict[str, AdapterKind] = {
@@ -149,6 +150,12 @@ ADAPTERS: dict[str, AdapterKind] = {
 def kinds(role: Role) -> tuple[str, ...]:
     """The device kinds of a role, in the registry's order."""
     return tuple(k for k, a in ADAPTERS.items() if a.role == role)
+
+
+def moves_on_goals(kind: str) -> bool:
+    """True for an arm kind whose protocol takes goal positions."""
+    entry = ADAPTERS.get(kind)
+    return entry is not None and entry.moves_on_goals
 
 
 def role_of(kind: str) -> Role | None:

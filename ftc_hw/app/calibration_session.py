@@ -139,6 +139,25 @@ class DeviceSession:
                 break
             time.sleep(1.0 / rate_hz)
 
+    def follow(self, reference: Callable[[float], np.ndarray], duration: float, rate_hz: float = 50.0,
+               progress: Callable[[float], None] | None = None) -> tuple[list, list]:
+        """Stream ``reference(t)`` as goals for ``duration`` s (t from 0); every F/T and joint frame
+        meanwhile."""
+        if not self.can_command:
+            raise SessionError("this arm cannot be commanded: play the motion on its controller")
+        self.flush()
+        ws: list = []
+        js: list = []
+        t0 = time.monotonic()
+        while (t := time.monotonic() - t0) < duration:
+            self._send_goal(reference(t))
+            ws += self._wrench.drain()
+            js += self._joints.drain()
+            if progress is not None:
+                progress(t / duration)
+            time.sleep(max(0.0, t0 + t + 1.0 / rate_hz - time.monotonic()))
+        return ws + self._wrench.drain(), js + self._joints.drain()
+
     def _send_goal(self, q: np.ndarray, timeout: float = 5.0) -> None:
         """One goal; if the adapter's link drops meanwhile (it reconnects by itself), wait for it and
         send again. The adapter's reader may close the port under a concurrent write, which the SDK

@@ -24,6 +24,7 @@ from rich.console import Console
 
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE
 from ftc_hw.calibration.applied import merge_inertials
+from ftc_hw.calibration.excitation import plan_excitation
 from ftc_hw.calibration.file import (
     Calibration,
     CalibrationError,
@@ -39,6 +40,9 @@ from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.reader import Recording, RecordingError, read_recording
 from ftc_hw.scene import Scene
 
+from .calibration_session import DeviceSession, SessionError
+from .drive_excitation import drive_excitation
+from .rig import RigError
 from .session import MonitorConfig, MonitorSetupError, run_monitor
 
 CONTACT_MARGIN_S = 0.3  # cut this much before a reported contact and after its end
@@ -167,28 +171,38 @@ def _joints(arm: ArmModel, fit: FreeMotionFit, segments: list[MotionData]) -> Jo
 
 
 def _joint_figures(j: JointFit) -> dict[str, Any]:
-    return {"joints_fitted": j.fitted.tolist(), "joint_residual_rms_before_Nm": j.residual_rms_before.tolist(),
+    untold = j.untold if j.untold is not None else [False] * len(j.fitted)
+    return {"joints_fitted": j.fitted.tolist(), "joints_untold": [bool(u) for u in untold],
+            "joint_residual_rms_before_Nm": j.residual_rms_before.tolist(),
             "joint_residual_rms_Nm": j.residual_rms.tolist(), "joint_std": j.std.tolist()}
 
 
 def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *, sim: bool = False,
                  scenario: str = "sweep", duration: float = 120.0, seed: int = 0, reality: str = "ideal",
-                 console: Console | None = None) -> int:
+                 console: Console | None = None, drive: bool = False) -> int:
+    """From ``recording``; or ``sim``: the emulated devices run ``scenario`` (recorded); or ``drive``:
+    the planned excitation streamed to the arm as goals through its protocol (emulated with ``sim``)."""
     console = console or Console()
     if opts.out is None:
         opts = dataclasses.replace(opts, out=Path(f"calibration-{scene.name}.toml"))
     try:
         base = base_calibration(scene, opts)
-        with tempfile.TemporaryDirectory(prefix="ftc-identify-") as tmp:
-            if sim:
-                recording = _record_sim(scene, scenario, duration, seed, reality, Path(tmp) / "run.mcap", console)
-            rec = read_recording(recording)
-            segments, counts = motion_segments(rec, keep_contacts=opts.keep_contacts or sim)
-        source = (f"ftc identify --sim: {scenario}, {duration:g} s, reality {reality}, seed {seed}" if sim
-                  else str(recording))
+        if drive:
+            segments, counts = _driven(scene, duration, seed, sim, reality, console)
+            source = (f"ftc identify --plan, driven through the arm's protocol: {duration:g} s, seed {seed}"
+                      + (f", emulated, reality {reality}" if sim else ""))
+        else:
+            with tempfile.TemporaryDirectory(prefix="ftc-identify-") as tmp:
+                if sim:
+                    recording = _record_sim(scene, scenario, duration, seed, reality, Path(tmp) / "run.mcap",
+                                            console)
+                rec = read_recording(recording)
+                segments, counts = motion_segments(rec, keep_contacts=opts.keep_contacts or sim)
+            source = (f"ftc identify --sim: {scenario}, {duration:g} s, reality {reality}, seed {seed}" if sim
+                      else str(recording))
         cal, fit = identify(scene, segments, base, source, gain=opts.gain)
-    except (IdentificationError, RecordingError, CalibrationError, MonitorSetupError, OSError,
-            np.linalg.LinAlgError) as exc:
+    except (IdentificationError, RecordingError, CalibrationError, MonitorSetupError, SessionError, RigError,
+            OSError, np.linalg.LinAlgError) as exc:
         console.print(f"[red]cannot identify:[/] {exc}")
         return 1
     save_calibration(cal, opts.out)
@@ -199,6 +213,18 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
                                                                  cal.identification.joints.items()}}
         opts.json_path.write_text(json.dumps(figures, indent=2))
     return 0 if fit.verdict == "good" else 4
+
+
+def _driven(scene: Scene, duration: float, seed: int, sim: bool, reality: str,
+            console: Console) -> tuple[list[MotionData], dict[str, int]]:
+    plan = plan_excitation(scene, duration, seed=seed)
+    console.print(f"playing {duration:g} s of the planned excitation through the arm's protocol"
+                  + (f" (emulated devices, reality {reality})" if sim else "") + " ...")
+    with DeviceSession(scene, sim=sim, seed=seed, reality=reality) as session:
+        if not session.arm.moves_on_goals:
+            raise SessionError(f"{session.arm.describe()} takes no goal positions: write the plan with "
+                               "--plan-file and play it on the controller while ftc monitor --record runs")
+        return drive_excitation(session, plan.excitation, motion_segments)
 
 
 def _record_sim(scene: Scene, scenario: str, duration: float, seed: int, reality: str, path: Path,
@@ -226,8 +252,13 @@ def _report_joints(console: Console, scene: Scene, ident: Identification) -> Non
         console.print("joint friction and torque constants: not fitted (no motor currents recorded)")
         return
     fitted = ident.figures.get("joints_fitted", [])
+    untold = ident.figures.get("joints_untold", [])
     r = scene.robot
     for j, name in enumerate(scene.robot.joints):
+        if j < len(untold) and untold[j]:
+            console.print(f"  {name}: moved, but its motor current did not tell its torque constant from its "
+                          "friction (little load but its own friction): the scene's values kept")
+            continue
         if not (j < len(fitted) and fitted[j]):
             console.print(f"  {name}: moved too little to fit its friction: the scene's values kept")
             continue

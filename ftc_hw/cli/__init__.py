@@ -332,13 +332,14 @@ def identify(
     scene: Annotated[Optional[str], typer.Option(  # noqa: UP045
         help="Built-in scene or scene file (default: the recording's).")] = None,
     sim: Annotated[bool, typer.Option("--sim", help="Record the emulated devices first, then identify.")] = False,
-    plan: Annotated[bool, typer.Option("--plan", help="With --sim: the planned excitation (scenario excitation) "
-                                       "instead of the ordinary sweep.")] = False,
+    plan: Annotated[bool, typer.Option("--plan", help="The planned excitation instead of the ordinary sweep: "
+                                       "streamed as goals through the arm's protocol where it takes them "
+                                       "(DYNAMIXEL; emulated with --sim), else played by the world (--sim).")] = False,
     plan_file: Annotated[Optional[Path], typer.Option(help="Write the planned excitation as CSV (t, q at 125 Hz) "  # noqa: UP045
                                                       "for a controller to play, and exit.")] = None,
     scenario: Annotated[Optional[str], typer.Option(help="With --sim: a contact-free scenario (sweep, excitation, "  # noqa: UP045
                                                     "hold).")] = None,
-    duration: Annotated[float, typer.Option(min=5.0, help="With --sim or --plan-file: seconds of motion.")] = 120.0,
+    duration: Annotated[float, typer.Option(min=5.0, help="Seconds of motion (--sim, --plan, --plan-file).")] = 120.0,
     seed: Annotated[int, typer.Option(help="Random seed (the plan, the simulated world).")] = 0,
     reality: Annotated[RealityChoice, reality_option(RealityChoice.typical, "With --sim: ")] = RealityChoice.typical,
     calibration: Annotated[Optional[Path], typer.Option(help="Start from this calibration (default: --out if it "  # noqa: UP045
@@ -350,6 +351,8 @@ def identify(
                                                 "(robust weights instead of cutting them out).")] = False,
     gain: Annotated[bool, typer.Option("--gain/--no-gain", help="Also fit the sensor's linear error on the "
                                        "arm's loads (gain, crosstalk, mount).")] = True,
+    device: DeviceOption = None,
+    rig: RigOption = None,
 ) -> None:
     """Identify the arm's inertial parameters and the sensor's errors from free motion, into the calibration."""
     from ftc_hw.app.identify import IdentifyOptions  # lazy: CLI start-up
@@ -359,7 +362,7 @@ def identify(
                            gain=gain)
     raise typer.Exit(run_identify_command(recording, scene, sim=sim, plan=plan, plan_file=plan_file,
                                           scenario=scenario, duration=duration, seed=seed, reality=reality.value,
-                                          opts=opts))
+                                          opts=opts, device_overrides=tuple(device or ()), rig=rig))
 
 
 @app.command()

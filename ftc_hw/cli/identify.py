@@ -9,6 +9,7 @@ import typer
 from ftc_hw.app.identify import IdentifyOptions, run_identify
 from ftc_hw.app.view import make_console
 from ftc_hw.calibration.excitation import plan_excitation
+from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.replay import ReplayError, recorded_scene
 
@@ -17,20 +18,30 @@ from .common import scene_or_exit
 
 def run_identify_command(recording: Path | None, scene_name: str | None, *, sim: bool, plan: bool,
                          plan_file: Path | None, scenario: str | None, duration: float, seed: int, reality: str,
-                         opts: IdentifyOptions) -> int:
+                         opts: IdentifyOptions, device_overrides: tuple[str, ...] = (),
+                         rig: Path | None = None) -> int:
     console = make_console()
-    if (recording is None) == (not sim and not plan_file):
-        raise typer.BadParameter("give a recording (FILE.mcap), or --sim, or --plan-file", param_hint="RECORDING")
-    if recording is not None and (sim or plan_file):
-        raise typer.BadParameter("a recording, or --sim / --plan-file, not both", param_hint="RECORDING")
+    if (recording is None) == (not sim and not plan_file and not plan):
+        raise typer.BadParameter("give a recording (FILE.mcap), or --sim, --plan or --plan-file",
+                                 param_hint="RECORDING")
+    if recording is not None and (sim or plan_file or plan):
+        raise typer.BadParameter("a recording, or --sim / --plan / --plan-file, not both", param_hint="RECORDING")
     if recording is not None:
         scene = scene_or_exit(scene_name) if scene_name else _recorded(recording)
         return run_identify(scene, recording, opts, console=console)
     if scene_name is None:
-        raise typer.BadParameter("--sim and --plan-file need --scene", param_hint="--scene")
-    scene = scene_or_exit(scene_name)
+        raise typer.BadParameter("--sim, --plan and --plan-file need --scene", param_hint="--scene")
+    scene = scene_or_exit(scene_name, device_overrides, rig)
     if plan_file is not None:
         return write_plan(scene, plan_file, duration, seed, console)
+    arm = next((d for d in scene.devices if role_of(d.kind) == "arm"), None)
+    if plan and arm is not None and moves_on_goals(arm.kind):  # the plan streamed through its protocol
+        return run_identify(scene, None, opts, sim=sim, duration=duration, seed=seed, reality=reality,
+                            console=console, drive=True)
+    if not sim:
+        raise typer.BadParameter(f"--plan without --sim drives an arm that takes goal positions (DYNAMIXEL); "
+                                 f"{arm.kind if arm else 'no arm'} here: write it with --plan-file for the "
+                                 "controller", param_hint="--plan")
     return run_identify(scene, None, opts, sim=True, scenario=scenario or ("excitation" if plan else "sweep"),
                         duration=duration, seed=seed, reality=reality, console=console)
 

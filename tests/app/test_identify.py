@@ -2,6 +2,9 @@
 written into the calibration file on top of what it had, and the planned excitation within its limits."""
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -105,3 +108,23 @@ def test_repeated_time_stamps_are_dropped_not_divided_by():
     assert all(np.all(np.diff(s.t) > 0) for s in segments)
     cal, fit = identify(SCENE, segments, None, "stamped.mcap")
     assert np.all(np.isfinite(fit.residual_rms)) and cal.identification is not None
+
+
+def test_the_plan_is_driven_through_a_dynamixel_arms_protocol(tmp_path):
+    """``ftc identify --plan`` on an arm that takes goal positions streams the plan to it through its
+    protocol (the emulated servos here, the world only physics behind them) while the monitor pairs the
+    frames; an arm that takes none (UR RTDE receive) is told to play the written plan instead."""
+    out = tmp_path / "dxl.toml"
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "identify", "--scene", "dxl-arm", "--sim", "--plan",
+                           "--duration", "15", "--reality", "ideal", "--out", str(out)],
+                          capture_output=True, text=True, timeout=240)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode in (0, 4), text[-3000:]  # a 15 s plan leaves parameters untold: 4 is honest
+    assert "through the arm's protocol" in text, text[-3000:]
+    seconds = float(re.search(r"free motion: ([0-9.]+) s", text).group(1))
+    assert seconds >= 10.0, text[-3000:]
+    cal = load_calibration(out, scene=SCENE)
+    assert "driven through the arm's protocol" in cal.identification.source
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "identify", "--scene", "ur5e", "--plan"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "--plan-file" in proc.stdout + proc.stderr
