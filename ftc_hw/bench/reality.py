@@ -93,9 +93,11 @@ def run_job(job: Job) -> dict[str, Any]:
 def _mesh_shell(scene: Scene, world: Scene) -> MeshShell | None:
     """The world's mesh shell (its vendor meshes, or a user's mesh links), for localizing on it: the
     solver's line of action followed into the meshes, measured beside the fitted primitives."""
+    if scene.robot.couplings:  # a scene joint that drives several model joints: no one qpos per joint
+        return None
     m = compile_true_arm(world, true_arm_spec(world))
-    shell = MeshShell(m, [int(m.joint(j).qposadr[0]) for j in scene.robot.joints if m.joint(j).qposadr.size])
-    return shell if shell.meshes and not scene.robot.couplings else None
+    shell = MeshShell(m, [int(m.joint(j).qposadr[0]) for j in scene.robot.joints])
+    return shell if shell.meshes else None
 
 
 def _run(scene: Scene, rec: Recording, kwargs: dict[str, Any], shell: MeshShell | None = None) -> dict[str, Any]:
@@ -198,6 +200,7 @@ def _pct(values, q: float) -> float:
 FIGURES = ("residual_rms_N", "residual_rms_Nm", "statistic_p99_over_threshold", "false_alarms_per_min",
            "delay_ms_median", "delay_ms_p95", "pos_err_mm_median", "pos_err_mm_p95", "coverage95", "link_right",
            "flagged_share", "pos_err_mm_median_mesh", "pos_err_mm_p95_mesh")
+COUNTS = ("false_alarms", "free_minutes", "contacts_over_10N", "detected_over_10N", "mesh_misses", "estimates")
 WORSE_HIGH = {"coverage95": False, "link_right": False}  # for these, the worst draw is the lowest
 
 
@@ -234,7 +237,7 @@ def run(json_path: Path | None = None, plot_path: Path | None = None, scenes: li
             outs[k] = fut.result()
             j = jobs[k]
             table_console().print(f"[{done}/{len(jobs)}] {j.scene} {j.column.name} draw {j.draw}: "
-                                  + json.dumps({n: outs[k][n] for n in FIGURES if n in outs[k]}))
+                                  + json.dumps({n: outs[k][n] for n in FIGURES + COUNTS if n in outs[k]}))
     results: dict[str, Any] = {}
     for s in names:
         results[s] = {c.name: _combine([o for j, o in zip(jobs, outs, strict=True)
