@@ -40,12 +40,13 @@ def test_a_users_urdf_with_mesh_links_calibrates_monitors_and_identifies(tmp_pat
     proc = ftc("monitor", "--scene", str(scene_path), "--sim", "--scenario", "sweep-with-collision", "--duration",
                "14", "--record", str(rec), "--events", str(events), "--truth", str(truth),
                "--no-view")
-    clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
+    loaded = clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
     lines = read_events(events)
     ev = evaluate(lines, read_truth(truth), 1.0 / scene.sensor.rate_hz)
     report = proc.stdout[-3000:]
-    # what tests/app/test_monitor_sim.py asks of the built-in scenes, on the meshes' world
-    assert len(ev.contacts) == 3 and ev.all_in_time, report
+    # what tests/app/test_monitor_sim.py asks of the built-in scenes, on the meshes' world; the onsets'
+    # 3 ms only when the monitor kept up (a run its host left behind says so: exit 3, its load reasons)
+    assert len(ev.contacts) == 3 and (ev.all_in_time or loaded), report
     assert ev.false_alarms == [] and ev.splits == 0, report
     for c in ev.contacts:
         assert c.link_right >= 0.8 and c.est_link == c.link and c.trusted >= 5, report
