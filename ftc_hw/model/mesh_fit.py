@@ -156,7 +156,7 @@ def _axial_boxes(m: mujoco.MjModel, names: list[str]):
         mesh = int(m.geom_dataid[g])
         vert = m.mesh_vert[int(m.mesh_vertadr[mesh]):int(m.mesh_vertadr[mesh]) + int(m.mesh_vertnum[mesh])]
         lo, hi = vert.min(axis=0).astype(float), vert.max(axis=0).astype(float)
-        half, pos = (hi - lo) / 2, m.geom_pos[g] + _rot(m.geom_quat[g]) @ ((hi + lo) / 2)
+        half, pos = (hi - lo) / 2, m.geom_pos[g] + quat_matrix(m.geom_quat[g]) @ ((hi + lo) / 2)
         for axis, turn in _AXES.items():  # turn: the geom's z onto this principal axis
             quat = np.empty(4)
             mujoco.mju_mulQuat(quat, m.geom_quat[g], turn)
@@ -184,17 +184,18 @@ def _mesh_samples(m: mujoco.MjModel, names: list[str]) -> list[np.ndarray]:
         u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
         t = tri[pick]
         local = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
-        out.append(local @ _rot(m.geom_quat[g]).T + m.geom_pos[g])  # the mesh's frame is the geom's
+        out.append(local @ quat_matrix(m.geom_quat[g]).T + m.geom_pos[g])  # the mesh's frame is the geom's
     return out
 
 
 def _distances(kind: str, size: np.ndarray, pos: np.ndarray, quat: np.ndarray, points: np.ndarray) -> np.ndarray:
-    rot = _rot(quat)
+    rot = quat_matrix(quat)
     local = (points - pos) @ rot
     return np.linalg.norm(project(kind, size, local) - local, axis=1)
 
 
-def _rot(quat: np.ndarray) -> np.ndarray:
+def quat_matrix(quat) -> np.ndarray:
+    """The 3 x 3 rotation of a MuJoCo quaternion (w, x, y, z)."""
     r = np.empty(9)
     mujoco.mju_quat2Mat(r, np.asarray(quat, dtype=float))
     return r.reshape(3, 3)

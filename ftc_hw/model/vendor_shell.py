@@ -13,7 +13,8 @@ import numpy as np
 
 from ..scene import Scene, SceneError
 from ..scene.vendor import VENDOR_SHELLS, shell_model
-from .mesh_fit import SURFACE_GROUP
+from .arm import pose
+from .mesh_fit import SURFACE_GROUP, quat_matrix
 
 _MESH = mujoco.mjtGeom.mjGEOM_MESH
 _OFF_GROUP = 3  # where a replaced primitive goes: out of the surface
@@ -66,10 +67,5 @@ def _zero_pose_bodies(spec: mujoco.MjSpec, strip_meshes: bool) -> dict[str, np.n
 
 
 def _pose(pos, quat) -> np.ndarray:
-    out = np.eye(4)
-    r = np.empty(9)
-    mujoco.mju_quat2Mat(r, np.asarray(quat, dtype=float))
-    out[:3, :3] = r.reshape(3, 3)
-    out[:3, 3] = pos
-    return out
+    return pose(quat_matrix(quat), np.asarray(pos, dtype=float))
 

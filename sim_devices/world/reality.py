@@ -73,7 +73,8 @@ def with_reality(scene: Scene, reality: Reality | str, seed: int = 0,
         return scene
     tol = TOLERANCES[reality]
     rng = np.random.default_rng([seed, 21_000 + list(Reality).index(reality)])
-    drawn = _draw(scene, tol, rng)  # every difference drawn, so a subset keeps the same values
+    arm = _moving_bodies_and_shells(scene)  # the true arm compiled once for the draw and the shell
+    drawn = _draw(scene, tol, rng, arm)  # every difference drawn, so a subset keeps the same values
     base = scene.world
     keep = set(DIFFERENCES) if only is None else set(only)
     unknown = keep - set(DIFFERENCES)
@@ -83,18 +84,17 @@ def with_reality(scene: Scene, reality: Reality | str, seed: int = 0,
     for name in keep:
         changes.update(_compose(name, base, drawn))
     if "shell" in keep:
-        changes.update(_vendor_shell(scene, changes["shell_offsets"]))
+        changes.update(_vendor_shell(scene, changes["shell_offsets"], arm[1]))
     return dataclasses.replace(scene, world=dataclasses.replace(base, **changes))
 
 
-def _vendor_shell(scene: Scene, offsets: dict[str, float]) -> dict:
+def _vendor_shell(scene: Scene, offsets: dict[str, float], bodies_of: dict[str, str]) -> dict:
     """The scene's vendor meshes as the shell, where fetched (``ftc scenes meshes``): no drawn offset
     on the bodies they cover. Not fetched: the drawn offsets stay (``shell_source`` says which)."""
     name = scene.robot.vendor_shell
     if name is None or scene.world.vendor_shell is not None or not shell_fetched(name):
         return {}
     covered = set(VENDOR_SHELLS[name].bodies)
-    _, bodies_of = _moving_bodies_and_shells(scene)
     return {"vendor_shell": name, "shell_offsets": {g: v for g, v in offsets.items() if bodies_of[g] not in covered}}
 
 
@@ -109,14 +109,15 @@ def shell_source(scene: Scene) -> str:
     return "the model's primitives"
 
 
-def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator) -> WorldSpec:
+def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator,
+          arm: tuple[list[str], dict[str, str]]) -> WorldSpec:
     r, s, w = scene.robot, scene.sensor, scene.world
     n = scene.n_joints
     coulomb = r.friction_coulomb if w.friction_coulomb is None else w.friction_coulomb
     viscous = r.friction_viscous if w.friction_viscous is None else w.friction_viscous
     stribeck = np.zeros(n) if w.friction_stribeck is None else w.friction_stribeck
     kt = r.torque_constant if w.torque_constant is None else w.torque_constant
-    bodies, geoms = _moving_bodies_and_shells(scene)
+    bodies, geoms = arm
     inertials = {b: InertialError(1.0 + rng.uniform(-tol.mass_rel, tol.mass_rel),
                                   rng.uniform(-tol.com_m, tol.com_m, 3),
                                   1.0 + rng.uniform(-tol.inertia_rel, tol.inertia_rel)) for b in bodies}
