@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .arm_gravity import ArmGravityBasis
-from .regressor import PARAMS, GeometryModel, PoseGeometry, predict
+from .regressor import N_CORE, PARAMS, GeometryModel, PoseGeometry, arm_param_rows, core_rows, predict
 from .samples import PoseSample
 
 HUBER_K = 1.345
@@ -127,12 +127,18 @@ class Identifier:
         return predict(g, theta, self.gm.gravity, self.gm.sign, yaw, tilt, delta)
 
     def jacobian(self, g: PoseGeometry, p: np.ndarray) -> np.ndarray:
+        """Exact in the 10 core parameters and the arm-gravity terms (the reading is linear in them);
+        central differences in the mount yaw and the gravity tilt."""
+        _, yaw, tilt, _ = self._split(p)
         out = np.empty((6, len(p)))
-        for j in range(len(p)):
-            h = 1e-6 if j >= 10 else 1e-3  # linear in the core parameters: any step is exact
+        out[:, :N_CORE] = core_rows(g, self.gm.gravity, self.gm.sign, yaw, tilt)
+        n_arm = self.basis.v.shape[1] if self.basis is not None else 0
+        if n_arm:  # linear in the link corrections too, through the basis
+            out[:, len(p) - n_arm:] = arm_param_rows(g, self.gm.gravity, self.gm.sign, yaw, tilt) @ self.basis.v
+        for j in range(N_CORE, len(p) - n_arm):
             dp = np.zeros(len(p))
-            dp[j] = h
-            out[:, j] = (self.model(g, p + dp) - self.model(g, p - dp)) / (2 * h)
+            dp[j] = 1e-6
+            out[:, j] = (self.model(g, p + dp) - self.model(g, p - dp)) / 2e-6
         return out
 
     def pose_cov(self, g: PoseGeometry, p: np.ndarray, n: int) -> np.ndarray:

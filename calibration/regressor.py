@@ -96,16 +96,19 @@ def tilt_rotation(tilt) -> np.ndarray:
     return np.eye(3) + np.sin(a) * kx + (1 - np.cos(a)) * kx @ kx
 
 
-def core_rows(g: PoseGeometry, gravity: np.ndarray, sign: float) -> np.ndarray:
-    """The 6 x 10 regressor of one pose: reading - arm's own load = rows @ theta."""
-    rs = g.base_R_sensor
+def core_rows(g: PoseGeometry, gravity: np.ndarray, sign: float, yaw: float = 0.0,
+              tilt=(0.0, 0.0)) -> np.ndarray:
+    """The 6 x 10 regressor of one pose: reading - arm's own load = rows @ theta (the reading is linear
+    in theta: also :func:`predict`'s exact derivative in theta at that mount yaw and gravity tilt)."""
+    grav = tilt_rotation(tilt) @ gravity
+    rm = g.base_R_sensor @ rot_z(yaw)
     a = np.zeros((6, N_CORE))
     a[:, :6] = np.eye(6)
-    a[:3, 6] = sign * (rs.T @ -gravity)
-    a[3:, 6] = sign * (rs.T @ -np.cross(g.base_p_flange - g.base_p_sensor, gravity))
+    a[:3, 6] = sign * (rm.T @ -grav)
+    a[3:, 6] = sign * (rm.T @ -np.cross(g.base_p_flange - g.base_p_sensor, grav))
     # -(R_f h) x g = g x (R_f h) = [g]x R_f h
-    gx = np.array([[0, -gravity[2], gravity[1]], [gravity[2], 0, -gravity[0]], [-gravity[1], gravity[0], 0]])
-    a[3:, 7:10] = sign * (rs.T @ gx @ g.base_R_flange)
+    gx = np.array([[0, -grav[2], grav[1]], [grav[2], 0, -grav[0]], [-grav[1], grav[0], 0]])
+    a[3:, 7:10] = sign * (rm.T @ gx @ g.base_R_flange)
     return a
 
 
@@ -116,16 +119,19 @@ def arm_load(g: PoseGeometry, gravity: np.ndarray, sign: float) -> np.ndarray:
     return sign * np.concatenate([rs.T @ -w, rs.T @ -np.cross(g.arm_com - g.base_p_sensor, w)])
 
 
-def arm_param_rows(g: PoseGeometry, gravity: np.ndarray, sign: float) -> np.ndarray:
-    """6 x 4k: d(reading)/d(link mass, link first moment in the link frame) for each body beyond the sensor."""
-    rs = g.base_R_sensor
+def arm_param_rows(g: PoseGeometry, gravity: np.ndarray, sign: float, yaw: float = 0.0,
+                   tilt=(0.0, 0.0)) -> np.ndarray:
+    """6 x 4k: d(reading)/d(link mass, link first moment in the link frame) for each body beyond the
+    sensor (the reading is linear in them: :func:`predict`'s exact derivative at that yaw and tilt)."""
+    grav = tilt_rotation(tilt) @ gravity
+    rm = g.base_R_sensor @ rot_z(yaw)
     k = len(g.link_p)
     out = np.zeros((6, 4 * k))
-    gx = np.array([[0, -gravity[2], gravity[1]], [gravity[2], 0, -gravity[0]], [-gravity[1], gravity[0], 0]])
+    gx = np.array([[0, -grav[2], grav[1]], [grav[2], 0, -grav[0]], [-grav[1], grav[0], 0]])
     for i in range(k):
-        out[:3, 4 * i] = sign * (rs.T @ -gravity)
-        out[3:, 4 * i] = sign * (rs.T @ -np.cross(g.link_p[i] - g.base_p_sensor, gravity))
-        out[3:, 4 * i + 1:4 * i + 4] = sign * (rs.T @ gx @ g.link_R[i])
+        out[:3, 4 * i] = sign * (rm.T @ -grav)
+        out[3:, 4 * i] = sign * (rm.T @ -np.cross(g.link_p[i] - g.base_p_sensor, grav))
+        out[3:, 4 * i + 1:4 * i + 4] = sign * (rm.T @ gx @ g.link_R[i])
     return out
 
 
