@@ -19,6 +19,7 @@ difference at a time, what each costs without identification (``only:<difference
 """
 from __future__ import annotations
 
+import fnmatch
 import json
 import math
 import os
@@ -59,6 +60,18 @@ MAIN_COLUMNS = (Column("ideal", "ideal"), Column("typical", "typical"),
                 Column("typical+id", "typical", "excitation"), Column("harsh+id", "harsh", "excitation"),
                 Column("typical+id-sweep", "typical", "sweep"))
 COST_COLUMNS = tuple(Column(f"only:{d}", "typical", only=d) for d in DIFFERENCES)
+ALL_COLUMNS = MAIN_COLUMNS + COST_COLUMNS
+
+
+def select_columns(columns: tuple[Column, ...], patterns: list[str] | None) -> tuple[Column, ...]:
+    """The columns whose names match one of ``patterns`` (shell globs, e.g. ``only:*``), in table order."""
+    if not patterns:
+        return columns
+    unknown = [p for p in patterns if not any(fnmatch.fnmatchcase(c.name, p) for c in columns)]
+    if unknown:
+        raise ValueError(f"no column matches {', '.join(unknown)}: the columns are "
+                         f"{', '.join(c.name for c in columns)}")
+    return tuple(c for c in columns if any(fnmatch.fnmatchcase(c.name, p) for p in patterns))
 
 
 @dataclass(frozen=True)
@@ -224,8 +237,8 @@ def _combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
 
 def run(json_path: Path | None = None, plot_path: Path | None = None, scenes: list[str] | None = None,
         draws: int = 5, free_minutes: float = 2.0, contact_minutes: float = 1.0, identify_minutes: float = 2.0,
-        costs: bool = True, workers: int | None = None) -> dict[str, Any]:
-    columns = MAIN_COLUMNS + (COST_COLUMNS if costs else ())
+        costs: bool = True, workers: int | None = None, only_columns: list[str] | None = None) -> dict[str, Any]:
+    columns = select_columns(MAIN_COLUMNS + (COST_COLUMNS if costs else ()), only_columns)
     names = scenes or builtin_names()
     jobs = [Job(s, c, d, free_minutes * 60, contact_minutes * 60, identify_minutes * 60)
             for s in names for c in columns for d in range(draws if c.reality != "ideal" else 1)]
@@ -288,7 +301,7 @@ def _plot(results: dict[str, Any], names: list[str], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # lazy: matplotlib only for --plot
 
-    cols = [c.name for c in MAIN_COLUMNS]
+    cols = results["meta"]["columns"]
     fig, axes = plt.subplots(1, 3, figsize=(13, 4))
     for ax, key, label in zip(axes, ("false_alarms_per_min", "pos_err_mm_median", "coverage95"),
                               ("false alarms / min", "position error, median (mm)", "95 % coverage"), strict=True):

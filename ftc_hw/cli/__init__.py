@@ -280,12 +280,19 @@ def bench_reality(
     identify_minutes: Annotated[float, typer.Option(min=0.2, help="Minutes of motion identification uses.")] = 2.0,
     costs: Annotated[bool, typer.Option("--costs/--no-costs", help="Also each difference on its own.")] = True,
     workers: Annotated[Optional[int], typer.Option(min=1, help="Processes (default: one per CPU).")] = None,  # noqa: UP045
+    column: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        help="Only the columns matching this name or glob (repeatable), e.g. ideal, 'only:*'.")] = None,
 ) -> None:
     """Reality gap: ideal, typical and harsh worlds, with and without identification, and each difference's cost."""
-    from ftc_hw.bench.reality import run  # lazy: CLI start-up
+    from ftc_hw.bench.reality import ALL_COLUMNS, run, select_columns  # lazy: CLI start-up
 
+    try:
+        select_columns(ALL_COLUMNS, column)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--column") from exc
     run(json_path=json_path, plot_path=plot, scenes=scene, draws=draws, free_minutes=free_minutes,
-        contact_minutes=contact_minutes, identify_minutes=identify_minutes, costs=costs, workers=workers)
+        contact_minutes=contact_minutes, identify_minutes=identify_minutes, costs=costs, workers=workers,
+        only_columns=column)
 
 
 @bench_app.command("isolation")

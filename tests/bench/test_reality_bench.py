@@ -3,8 +3,10 @@ the contacts above 10 N only, errors and coverage over the unflagged events, the
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from ftc_hw.bench.reality import _combine, _summarize
+from ftc_hw.bench.reality import ALL_COLUMNS, _combine, _summarize, select_columns
+from ftc_hw.sim_devices.world import DIFFERENCES
 
 
 def _run(onsets, points, contact_spans=((1.0, 1.3, 30.0), (2.0, 2.3, 5.0))):
@@ -36,3 +38,11 @@ def test_summary_counts_what_the_issue_asks():
     c = _combine([s, worse])
     assert c["coverage95_worst"] == 0.2 and c["pos_err_mm_median_worst"] == 9.0 and c["draws"] == 2
     assert c["false_alarms"] == 4 and abs(c["false_alarms_per_min"] - 4 / (2 * s["free_minutes"])) < 1e-12
+
+
+def test_columns_are_chosen_by_name_or_glob_and_an_unknown_one_is_named():
+    assert [c.name for c in select_columns(ALL_COLUMNS, ["ideal", "only:*"])] == (
+        ["ideal"] + [f"only:{d}" for d in DIFFERENCES])
+    assert select_columns(ALL_COLUMNS, None) == ALL_COLUMNS
+    with pytest.raises(ValueError, match="no column matches only:nothing, typo: the columns are ideal"):
+        select_columns(ALL_COLUMNS, ["typical", "only:nothing", "typo"])
