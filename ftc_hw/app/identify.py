@@ -35,6 +35,7 @@ from ftc_hw.calibration.file import (
 )
 from ftc_hw.calibration.free_motion import FreeMotionFit, FreeMotionIdentifier, IdentificationError, MotionData
 from ftc_hw.calibration.joint_friction import JointFit, fit_joint_friction
+from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.reader import Recording, RecordingError, read_recording
@@ -213,6 +214,23 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
                                                                  cal.identification.joints.items()}}
         opts.json_path.write_text(json.dumps(figures, indent=2))
     return 0 if fit.verdict == "good" else 4
+
+
+def run_planned_identify(scene: Scene, opts: IdentifyOptions, *, sim: bool, duration: float, seed: int,
+                         reality: str, console: Console | None = None) -> int:
+    """The planned excitation: streamed as goals where the arm's protocol takes them (DYNAMIXEL; emulated
+    with ``sim``), else played by the emulated world (``sim``); raises ``SessionError`` for a real arm that
+    takes no goals (its controller plays ``ftc identify --plan-file``)."""
+    arm = next((d for d in scene.devices if role_of(d.kind) == "arm"), None)
+    if arm is not None and moves_on_goals(arm.kind):
+        return run_identify(scene, None, opts, sim=sim, duration=duration, seed=seed, reality=reality,
+                            console=console, drive=True)
+    if not sim:
+        raise SessionError(f"the planned excitation is driven only on an arm that takes goal positions "
+                           f"(DYNAMIXEL); {arm.kind if arm else 'no arm'} here: write it with --plan-file for "
+                           "the controller")
+    return run_identify(scene, None, opts, sim=True, scenario="excitation", duration=duration, seed=seed,
+                        reality=reality, console=console)
 
 
 def _driven(scene: Scene, duration: float, seed: int, sim: bool, reality: str,

@@ -155,13 +155,18 @@ def demo(
     duration: Annotated[float, typer.Option(min=1.0, help="Simulated seconds (real time) of live view.")] = 30.0,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     record: Annotated[Optional[Path], typer.Option(help="Also record the run to this MCAP file.")] = None,  # noqa: UP045
-    reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal)] = RealityChoice.ideal,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.typical)] = RealityChoice.typical,
+    identify_seconds: Annotated[float, typer.Option(
+        min=0.0, help="In a typical or harsh world: seconds of planned excitation the drawn arm is identified from "
+                      "first (ftc identify --sim --plan); 0 monitors it with the nominal model.")] = 30.0,
 ) -> None:
     """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
+    if 0 < identify_seconds < 5:
+        raise typer.BadParameter("0 (no identification) or at least 5", param_hint="--identify-seconds")
     typer.echo(LOADING, err=True)
     from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
 
-    raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value))
+    raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value, identify_seconds))
 
 
 @app.command()

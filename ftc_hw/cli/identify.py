@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from ftc_hw.app.identify import IdentifyOptions, run_identify
+from ftc_hw.app.calibration_session import SessionError
+from ftc_hw.app.identify import IdentifyOptions, run_identify, run_planned_identify
 from ftc_hw.app.view import make_console
 from ftc_hw.calibration.excitation import plan_excitation
-from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.replay import ReplayError, recorded_scene
 
@@ -34,16 +34,14 @@ def run_identify_command(recording: Path | None, scene_name: str | None, *, sim:
     scene = scene_or_exit(scene_name, device_overrides, rig)
     if plan_file is not None:
         return write_plan(scene, plan_file, duration, seed, console)
-    arm = next((d for d in scene.devices if role_of(d.kind) == "arm"), None)
-    if plan and arm is not None and moves_on_goals(arm.kind):  # the plan streamed through its protocol
-        return run_identify(scene, None, opts, sim=sim, duration=duration, seed=seed, reality=reality,
-                            console=console, drive=True)
-    if not sim:
-        raise typer.BadParameter(f"--plan without --sim drives an arm that takes goal positions (DYNAMIXEL); "
-                                 f"{arm.kind if arm else 'no arm'} here: write it with --plan-file for the "
-                                 "controller", param_hint="--plan")
-    return run_identify(scene, None, opts, sim=True, scenario=scenario or ("excitation" if plan else "sweep"),
-                        duration=duration, seed=seed, reality=reality, console=console)
+    if plan:
+        try:
+            return run_planned_identify(scene, opts, sim=sim, duration=duration, seed=seed, reality=reality,
+                                        console=console)
+        except SessionError as exc:
+            raise typer.BadParameter(str(exc), param_hint="--plan") from None
+    return run_identify(scene, None, opts, sim=True, scenario=scenario or "sweep", duration=duration, seed=seed,
+                        reality=reality, console=console)
 
 
 def _recorded(path: Path):
