@@ -102,8 +102,13 @@ def test_unplug_and_replug_of_the_pty(ft_sim, wrench_of):
     seqs = [f.seq for f in frames]
     unplugged = set(stats["damaged"])
     assert len(unplugged) == stats["faults"]["unplugged"] >= 250
-    # besides the unplugged time, only what the device sent before the host had reopened the port
-    late = sorted(set(range(seqs[0], seqs[-1] + 1)) - set(seqs) - unplugged)
+    # besides the unplugged time, only what the device sent before the host had reopened the port, and
+    # what was still in the pty's buffer, unread, when it was unplugged (a reader a few ms behind on a
+    # loaded host: a real unplug loses that too)
+    lost = sorted(set(range(seqs[0], seqs[-1] + 1)) - set(seqs) - unplugged)
+    before = [s for s in lost if s < min(unplugged)]
+    late = [s for s in lost if s > max(unplugged)]
+    assert before == list(range(min(unplugged) - len(before), min(unplugged))) and len(before) < 50, before
     assert late == list(range(max(unplugged) + 1, max(unplugged) + 1 + len(late))) and len(late) < 400
 
 
