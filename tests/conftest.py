@@ -12,6 +12,20 @@ from ftc_hw.model import ArmModel
 from ftc_hw.scene import Scene, load_scene
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
 
+# Tests whose worlds, emulators or streams run against the wall clock: ./run-tests runs them one at a
+# time, after the others (which it runs on every core: they compute, nothing in them is timed).
+REALTIME_DIRS = {"app", "devices", "sim", "cli", "record"}
+REALTIME_MODULES = {"test_bus_remote.py", "test_monitor.py", "test_stream_loss.py", "test_pipeline_events.py"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        path = Path(str(item.fspath))
+        if (path.parent.name in REALTIME_DIRS or path.name in REALTIME_MODULES
+                or "world_feeder" in getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.realtime)
+
+
 SCENE = """schema = 1
 name = "{name}"
 [robot]
