@@ -110,9 +110,11 @@ def _sample_at_us(n_frames: int = 10_000, rate_hz: float = 500.0, calls: int = 2
 
 
 def run(
-    json_path: Path | None = None, frames: int = 200_000, *, repeat: int = 3, quiet: bool = False
+    json_path: Path | None = None, frames: int = 200_000, *, repeat: int = 3, quiet: bool = False,
+    transport: str = "inproc",
 ) -> dict:
-    """Run the benchmark, print a table (unless ``quiet``), write JSON if ``json_path``; return the dict."""
+    """Run the benchmark, print a table (unless ``quiet``), write JSON if ``json_path``; return the dict.
+    ``transport="zenoh"`` adds the bus between processes (:mod:`ftc_hw.bench.bus_remote`)."""
     fr = _wrench_frames(frames)
 
     def median_of(fn: Any, *args: Any) -> float:
@@ -133,6 +135,10 @@ def run(
         "machine": f"{platform.machine()} {platform.system()} {platform.release()}, {os.cpu_count()} CPU",
         "numpy": np.__version__,
     }
+    if transport == "zenoh":
+        from ftc_hw.bench.bus_remote import measure  # lazy: spawns processes, loads Zenoh
+
+        result["zenoh"] = measure(frames=min(frames, 100_000))
     if not quiet:
         _print(result)
     if json_path is not None:
@@ -150,6 +156,13 @@ def _print(result: dict) -> None:
         table.add_row(f"publish->deliver, {key.replace('_', ' ')}", f"{fps:,.0f} frames/s")
     table.add_row("sample_at median", f"{result['sample_at_us']['median']:.1f} us")
     table.add_row("sample_at p99", f"{result['sample_at_us']['p99']:.1f} us")
+    for n, r in result.get("zenoh", {}).items():
+        t, lat = r["throughput"], r["latency"]
+        table.add_row(f"zenoh, 2 processes, {n.replace('_', ' ')}, flat out",
+                      f"{t['frames_per_s']:,.0f} frames/s ({t['received_min']:,} of {t['frames']:,} delivered)")
+        table.add_row(f"zenoh, {n.replace('_', ' ')}, publish->deliver at 1 kHz",
+                      f"median {lat['latency_us']['median']:.0f} us, p99 {lat['latency_us']['p99']:.0f} us, "
+                      f"max {lat['latency_us']['max']:.0f} us ({lat['received_min']:,} of {lat['frames']:,})")
     table.add_row("python", result["python"])
     table.add_row("machine", result["machine"])
     Console(file=sys.stdout).print(table)

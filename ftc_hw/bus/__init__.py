@@ -4,7 +4,7 @@ Topics: ``wrench/<source>``, ``joints/<source>``, ``events/contact``, ``events/d
 :mod:`ftc_hw.bus.bus`). Times are host ``time.monotonic_ns()`` unless named ``t_device_ns``.
 """
 
-from .bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, StaleDataError, joints_topic, wrench_topic
+from .bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, StaleDataError, frame_topic, joints_topic, wrench_topic
 from .clock import ClockAligner, ClockNotReadyError
 from .frames import (
     CONTACT_KINDS,
@@ -35,6 +35,7 @@ __all__ = [
     "ClockAligner",
     "ClockNotReadyError",
     "ContactEvent",
+    "frame_topic",
     "ContactKind",
     "DeviceEvent",
     "DeviceEventKind",

@@ -38,13 +38,13 @@ from itertools import islice
 from operator import attrgetter
 from typing import Any, Literal
 
-from .frames import DeviceEvent, Frame, JointFrame, WrenchFrame
+from .frames import ContactEvent, DeviceEvent, Frame, JointFrame, WrenchFrame
 from .sampling import hold as _hold
 from .sampling import interpolate as _interpolate
 from .stats import StatsSnapshot, StreamStats
 from .subscription import Subscription
 
-__all__ = ["EVENTS_CONTACT", "EVENTS_DEVICE", "Bus", "StaleDataError", "joints_topic", "wrench_topic"]
+__all__ = ["EVENTS_CONTACT", "EVENTS_DEVICE", "Bus", "StaleDataError", "frame_topic", "joints_topic", "wrench_topic"]
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +70,19 @@ def wrench_topic(source: str) -> str:
 def joints_topic(source: str) -> str:
     """``"joints/<source>"``."""
     return f"joints/{source}"
+
+
+def frame_topic(frame: Any) -> str | None:
+    """The topic a bus frame is published on (the conventions above), None for another object."""
+    if isinstance(frame, WrenchFrame):
+        return wrench_topic(frame.source)
+    if isinstance(frame, JointFrame):
+        return joints_topic(frame.source)
+    if isinstance(frame, ContactEvent):
+        return EVENTS_CONTACT
+    if isinstance(frame, DeviceEvent):
+        return EVENTS_DEVICE
+    return None
 
 
 class StaleDataError(LookupError):

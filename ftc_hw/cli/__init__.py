@@ -46,6 +46,11 @@ class RealityChoice(StrEnum):
     harsh = "harsh"
 
 
+class BusTransport(StrEnum):
+    inproc = "inproc"
+    zenoh = "zenoh"
+
+
 def reality_option(default: RealityChoice, what: str = "") -> Any:
     return typer.Option(help=f"{what}The simulated world: ideal (the model itself), typical or harsh (seeded draws "
                              "of a real arm's, sensor's and shell's differences from the model; docs/reality.md).")
@@ -141,11 +146,14 @@ def solve(
 def bench_bus(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
     frames: Annotated[int, typer.Option(min=1000, help="Frames per throughput run.")] = 200_000,
+    transport: Annotated[BusTransport, typer.Option(help="inproc: one process; zenoh: also between processes "
+                                                   "on Zenoh (1 and 4 subscriber processes, loopback).")]
+    = BusTransport.inproc,
 ) -> None:
     """Bus throughput (publish to deliver, 1 and 4 subscribers) and sample_at latency."""
     from ftc_hw.bench.bus import run  # lazy: CLI start-up
 
-    run(json_path=json_path, frames=frames)
+    run(json_path=json_path, frames=frames, transport=transport.value)
 
 
 @app.command()
@@ -375,6 +383,33 @@ def identify(
     raise typer.Exit(run_identify_command(recording, scene, sim=sim, plan=plan, plan_file=plan_file,
                                           scenario=scenario, duration=duration, seed=seed, reality=reality.value,
                                           opts=opts, device_overrides=tuple(device or ()), rig=rig))
+
+
+@app.command()
+def serve(
+    scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
+    device: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        "--device", metavar="NAME | NAME.KEY=VALUE", help="A device to serve (repeatable; default: every device "
+        "of the scene), or where a device is / one of its params, as for ftc monitor.")] = None,
+    rig: RigOption = None,
+    listen: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        help="Zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:7447, loopback only).")] = None,
+    name: Annotated[Optional[str], typer.Option(  # noqa: UP045
+        help="The rig's name in the key expressions ftc/NAME/... (default: the scene's name).")] = None,
+    sim: Annotated[bool, typer.Option("--sim", help="Start the scene's world and emulated devices first.")] = False,
+    scenario: Annotated[str, typer.Option(help="With --sim: the scenario.")] = "sweep-with-collision",
+    seed: Annotated[int, typer.Option(help="With --sim: the world's seed.")] = 0,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
+    hold: Annotated[float, typer.Option(min=0.0, help="With --sim: seconds at the start pose before the scenario "
+                                        "plays (a monitor connecting then tares at rest).")] = 2.0,
+    duration: Annotated[Optional[float], typer.Option(  # noqa: UP045
+        min=0.1, help="Seconds to serve (with --sim: of the scenario); default until Ctrl-C.")] = None,
+) -> None:
+    """Each device's reader in its own process, supervised (restarted when it dies), publishing to Zenoh."""
+    from ftc_hw.cli.serve import run_serve_command  # lazy: CLI start-up
+
+    raise typer.Exit(run_serve_command(scene, tuple(device or ()), rig, tuple(listen or ()), name, sim, scenario,
+                                       seed, reality.value, hold, duration))
 
 
 @app.command()

@@ -10,8 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.bus import ContactEvent, DeviceEvent, JointFrame, WrenchFrame, joints_topic, wrench_topic
-from ftc_hw.bus.bus import EVENTS_CONTACT, EVENTS_DEVICE
+from ftc_hw.bus import ContactEvent, DeviceEvent, JointFrame, WrenchFrame, frame_topic
 from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
 
 _INT = {"type": "integer"}
@@ -70,18 +69,8 @@ def _list(a) -> list[float]:
 
 
 def topic_of(frame: Any) -> str | None:
-    """The bus topic a frame is published on (the bus conventions), None for an unknown type."""
-    if isinstance(frame, WrenchFrame):
-        return wrench_topic(frame.source)
-    if isinstance(frame, JointFrame):
-        return joints_topic(frame.source)
-    if isinstance(frame, ContactEvent):
-        return EVENTS_CONTACT
-    if isinstance(frame, DeviceEvent):
-        return EVENTS_DEVICE
-    if isinstance(frame, PipelineInput):
-        return MONITOR_INPUT
-    return None
+    """The topic a frame is published on (the bus conventions), None for an unknown type."""
+    return MONITOR_INPUT if isinstance(frame, PipelineInput) else frame_topic(frame)
 
 
 def encode(frame: Any) -> tuple[str, bytes]:

@@ -1,0 +1,209 @@
+"""``ftc serve``: each of a scene's device readers in its own process, supervised, publishing to Zenoh.
+
+The serve process is a Zenoh router listening on ``listen`` (loopback unless the user names other
+endpoints); each reader process is a Zenoh client of it that opens one device's adapter on its own bus
+and forwards the bus to Zenoh (``ftc/<rig>/wrench/<device>``, ``joints/<device>``, ``events/device``:
+docs/bus.md). A reader's computing is its own: nothing another process does can make it miss a packet.
+
+Supervision: a reader process that exits (crashed, killed) is restarted, at once the first time and
+then with a backoff doubling to ``max_backoff_s`` while it keeps dying; each exit and restart is a
+``DeviceEvent`` on ``events/device`` (``error``, then ``reconnecting``), so every subscriber knows.
+Reader processes are forked from a fork server that has imported the adapters already (a restart
+takes tens of milliseconds, not the seconds of a fresh interpreter).
+
+With ``sim``, the scene's world and emulators run first, as ``ftc sim`` starts them, holding the
+scenario's start pose for ``hold_s`` after the readers' first frames (a monitor connecting then can tare
+at rest), then playing it.
+"""
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import signal
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
+from ftc_hw.bus.remote import RemotePublisher, open_session
+from ftc_hw.devices.registry import role_of
+from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
+
+from .rig import build_rig
+
+DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+_PRELOAD = ["numpy", "zenoh", "ftc_hw.bus.remote", "ftc_hw.devices.registry", "ftc_hw.app.rig",
+            "ftc_hw.scene"]
+
+
+class ServeError(RuntimeError):
+    """The devices cannot be served: no such device, an endpoint in use, a world that does not start."""
+
+
+@dataclass
+class ServeConfig:
+    scene: str
+    devices: tuple[str, ...] = ()  # device names (default: every device of the scene with an adapter)
+    rig: str | None = None  # the key chunk in ftc/<rig>/... (default: the scene's name)
+    listen: tuple[str, ...] = (DEFAULT_LISTEN,)
+    device_overrides: tuple[str, ...] = ()
+    rig_file: Path | None = None
+    sim: bool = False
+    scenario: str = "sweep-with-collision"
+    seed: int = 0
+    reality: str = "ideal"
+    hold_s: float = 2.0
+    duration: float | None = None  # seconds (with sim: of the scenario), None: until stopped
+    max_backoff_s: float = 5.0
+
+
+def reader_main(scene_ref: str, overrides: tuple[str, ...], rig_file: Path | None, device: str, rig: str,
+                router: str, endpoint: Any) -> None:
+    """One device's reader (a process): its adapter on a local bus, the bus forwarded to Zenoh, until
+    SIGTERM. Its adapter reconnects by itself; an exception ends the process (the supervisor restarts it)."""
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    scene = load_rig_scene(scene_ref, overrides, rig_file)
+    spec = next(d for d in scene.devices if d.name == device)
+    session = open_session(connect=[router], mode="client")
+    bus = Bus(history=2000)
+    with RemotePublisher(session, bus, rig):
+        the_rig = build_rig(scene, bus=bus, devices=[spec], endpoints={device: endpoint} if endpoint else None)
+        with the_rig.open():
+            while not stop.wait(0.2):
+                pass
+    session.close()
+
+
+@dataclass
+class _Child:
+    spec: DeviceSpec
+    proc: Any = None
+    started: float = 0.0
+    restarts: int = 0
+    backoff: float = 0.0
+    due: float | None = None  # when a dead reader is to be started again
+
+
+@dataclass
+class Supervisor:
+    """Starts a reader process per device and restarts the ones that exit, saying so on ``bus``."""
+
+    start: Callable[[DeviceSpec], Any]  # -> a started process (``pid``, ``exitcode``, ``is_alive``)
+    specs: Sequence[DeviceSpec]
+    bus: Bus
+    max_backoff_s: float = 5.0
+    stable_s: float = 10.0  # a reader that ran this long starts over with no backoff
+    children: dict[str, _Child] = field(default_factory=dict)
+
+    def start_all(self) -> None:
+        for spec in self.specs:
+            self.children[spec.name] = _Child(spec, self.start(spec), time.monotonic())
+
+    def poll(self) -> None:
+        """Restart what died (at its due time); call it often (every 10 ms or so)."""
+        now = time.monotonic()
+        for name, c in self.children.items():
+            if c.due is None and c.proc is not None and not c.proc.is_alive():
+                ran = now - c.started
+                c.backoff = 0.0 if ran >= self.stable_s else min(max(2 * c.backoff, 0.2), self.max_backoff_s)
+                c.due = now + (0.0 if c.restarts == 0 or ran >= self.stable_s else c.backoff)
+                self._say(name, "error", f"reader process of {name} (pid {c.proc.pid}) exited with code "
+                                         f"{c.proc.exitcode} after {ran:.1f} s; restarting in {c.due - now:.1f} s")
+            if c.due is not None and now >= c.due:
+                c.proc, c.started, c.due = self.start(c.spec), now, None
+                c.restarts += 1
+                self._say(name, "reconnecting", f"reader process of {name} restarted (pid {c.proc.pid}, restart "
+                                                f"{c.restarts})")
+
+    def _say(self, name: str, kind: str, message: str) -> None:
+        c = self.children[name]
+        self.bus.publish(EVENTS_DEVICE, DeviceEvent.make(time.monotonic_ns(), name, kind, message,  # type: ignore[arg-type]
+                                                         {"restarts": c.restarts}))
+
+    def stop_all(self, timeout: float = 3.0) -> None:
+        for c in self.children.values():
+            if c.proc is not None and c.proc.is_alive():
+                c.proc.terminate()
+        end = time.monotonic() + timeout
+        for c in self.children.values():
+            if c.proc is not None:
+                c.proc.join(max(0.0, end - time.monotonic()))
+                if c.proc.is_alive():
+                    c.proc.kill()
+
+
+def served_devices(scene: Scene, names: Sequence[str]) -> list[DeviceSpec]:
+    """The named devices (default: each with an adapter role); ServeError names an unknown one."""
+    known = {d.name: d for d in scene.devices}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ServeError(f"no device {', '.join(unknown)} in scene {scene.name} (it has "
+                         f"{', '.join(known) or 'none'})")
+    specs = [known[n] for n in names] if names else [d for d in scene.devices if role_of(d.kind) is not None]
+    if not specs:
+        raise ServeError(f"scene {scene.name} has no device with an adapter to serve")
+    return specs
+
+
+def run_serve(cfg: ServeConfig, say: Callable[[str], None] = print) -> int:
+    """Serve until ``cfg.duration`` is up or SIGINT/SIGTERM; 0 when every reader ran to the end."""
+    try:
+        scene = load_rig_scene(cfg.scene, cfg.device_overrides, cfg.rig_file)
+    except SceneError as exc:
+        raise ServeError(str(exc)) from None
+    specs = served_devices(scene, cfg.devices)
+    rig = cfg.rig or scene.name
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(_PRELOAD)
+    stop = threading.Event()
+    with contextlib.ExitStack() as stack:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: stop.set())
+        world = _start_world(cfg, scene, stack, say) if cfg.sim else None
+        endpoints = world.endpoints if world is not None else {}
+        session = stack.enter_context(contextlib.closing(open_session(listen=list(cfg.listen), mode="router")))
+        bus = Bus(history=1000)
+        stack.enter_context(RemotePublisher(session, bus, rig, prefixes=(EVENTS_DEVICE,)))
+
+        def start(spec: DeviceSpec) -> Any:
+            p = ctx.Process(target=reader_main, name=f"ftc-reader-{spec.name}", daemon=True,
+                            args=(str(scene.path), cfg.device_overrides, cfg.rig_file, spec.name, rig,
+                                  cfg.listen[0], endpoints.get(spec.name)))
+            p.start()
+            return p
+
+        sup = Supervisor(start, specs, bus, max_backoff_s=cfg.max_backoff_s)
+        stack.callback(sup.stop_all)
+        sup.start_all()
+        say(f"serving {', '.join(f'{s.name} ({s.kind}, pid {sup.children[s.name].proc.pid})' for s in specs)} "
+            f"as ftc/{rig}/... on {', '.join(cfg.listen)}")
+        t_go = time.monotonic() + cfg.hold_s if world is not None else None
+        end = None if cfg.duration is None else time.monotonic() + cfg.duration + (cfg.hold_s if world else 0.0)
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            sup.poll()
+            if t_go is not None and time.monotonic() >= t_go:
+                world.go()
+                say(f"the world plays {cfg.scenario}")
+                t_go = None
+            stop.wait(0.01)
+        restarts = sum(c.restarts for c in sup.children.values())
+    say(f"stopped; reader restarts: {restarts}")
+    return 0 if restarts == 0 else 3
+
+
+def _start_world(cfg: ServeConfig, scene: Scene, stack: contextlib.ExitStack, say: Callable[[str], None]) -> Any:
+    from ftc_hw.sim_devices.host import WorldHost  # lazy: the world only with sim
+
+    world = WorldHost(scene, cfg.scenario, duration=cfg.duration, seed=cfg.seed, preroll=True, reality=cfg.reality)
+    try:
+        world.start()
+    except Exception as exc:  # noqa: BLE001 - emulator start failures carry their reason
+        raise ServeError(f"the world did not start: {exc}") from None
+    stack.callback(world.close)
+    say(f"world and emulators of {scene.name} up (reality {cfg.reality}); holding the start pose {cfg.hold_s:g} s")
+    return world
+

@@ -1,0 +1,106 @@
+"""``ftc bench bus --transport zenoh``: the bus between processes on Zenoh (:mod:`ftc_hw.bus.remote`).
+
+One publisher (this process: a bus whose wrench topic a :class:`RemotePublisher` forwards) and 1 or
+4 subscriber processes (each a Zenoh session into its own bus through a :class:`RemoteSubscriber`,
+a no-op callback subscriber on the topic), on loopback TCP:
+
+- throughput: ``frames`` frames published flat out; frames per second from the first publish to the
+  last frame delivered into the slowest subscriber's bus, and how many arrived;
+- latency: ``latency_frames`` frames paced at ``rate_hz``; publish (the frame's ``t_host_ns``, stamped
+  when it is made) to delivery into the subscriber's bus (``time.monotonic_ns()``, one clock on one
+  host): median, p99 and max.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import socket
+import time
+from typing import Any
+
+import numpy as np
+
+from ftc_hw.bus.bus import Bus
+from ftc_hw.bus.frames import WrenchFrame
+from ftc_hw.bus.remote import RemotePublisher, RemoteSubscriber, open_session
+
+_RIG, _TOPIC = "bench", "wrench/bench"
+
+
+def _endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def _subscriber(endpoint: str, expect: int, ready: Any, out: Any) -> None:
+    """A subscriber process: every frame's delivery latency (ns) and when the last one arrived."""
+    session = open_session(connect=[endpoint])
+    bus = Bus(history=1000)
+    lat = np.zeros(expect, dtype=np.int64)
+    got = [0, 0]  # frames, monotonic ns of the last
+
+    def on_frame(f: WrenchFrame) -> None:
+        now = time.monotonic_ns()
+        if got[0] < expect:
+            lat[got[0]] = now - f.t_host_ns
+        got[0] += 1
+        got[1] = now
+
+    bus.subscribe(_TOPIC, on_frame)
+    sub = RemoteSubscriber(session, bus, _RIG)
+    ready.set()
+    end = time.monotonic() + 120.0
+    while got[0] < expect and time.monotonic() < end:
+        time.sleep(0.01)
+    time.sleep(0.2)  # stragglers beyond the expected count would show up in the count
+    out.put({"received": got[0], "t_last_ns": got[1], "lat_ns": lat[:min(got[0], expect)].tolist(),
+             "foreign": sub.counts.foreign + sub.counts.corrupt})
+    sub.close()
+    session.close()
+
+
+def _run(n_subs: int, frames: int, rate_hz: float | None) -> dict[str, Any]:
+    endpoint = _endpoint()
+    session = open_session(listen=[endpoint])
+    bus = Bus(history=1000)
+    pub = RemotePublisher(session, bus, _RIG, prefixes=(_TOPIC,))
+    ctx = mp.get_context("spawn")
+    out = ctx.Queue()
+    readies = [ctx.Event() for _ in range(n_subs)]
+    procs = [ctx.Process(target=_subscriber, args=(endpoint, frames, r, out), daemon=True) for r in readies]
+    for p in procs:
+        p.start()
+    try:
+        for r in readies:
+            if not r.wait(30.0):
+                raise RuntimeError("a subscriber process did not start")
+        time.sleep(0.5)  # their sessions meet ours
+        w = np.zeros(6)
+        w.flags.writeable = False
+        publish, period, clock = bus.publish, (1e9 / rate_hz if rate_hz else 0.0), time.monotonic_ns
+        t0 = clock()
+        for i in range(frames):
+            if period:
+                while clock() < t0 + i * period:
+                    pass
+            publish(_TOPIC, WrenchFrame(clock(), None, i, "bench", w))
+        results = [out.get(timeout=150.0) for _ in procs]
+    finally:
+        for p in procs:
+            p.join(5.0)
+            if p.is_alive():
+                p.kill()
+        pub.close()
+        session.close()
+    lat = np.concatenate([np.asarray(r["lat_ns"], dtype=float) for r in results]) / 1e3
+    slowest = max(r["t_last_ns"] for r in results)
+    return {"subscribers": n_subs, "frames": frames, "received_min": min(r["received"] for r in results),
+            "frames_per_s": frames / max((slowest - t0) / 1e9, 1e-9),
+            "latency_us": {"median": float(np.median(lat)), "p99": float(np.percentile(lat, 99)),
+                           "max": float(lat.max())} if len(lat) else {}}
+
+
+def measure(frames: int = 100_000, latency_frames: int = 5_000, rate_hz: float = 1000.0) -> dict[str, Any]:
+    """Throughput and latency with 1 and 4 subscriber processes."""
+    return {f"{n}_sub": {"throughput": _run(n, frames, None), "latency": _run(n, latency_frames, rate_hz)}
+            for n in (1, 4)}

@@ -1,0 +1,219 @@
+"""The bus across processes and machines, on Eclipse Zenoh.
+
+Each bus topic of a rig is a Zenoh key expression, ``ftc/<rig>/<topic>``: ``ftc/cell1/wrench/ft``,
+``ftc/cell1/joints/arm``, ``ftc/cell1/events/contact``, ``ftc/cell1/events/device``; the payload is one
+frame in the binary format of :mod:`ftc_hw.bus.wire`.
+
+- :class:`RemotePublisher` forwards a local :class:`~ftc_hw.bus.Bus`'s topics to Zenoh (a device's
+  process publishes its reader's frames; the monitor publishes its contact events back).
+- :class:`RemoteSubscriber` publishes what arrives into a local bus: the frames keep their
+  timestamps, sequence numbers and sources, so ``latest``, ``window``, ``sample_at``, ``stats`` and a
+  :class:`~ftc_hw.bus.Watchdog` work on remote topics as on local ones. A payload on our key
+  expressions that is not a frame of ours (another program's, a corrupt one, another major version
+  of the format) is counted and dropped, never raised into Zenoh's thread.
+
+Where a session listens: :func:`session_config` gives a peer that listens only on the endpoints it
+is given (none: it only connects) with multicast scouting off unless asked; callers keep listening
+endpoints on loopback unless the user names others (``ftc serve --listen``). Zenoh's own TLS and
+access control are set in a Zenoh configuration file (``config_file``): docs/bus.md.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import threading
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from .bus import Bus, frame_topic
+from .wire import WireError, WireForeignError, WireVersionError, decode, encode
+
+KEY_ROOT = "ftc"
+DEFAULT_PREFIXES = ("wrench/", "joints/", "events/")
+_from_remote = threading.local()  # set while a RemoteSubscriber publishes into a bus (same thread)
+
+
+class RemoteError(RuntimeError):
+    """A Zenoh session could not be opened or a key expression is not ours."""
+
+
+def key_expr(rig: str, topic: str) -> str:
+    """The Zenoh key expression of a rig's bus topic."""
+    if not rig or "/" in rig or any(c in rig for c in "*$?#"):
+        raise RemoteError(f"rig name {rig!r}: one non-empty key chunk without / * $ ? #")
+    return f"{KEY_ROOT}/{rig}/{topic}"
+
+
+def topic_of(key: str) -> tuple[str, str] | None:
+    """``(rig, topic)`` of one of our key expressions, or None for another key."""
+    parts = key.split("/", 2)
+    if len(parts) != 3 or parts[0] != KEY_ROOT or not parts[2]:
+        return None
+    return parts[1], parts[2]
+
+
+def topic_for(frame: Any) -> str:
+    """The bus topic a frame belongs on; TypeError for anything that is not a bus frame."""
+    topic = frame_topic(frame)
+    if topic is None:
+        raise TypeError(f"not a bus frame: {type(frame).__name__}")
+    return topic
+
+
+def session_config(listen: Sequence[str] = (), connect: Sequence[str] = (), *, mode: str = "peer",
+                   multicast: bool = False, config_file: Path | None = None) -> zenoh.Config:
+    """A session's configuration: ``mode`` peer, client (everything through the router it connects
+    to) or router (``ftc serve``); it listens on ``listen`` only (none: it only connects), connects
+    to ``connect``, scouts by multicast only if asked; ``config_file`` (Zenoh's JSON5: TLS, access
+    control) is the base the rest is set on."""
+    if mode not in ("peer", "client", "router"):
+        raise RemoteError(f"Zenoh mode {mode!r}: peer, client or router")
+    try:
+        cfg = zenoh.Config.from_file(str(config_file)) if config_file is not None else zenoh.Config()
+        cfg.insert_json5("mode", json.dumps(mode))
+        cfg.insert_json5("scouting/multicast/enabled", json.dumps(bool(multicast)))
+        cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
+        cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    except (zenoh.ZError, OSError, ValueError) as exc:
+        raise RemoteError(f"Zenoh configuration: {exc}") from None
+    return cfg
+
+
+def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (), *, mode: str = "peer",
+                 multicast: bool = False, config_file: Path | None = None) -> zenoh.Session:
+    """A Zenoh session (see :func:`session_config`); :class:`RemoteError` if it cannot be opened
+    (an endpoint in use or unreachable to listen on, a bad configuration file)."""
+    cfg = session_config(listen, connect, mode=mode, multicast=multicast, config_file=config_file)
+    try:
+        return zenoh.open(cfg)
+    except zenoh.ZError as exc:
+        raise RemoteError(f"cannot open a Zenoh session (listen {list(listen)}, connect {list(connect)}): "
+                          f"{exc}") from None
+
+
+class RemotePublisher:
+    """Forwards a local bus's topics under ``prefixes`` to Zenoh as ``ftc/<rig>/<topic>``.
+
+    Reliable, and blocking when a link is congested (Zenoh's ``BLOCK``: a slow network delays the
+    publishing thread rather than losing frames silently); ``sent`` counts the frames put.
+    """
+
+    def __init__(self, session: zenoh.Session, bus: Bus, rig: str,
+                 prefixes: Iterable[str] = DEFAULT_PREFIXES) -> None:
+        key_expr(rig, "x")  # validates the rig name
+        self.session, self.bus, self.rig = session, bus, rig
+        self.sent = 0
+        self.errors = 0
+        self._pubs: dict[str, Any] = {}
+        self._lock = threading.Lock()
+        self._closed = False
+        self._subs = [bus.subscribe(p, self._forward) for p in prefixes]
+
+    def _forward(self, frame: Any) -> None:
+        if getattr(_from_remote, "active", False):
+            return  # it came from Zenoh: whoever sent it published it there
+        topic = topic_for(frame)
+        pub = self._pubs.get(topic)
+        if pub is None:
+            pub = self._declare(topic)
+            if pub is None:
+                return
+        pub.put(encode(frame))
+        self.sent += 1
+
+    def _declare(self, topic: str) -> Any:
+        with self._lock:
+            if self._closed:
+                return None
+            pub = self._pubs.get(topic)
+            if pub is None:
+                pub = self.session.declare_publisher(key_expr(self.rig, topic),
+                                                     congestion_control=zenoh.CongestionControl.BLOCK,
+                                                     reliability=zenoh.Reliability.RELIABLE)
+                self._pubs[topic] = pub
+            return pub
+
+    def close(self) -> None:
+        """Stop forwarding (idempotent)."""
+        for s in self._subs:
+            s.close()
+        with self._lock:
+            self._closed = True
+            pubs, self._pubs = list(self._pubs.values()), {}
+        for p in pubs:
+            with contextlib.suppress(zenoh.ZError):  # the session closed first: nothing to undeclare
+                p.undeclare()
+
+    def __enter__(self) -> RemotePublisher:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass
+class RemoteCounts:
+    """What a :class:`RemoteSubscriber` took and dropped."""
+
+    received: int = 0
+    foreign: int = 0  # on our key expressions, not a frame of ours (or on the wrong topic)
+    corrupt: int = 0  # magic right, body wrong (truncated, bad value)
+    version: int = 0  # another major version of the format
+    by_topic: dict[str, int] = field(default_factory=dict)
+
+
+class RemoteSubscriber:
+    """Publishes the frames of ``ftc/<rig>/**`` (``rig="*"``: every rig's) into a local bus."""
+
+    def __init__(self, session: zenoh.Session, bus: Bus, rig: str = "*") -> None:
+        self.bus, self.rig = bus, rig
+        self.counts = RemoteCounts()
+        self._lock = threading.Lock()
+        key = f"{KEY_ROOT}/{rig}/**" if rig == "*" else key_expr(rig, "**")
+        # other sessions' frames only: this process's own are on its bus already
+        self._sub = session.declare_subscriber(key, self._on_sample, allowed_origin=zenoh.Locality.REMOTE)
+
+    def _on_sample(self, sample: Any) -> None:
+        where = topic_of(str(sample.key_expr))
+        try:
+            frame = decode(sample.payload.to_bytes())
+            ok = where is not None and topic_for(frame) == where[1]
+        except WireVersionError:
+            self._count("version")
+            return
+        except WireForeignError:
+            self._count("foreign")
+            return
+        except WireError:
+            self._count("corrupt")
+            return
+        if not ok:
+            self._count("foreign")
+            return
+        with self._lock:
+            self.counts.received += 1
+            self.counts.by_topic[where[1]] = self.counts.by_topic.get(where[1], 0) + 1
+        _from_remote.active = True  # a RemotePublisher on this bus does not send it back out
+        try:
+            self.bus.publish(where[1], frame)
+        finally:
+            _from_remote.active = False
+
+    def _count(self, what: str) -> None:
+        with self._lock:
+            setattr(self.counts, what, getattr(self.counts, what) + 1)
+
+    def close(self) -> None:
+        """Stop taking frames (idempotent)."""
+        with contextlib.suppress(zenoh.ZError):  # already undeclared, or the session closed
+            self._sub.undeclare()
+
+    def __enter__(self) -> RemoteSubscriber:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

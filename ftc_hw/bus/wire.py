@@ -1,0 +1,215 @@
+"""The bus's frames as compact binary messages, for carrying them between processes and machines
+(:mod:`ftc_hw.bus.remote`). A codec: bytes in, frames out, no I/O.
+
+Every message starts with a 5-byte header: ``b"FT"``, the format's major and minor version (u8
+each) and the frame kind (u8: 1 wrench, 2 joints, 3 contact event, 4 device event); then the body,
+little-endian, fields in the order below. Times are int64 ns, ``t_device_ns`` absent is
+``INT64_MIN``; strings are UTF-8 with a u8 (a message: u16) length; arrays are float64.
+
+- wrench: ``t_host_ns, t_device_ns, seq`` (i64), ``flags`` (u32), ``source``, 6 floats;
+- joints: ``t_host_ns, t_device_ns, seq``, ``flags``, ``n`` (u8), ``has_tau`` (u8), ``source``,
+  ``q, qd, current`` (n floats each), ``tau`` (n floats if ``has_tau``);
+- contact event: ``t_host_ns``, ``kind`` (u8: onset, update, offset), ``contact_id`` (u32),
+  ``probability, duration_s, peak_force, impulse`` (f64), ``link``, ``point, force, point_std`` (3
+  floats each), the flags (u8 count, then each a string);
+- device event: ``t_host_ns``, ``source``, ``kind``, ``message`` (u16 length), the counters (u8
+  count, then each a name and an f64).
+
+Versions: a reader decodes its own major version only (another is :class:`WireVersionError`). A
+writer of a newer minor version may append fields after the ones above: an older reader decodes
+what it knows and ignores the rest; a message of the reader's own or an older minor version must
+end where its fields end. Anything else (wrong magic, unknown kind, truncated, a value a frame
+refuses) is :class:`WireError`: the caller counts and drops it.
+"""
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Mapping
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+from .frames import (
+    ContactEvent,
+    DeviceEvent,
+    FrameError,
+    JointFlag,
+    JointFrame,
+    WrenchFlag,
+    WrenchFrame,
+)
+
+MAGIC = b"FT"
+MAJOR, MINOR = 1, 0
+KIND_WRENCH, KIND_JOINTS, KIND_CONTACT, KIND_DEVICE = 1, 2, 3, 4
+CONTACT_KIND_CODES = {"onset": 0, "update": 1, "offset": 2}
+_CONTACT_KINDS = {v: k for k, v in CONTACT_KIND_CODES.items()}
+NO_DEVICE_TIME = -(2**63)
+
+_HEADER = struct.Struct("<2sBBB")
+_SENSOR = struct.Struct("<qqqI")  # t_host_ns, t_device_ns, seq, flags
+_JOINTS_N = struct.Struct("<BB")
+_CONTACT = struct.Struct("<qBIdddd")
+_F64 = struct.Struct("<d")
+_I64 = struct.Struct("<q")
+
+
+class WireError(ValueError):
+    """A message that is not a frame of ours: wrong magic, unknown kind, truncated, or a bad value."""
+
+
+class WireForeignError(WireError):
+    """Not a frame of ours at all: too short for the header, or another magic."""
+
+
+class WireVersionError(WireError):
+    """A message of another major version of the format than this reader's."""
+
+
+def encode(frame: Any) -> bytes:
+    """The message of one bus frame (WrenchFrame, JointFrame, ContactEvent or DeviceEvent)."""
+    if isinstance(frame, WrenchFrame):
+        return (_HEADER.pack(MAGIC, MAJOR, MINOR, KIND_WRENCH) + _sensor(frame) + _str(frame.source)
+                + frame.wrench.astype("<f8", copy=False).tobytes())
+    if isinstance(frame, JointFrame):
+        n, tau = len(frame.q), frame.tau
+        arrays = np.concatenate([frame.q, frame.qd, frame.current] + ([tau] if tau is not None else []))
+        return (_HEADER.pack(MAGIC, MAJOR, MINOR, KIND_JOINTS) + _sensor(frame)
+                + _JOINTS_N.pack(n, tau is not None) + _str(frame.source) + arrays.astype("<f8").tobytes())
+    if isinstance(frame, ContactEvent):
+        head = _CONTACT.pack(frame.t_host_ns, CONTACT_KIND_CODES[frame.kind], frame.contact_id, frame.probability,
+                             frame.duration_s, frame.peak_force, frame.impulse)
+        vectors = np.concatenate([frame.point, frame.force, frame.point_std]).astype("<f8").tobytes()
+        flags = bytes([len(frame.flags)]) + b"".join(_str(f) for f in frame.flags)
+        return _HEADER.pack(MAGIC, MAJOR, MINOR, KIND_CONTACT) + head + _str(frame.link) + vectors + flags
+    if isinstance(frame, DeviceEvent):
+        counters = bytes([len(frame.counters)]) + b"".join(_str(k) + _F64.pack(float(v))
+                                                           for k, v in frame.counters.items())
+        return (_HEADER.pack(MAGIC, MAJOR, MINOR, KIND_DEVICE) + _I64.pack(frame.t_host_ns) + _str(frame.source)
+                + _str(frame.kind) + _str(frame.message, 2) + counters)
+    raise TypeError(f"not a bus frame: {type(frame).__name__}")
+
+
+def decode(data: bytes | bytearray | memoryview) -> Any:
+    """The frame of one message; :class:`WireError` for anything that is not one of ours."""
+    buf = memoryview(data).cast("B") if not isinstance(data, bytes) else data
+    if len(buf) < _HEADER.size:
+        raise WireForeignError(f"{len(buf)} bytes: shorter than the header")
+    magic, major, minor, kind = _HEADER.unpack_from(buf)
+    if magic != MAGIC:
+        raise WireForeignError(f"not an ftc-hw frame (magic {bytes(magic)!r})")
+    if major != MAJOR:
+        raise WireVersionError(f"format version {major}.{minor}: this reader decodes {MAJOR}.x")
+    reader = _Reader(buf, _HEADER.size)
+    try:
+        frame = _DECODERS[kind](reader) if kind in _DECODERS else None
+    except (struct.error, UnicodeDecodeError, IndexError) as exc:
+        raise WireError(f"kind {kind}: truncated or malformed ({exc})") from None
+    except FrameError as exc:
+        raise WireError(f"kind {kind}: {exc}") from None
+    if frame is None:
+        raise WireError(f"unknown frame kind {kind}")
+    if reader.pos != len(buf) and minor <= MINOR:
+        raise WireError(f"kind {kind}: {len(buf) - reader.pos} bytes after the frame's last field")
+    return frame
+
+
+class _Reader:
+    __slots__ = ("buf", "pos")
+
+    def __init__(self, buf, pos: int) -> None:
+        self.buf, self.pos = buf, pos
+
+    def unpack(self, s: struct.Struct) -> tuple:
+        if self.pos + s.size > len(self.buf):
+            raise struct.error(f"needs {s.size} bytes at {self.pos}, has {len(self.buf) - self.pos}")
+        out = s.unpack_from(self.buf, self.pos)
+        self.pos += s.size
+        return out
+
+    def string(self, width: int = 1) -> str:
+        n = int.from_bytes(self._take(width), "little")
+        return bytes(self._take(n)).decode("utf-8")
+
+    def floats(self, n: int) -> np.ndarray:
+        """n float64, finite (a frame's arrays are), as a read-only array the frame may keep."""
+        values = self.unpack(_floats(n))
+        if not all(map(math.isfinite, values)):
+            raise FrameError("a non-finite value")
+        a = np.array(values, dtype=np.float64)
+        a.flags.writeable = False
+        return a
+
+    def byte(self) -> int:
+        return self._take(1)[0]
+
+    def _take(self, n: int):
+        if self.pos + n > len(self.buf):
+            raise struct.error(f"needs {n} bytes at {self.pos}, has {len(self.buf) - self.pos}")
+        out = self.buf[self.pos:self.pos + n]
+        self.pos += n
+        return out
+
+
+@cache
+def _floats(n: int) -> struct.Struct:
+    return struct.Struct(f"<{n}d")
+
+
+def _sensor(frame: WrenchFrame | JointFrame) -> bytes:
+    t_dev = NO_DEVICE_TIME if frame.t_device_ns is None else frame.t_device_ns
+    return _SENSOR.pack(frame.t_host_ns, t_dev, frame.seq, int(frame.flags))
+
+
+def _str(s: str, width: int = 1) -> bytes:
+    raw = s.encode("utf-8")
+    if len(raw) >= 1 << (8 * width):
+        raw = raw[:(1 << (8 * width)) - 1].decode("utf-8", errors="ignore").encode("utf-8")
+    return len(raw).to_bytes(width, "little") + raw
+
+
+def _device_time(t: int) -> int | None:
+    return None if t == NO_DEVICE_TIME else t
+
+
+def _wrench(r: _Reader) -> WrenchFrame:
+    t_host, t_dev, seq, flags = r.unpack(_SENSOR)
+    source = r.string()
+    if not source:
+        raise FrameError("an empty source")
+    return WrenchFrame(t_host, _device_time(t_dev), seq, source, r.floats(6), WrenchFlag(flags))
+
+
+def _joints(r: _Reader) -> JointFrame:
+    t_host, t_dev, seq, flags = r.unpack(_SENSOR)
+    n, has_tau = r.unpack(_JOINTS_N)
+    source = r.string()
+    if n < 1 or not source:
+        raise FrameError(f"{n} joints, source {source!r}")
+    q, qd, current = r.floats(n), r.floats(n), r.floats(n)
+    tau = r.floats(n) if has_tau else None
+    return JointFrame(t_host, _device_time(t_dev), seq, source, q, qd, current, tau, JointFlag(flags))
+
+
+def _contact(r: _Reader) -> ContactEvent:
+    t_host, kind, cid, probability, duration, peak, impulse = r.unpack(_CONTACT)
+    if kind not in _CONTACT_KINDS:
+        raise FrameError(f"unknown contact event kind code {kind}")
+    link = r.string()
+    point, force, std = r.floats(3), r.floats(3), r.floats(3)
+    flags = tuple(r.string() for _ in range(r.byte()))
+    return ContactEvent.make(t_host, _CONTACT_KINDS[kind], link, point, force, std, flags=flags,
+                             probability=probability, contact_id=cid, duration_s=duration, peak_force=peak,
+                             impulse=impulse)
+
+
+def _device(r: _Reader) -> DeviceEvent:
+    (t_host,) = r.unpack(_I64)
+    source, kind, message = r.string(), r.string(), r.string(2)
+    counters: Mapping[str, float] = {r.string(): r.unpack(_F64)[0] for _ in range(r.byte())}
+    return DeviceEvent.make(t_host, source, kind, message, counters)  # type: ignore[arg-type]
+
+
+_DECODERS = {KIND_WRENCH: _wrench, KIND_JOINTS: _joints, KIND_CONTACT: _contact, KIND_DEVICE: _device}

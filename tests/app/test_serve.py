@@ -1,0 +1,66 @@
+"""``ftc serve``: each device's reader in its own process, publishing to Zenoh; here a client session
+takes the frames into its bus, as ``ftc monitor --remote`` will. A reader process killed (SIGKILL)
+is a stale event within 100 ms (this side's watchdog), an ``error`` event from the supervisor, and
+frames again within 1 s (restarted from the fork server)."""
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from ftc_hw.bus import EVENTS_DEVICE, Bus, Watchdog
+from ftc_hw.bus.remote import RemoteSubscriber, open_session
+from tests.foundation.test_bus_remote import free_endpoint, wait_for
+
+pytestmark = pytest.mark.timeout(90)
+
+
+def test_a_killed_reader_process_is_stale_at_once_and_streams_again_within_a_second():
+    endpoint = free_endpoint()
+    serve = subprocess.Popen([sys.executable, "-m", "ftc_hw", "serve", "--scene", "dxl-arm", "--sim", "--duration",
+                              "20", "--hold", "0", "--listen", endpoint], stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    try:
+        while not any(line.startswith("serving ") for line in lines):
+            line = serve.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+        pids = dict(re.findall(r"(\w+) \([\w-]+, pid (\d+)\)", lines[-1]))
+        assert set(pids) == {"ft", "arm"}, lines[-1]
+        session = open_session(connect=[endpoint], mode="client")
+        bus = Bus()
+        with RemoteSubscriber(session, bus, "dxl-arm") as sub:
+            wait_for(lambda: sub.counts.by_topic.get("wrench/ft", 0) > 100 and "joints/arm" in sub.counts.by_topic,
+                     what="both devices' frames")
+            with Watchdog(bus, {"wrench/ft": 0.05}, period=0.005) as dog:
+                dog.start()
+                time.sleep(0.5)
+                assert not dog.stale_topics, dog.stale_topics
+                os.kill(int(pids["ft"]), signal.SIGKILL)
+                t_kill = time.monotonic_ns()
+                wait_for(lambda: "wrench/ft" in dog.stale_topics, 2.0, "stale")
+                wait_for(lambda: any(f.t_host_ns > t_kill for f in bus.history("wrench/ft")[-5:]), 5.0, "frames again")
+                back = min(f.t_host_ns for f in bus.history("wrench/ft") if f.t_host_ns > t_kill)
+                events = [e for e in bus.history(EVENTS_DEVICE) if e.t_host_ns > t_kill]
+                stale = next(e for e in events if e.kind == "stale" and e.source == "ft")
+                assert stale.t_host_ns - t_kill <= 100_000_000, (stale.t_host_ns - t_kill) / 1e6
+                assert (back - t_kill) <= 1_000_000_000, (back - t_kill) / 1e6
+                said = [e for e in events if e.source == "ft" and e.kind in ("error", "reconnecting")]
+                assert [e.kind for e in said][:2] == ["error", "reconnecting"], said
+                assert f"pid {pids['ft']}" in said[0].message and "exited with code -9" in said[0].message
+                # the other reader never noticed
+                assert not [e for e in events if e.source == "arm" and e.kind in ("error", "stale", "reconnecting")]
+        session.close()
+        serve.send_signal(signal.SIGINT)
+        rest, _ = serve.communicate(timeout=20)
+        assert serve.returncode == 3 and "reader restarts: 1" in rest, "".join(lines) + rest
+    finally:
+        if serve.poll() is None:
+            serve.kill()
+            serve.wait(5)
