@@ -35,6 +35,7 @@ from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
 from .faults import Fault, FaultError, FaultPlan
+from .remote_rig import RemoteRig
 from .rig import RigError, build_rig, check_located, pick_device, require_device
 from .sim_joints import SimJointSource
 from .vendor_output import vendor_stderr
@@ -70,6 +71,8 @@ class MonitorConfig:
     rig: Path | None = None  # a rig file (--rig): a table of keys per device name
     reality: str = "ideal"  # with sim: how the world's arm differs from the model (ideal, typical, harsh)
     refine: bool = False  # keep refining the calibration's identified model while the arm moves free
+    remote: str | None = None  # a Zenoh endpoint: the devices' frames from ftc serve there, not adapters here
+    remote_rig: str | None = None  # the rig's name in ftc/<rig>/... (default: the scene's name)
 
 
 @dataclass
@@ -86,6 +89,7 @@ class MonitorOutcome:
     faults: list[tuple[str, float]] = field(default_factory=list)  # (fault, scenario time s when done)
     vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
     degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
+    remote: dict[str, Any] = field(default_factory=dict)  # with remote: frames taken, dropped, events sent
 
 
 def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any], dict[str, str]]:
@@ -147,12 +151,12 @@ class StopReflex:
         self._thread.join(5.0)
 
 
-def _devices(scene: Scene, sim: bool) -> tuple[DeviceSpec, DeviceSpec | None]:
+def _devices(scene: Scene, sim: bool, remote: bool = False) -> tuple[DeviceSpec, DeviceSpec | None]:
     """The scene's F/T sensor and arm devices; without an arm device only a simulated world will do."""
     try:
         ft = require_device(scene, "ft")
         arm = pick_device(scene, "arm") if sim else require_device(scene, "arm")
-        if not sim:  # said before anything loads: the devices must say where they are
+        if not sim and not remote:  # said before anything loads: the devices must say where they are
             check_located([ft, arm])
         return ft, arm
     except RigError as exc:
@@ -173,7 +177,8 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
         scene = load_rig_scene(cfg.scene, cfg.device_overrides, cfg.rig)
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
-    ft_dev, arm_dev = _devices(scene, cfg.sim)
+    _check_remote(cfg)
+    ft_dev, arm_dev = _devices(scene, cfg.sim, cfg.remote is not None)
     try:
         faults = [Fault.parse(f) for f in cfg.faults]
     except FaultError as exc:
@@ -187,6 +192,15 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
     with responsive_readers(), vendor_stderr() as vendor:
         out.vendor_lines = vendor.counts
         return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out, faults)
+
+
+def _check_remote(cfg: MonitorConfig) -> None:
+    if cfg.remote is None:
+        return
+    clash = [what for what, on in (("--sim", cfg.sim), ("--reflex", cfg.reflex), ("--fault", cfg.faults)) if on]
+    if clash:  # the reflex and the faults act on devices in this process
+        raise MonitorSetupError(f"--remote takes the devices' frames from ftc serve: not with {', '.join(clash)} "
+                                "(start the world with ftc serve --sim)")
 
 
 def _stop_on_sigterm(stack: contextlib.ExitStack) -> None:
@@ -278,10 +292,13 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         writer = EventWriter(events_file) if events_file is not None else None
         if world is None:
             monitor.start()  # on hardware the arm must be still now: the tare takes the first 0.1 s
-        console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "") + " ...")
+        console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "")
+                      + (f" served at {cfg.remote}" if cfg.remote else "") + " ...")
         try:
-            rig = build_rig(scene, bus=bus, devices=[d for d in (ft_dev, arm_dev) if d is not None],
-                            endpoints=world.endpoints if world is not None else None, timeout=cfg.connect_timeout_s)
+            rig = (RemoteRig(bus, cfg.remote, cfg.remote_rig or scene.name, topics[:2], cfg.connect_timeout_s)
+                   if cfg.remote else
+                   build_rig(scene, bus=bus, devices=[d for d in (ft_dev, arm_dev) if d is not None],
+                             endpoints=world.endpoints if world is not None else None, timeout=cfg.connect_timeout_s))
         except RigError as exc:
             raise MonitorSetupError(str(exc)) from None
         if arm_dev is None:
@@ -330,6 +347,8 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         if monitor.pipeline.refiner is not None:
             out.drift = monitor.pipeline.refiner.drift()
             console.print(out.drift.summary())
+        if isinstance(rig, RemoteRig):
+            out.remote = rig.counts
         _judge_degraded(monitor, rig.adapters, out, cfg.sim)
         _summary(console, cfg, bus, topics, out, rig.adapters, recorder, world)
     return out
@@ -431,6 +450,8 @@ def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], 
     console.print(f"monitor: {out.counters}")
     for a in adapters:
         console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
+    if cfg.remote:
+        console.print(f"from {cfg.remote} (Zenoh): {out.remote}")
     if out.faults:
         console.print("faults played: " + ", ".join(f"{f} (done at t = {t:.2f} s)" for f, t in out.faults))
     for line, n in out.vendor_lines.items():

@@ -205,6 +205,11 @@ def monitor(
     refine: Annotated[bool, typer.Option("--refine", help="Keep refining the calibration's identified model "
                                          "(ftc identify) while the arm moves free, and say at the end how far it "
                                          "drifted (docs/reality.md).")] = False,
+    remote: Annotated[Optional[str], typer.Option(  # noqa: UP045
+        metavar="ENDPOINT", help="Take the devices' frames from ftc serve at this Zenoh endpoint (e.g. "
+        "tcp/127.0.0.1:7447) instead of opening them here; the contact events go back there (docs/bus.md).")] = None,
+    remote_name: Annotated[Optional[str], typer.Option(  # noqa: UP045
+        help="With --remote: the rig's name in ftc/NAME/... (default: the scene's name, as ftc serve).")] = None,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
@@ -213,7 +218,8 @@ def monitor(
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
                                          reflex.value if reflex else None, events, truth, noise, view, level.value,
                                          tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
-                                         reality=reality.value, refine=refine))
+                                         reality=reality.value, refine=refine, remote=remote,
+                                         remote_name=remote_name))
 
 
 @app.command()

@@ -4,6 +4,7 @@ is a stale event within 100 ms (this side's watchdog), an ``error`` event from t
 frames again within 1 s (restarted from the fork server)."""
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -13,6 +14,8 @@ import time
 
 import pytest
 
+from ftc_hw.app.remote_rig import RemoteRig
+from ftc_hw.app.rig import RigError
 from ftc_hw.bus import EVENTS_DEVICE, Bus, Watchdog
 from ftc_hw.bus.remote import RemoteSubscriber, open_session
 from tests.foundation.test_bus_remote import free_endpoint, wait_for
@@ -64,3 +67,47 @@ def test_a_killed_reader_process_is_stale_at_once_and_streams_again_within_a_sec
         if serve.poll() is None:
             serve.kill()
             serve.wait(5)
+
+
+def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_back(tmp_path):
+    """Two hosts, simulated: the devices served on 127.0.0.2, the monitor (recording) connecting with only
+    --remote; a third session sees the monitor's contact events; the recording replays bit for bit."""
+    endpoint = free_endpoint().replace("127.0.0.1", "127.0.0.2")
+    serve = subprocess.Popen([sys.executable, "-m", "ftc_hw", "serve", "--scene", "dxl-arm", "--sim", "--duration",
+                              "12", "--hold", "3", "--listen", endpoint], stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True)
+    try:
+        said = [serve.stdout.readline() for _ in range(2)]
+        assert said[1].startswith("serving "), said  # the router listens from now on
+        session = open_session(connect=[endpoint], mode="client")
+        watcher = Bus()
+        with RemoteSubscriber(session, watcher, "dxl-arm"):
+            events, rec = tmp_path / "events.jsonl", tmp_path / "run.mcap"
+            mon = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--remote", endpoint,
+                                  "--duration", "10", "--no-view", "--events", str(events), "--record", str(rec)],
+                                 capture_output=True, text=True, timeout=60)
+            out = mon.stdout + mon.stderr
+            assert mon.returncode == 0, out[-3000:]
+            written = [json.loads(line) for line in events.read_text().splitlines()]
+            onsets = [e for e in written if e["kind"] == "onset"]
+            assert len(onsets) >= 2 and "'foreign': 0, 'corrupt': 0" in out, out[-2000:]
+            time.sleep(0.3)
+            seen = watcher.history("events/contact")
+            assert len(seen) == len(written) and [e.kind for e in seen] == [e["kind"] for e in written]
+            assert all(abs(e.t_host_ns / 1e9 - w["t"]) < 1e-6 for e, w in zip(seen, written, strict=True))
+        session.close()
+        replay = subprocess.run([sys.executable, "-m", "ftc_hw", "replay", str(rec), "--speed", "0", "--check"],
+                                capture_output=True, text=True, timeout=60)
+        assert replay.returncode == 0 and "identical" in replay.stdout, replay.stdout[-2000:]
+    finally:
+        serve.kill()
+        serve.wait(5)
+
+
+def test_nothing_served_there_is_a_clear_error_and_the_options_that_act_here_are_refused(tmp_path):
+    with pytest.raises(RigError, match="is ftc serve listening there"):
+        RemoteRig(Bus(), free_endpoint(), "dxl-arm", ["wrench/ft"], timeout=1.0).open()
+    for extra in (["--sim"], ["--reflex", "stop"]):
+        proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--remote",
+                               free_endpoint(), "--no-view", *extra], capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 1 and f"not with {extra[0]}" in proc.stderr, proc.stderr[-2000:]

@@ -1,0 +1,72 @@
+"""The rig of a monitor whose devices are served elsewhere (``ftc serve``): the frames of ``ftc/<rig>/...``
+taken from Zenoh into the monitor's bus, and its contact events published back. It stands where
+:class:`~ftc_hw.app.rig.Rig` stands for local adapters: ``open()``, ``wait()``, ``close()``,
+``adapters`` (none here: the readers' counters are in their own processes)."""
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from ftc_hw.bus import EVENTS_CONTACT, Bus
+from ftc_hw.bus.remote import RemoteError, RemotePublisher, RemoteSubscriber, open_session
+
+from .rig import RigError
+
+
+class RemoteRig:
+    """Frames from ``endpoint`` (a client of the ``ftc serve`` router there) for ``topics`` of ``rig``."""
+
+    def __init__(self, bus: Bus, endpoint: str, rig: str, topics: Sequence[str], timeout: float = 20.0) -> None:
+        self.bus, self.endpoint, self.rig, self.topics, self.timeout = bus, endpoint, rig, tuple(topics), timeout
+        self.adapters: tuple[Any, ...] = ()
+        self.arm = None
+        self._session: Any = None
+        self._sub: RemoteSubscriber | None = None
+        self._pub: RemotePublisher | None = None
+        self._final: dict[str, Any] = {}
+
+    def open(self) -> RemoteRig:
+        end = time.monotonic() + self.timeout
+        while self._session is None:  # the server may be starting: try again until the timeout
+            try:
+                self._session = open_session(connect=[self.endpoint], mode="client")
+            except RemoteError as exc:
+                if time.monotonic() >= end:
+                    raise RigError(f"{exc} (for {self.timeout:g} s: is ftc serve listening there?)") from None
+                time.sleep(0.5)
+        if self._sub is None:
+            self._sub = RemoteSubscriber(self._session, self.bus, self.rig)
+            self._pub = RemotePublisher(self._session, self.bus, self.rig, prefixes=(EVENTS_CONTACT,))
+        return self
+
+    def wait(self, timeout: float | None = None) -> None:
+        """Until every topic has had a frame; RigError naming the silent ones and what did arrive."""
+        end = time.monotonic() + (self.timeout if timeout is None else timeout)
+        while time.monotonic() < end:
+            if all(self.bus.latest(t) is not None for t in self.topics):
+                return
+            time.sleep(0.02)
+        silent = [t for t in self.topics if self.bus.latest(t) is None]
+        counts = self._sub.counts if self._sub is not None else None
+        raise RigError(f"no frames on {', '.join(f'ftc/{self.rig}/{t}' for t in silent)} from {self.endpoint} "
+                       f"within {self.timeout:g} s (is ftc serve --scene ... running there, with --name "
+                       f"{self.rig}?); received {counts}")
+
+    @property
+    def counts(self) -> dict[str, Any]:
+        """What was taken and dropped (after close: at close)."""
+        c = self._sub.counts if self._sub is not None else None
+        return self._final if c is None else {"received": c.received, "foreign": c.foreign, "corrupt": c.corrupt,
+                                     "version": c.version, "events_sent": self._pub.sent if self._pub else 0}
+
+    def close(self) -> None:
+        """Idempotent: stops taking frames and publishing events, closes the session."""
+        if self._sub is not None:
+            self._final = self.counts
+        for part in (self._pub, self._sub):
+            if part is not None:
+                part.close()
+        if self._session is not None:
+            self._session.close()
+        self._session = self._sub = self._pub = None
