@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import json
 import threading
+from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +31,7 @@ from typing import Any
 import zenoh
 
 from .bus import Bus, frame_topic
-from .wire import WireError, WireForeignError, WireVersionError, decode, encode
+from .wire import WireError, WireForeignError, WireVersionError, decode_all, encode, encode_batch
 
 KEY_ROOT = "ftc"
 DEFAULT_PREFIXES = ("wrench/", "joints/", "events/")
@@ -98,61 +99,89 @@ def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (), *, mod
 class RemotePublisher:
     """Forwards a local bus's topics under ``prefixes`` to Zenoh as ``ftc/<rig>/<topic>``.
 
-    Reliable, and blocking when a link is congested (Zenoh's ``BLOCK``: a slow network delays the
-    publishing thread rather than losing frames silently); ``sent`` counts the frames put.
+    The publishing thread (a device's reader) only encodes the frame and hands it over; a sender thread
+    puts it on Zenoh, reliably, blocking when a link is congested (Zenoh's ``BLOCK``: a slow network
+    delays the sender, never loses frames silently). Frames that pile up while the sender is busy go
+    out together, one batch message per topic (``wire.encode_batch``): one at a time when they come
+    at a sensor's rate, batched when they come faster. ``sent`` counts the frames put.
     """
 
     def __init__(self, session: zenoh.Session, bus: Bus, rig: str,
-                 prefixes: Iterable[str] = DEFAULT_PREFIXES) -> None:
+                 prefixes: Iterable[str] = DEFAULT_PREFIXES, max_batch: int = 256) -> None:
         key_expr(rig, "x")  # validates the rig name
-        self.session, self.bus, self.rig = session, bus, rig
+        self.session, self.bus, self.rig, self.max_batch = session, bus, rig, max_batch
         self.sent = 0
-        self.errors = 0
         self._pubs: dict[str, Any] = {}
-        self._lock = threading.Lock()
+        self._queue: deque[tuple[str, bytes]] = deque()
+        self._wake = threading.Condition()
         self._closed = False
+        self._thread = threading.Thread(target=self._send_loop, name=f"ftc-zenoh-pub-{rig}", daemon=True)
+        self._thread.start()
         self._subs = [bus.subscribe(p, self._forward) for p in prefixes]
 
     def _forward(self, frame: Any) -> None:
         if getattr(_from_remote, "active", False):
             return  # it came from Zenoh: whoever sent it published it there
-        topic = topic_for(frame)
+        item = (topic_for(frame), encode(frame))
+        with self._wake:
+            if self._closed:
+                return
+            self._queue.append(item)
+            if len(self._queue) == 1:
+                self._wake.notify()
+
+    def _send_loop(self) -> None:
+        while True:
+            with self._wake:
+                while not self._queue and not self._closed:
+                    self._wake.wait()
+                if not self._queue:
+                    return  # closed and flushed
+                items = [self._queue.popleft() for _ in range(min(len(self._queue), self.max_batch))]
+            for topic, group in _runs(items):
+                try:
+                    self._publisher(topic).put(group[0] if len(group) == 1 else encode_batch(group))
+                except zenoh.ZError:
+                    return  # the session closed under us: nothing more can be sent
+                self.sent += len(group)
+
+    def _publisher(self, topic: str) -> Any:
         pub = self._pubs.get(topic)
         if pub is None:
-            pub = self._declare(topic)
-            if pub is None:
-                return
-        pub.put(encode(frame))
-        self.sent += 1
+            pub = self._pubs[topic] = self.session.declare_publisher(
+                key_expr(self.rig, topic), congestion_control=zenoh.CongestionControl.BLOCK,
+                reliability=zenoh.Reliability.RELIABLE)
+        return pub
 
-    def _declare(self, topic: str) -> Any:
-        with self._lock:
-            if self._closed:
-                return None
-            pub = self._pubs.get(topic)
-            if pub is None:
-                pub = self.session.declare_publisher(key_expr(self.rig, topic),
-                                                     congestion_control=zenoh.CongestionControl.BLOCK,
-                                                     reliability=zenoh.Reliability.RELIABLE)
-                self._pubs[topic] = pub
-            return pub
-
-    def close(self) -> None:
-        """Stop forwarding (idempotent)."""
+    def close(self, timeout: float = 2.0) -> None:
+        """Stop forwarding; what was handed over is sent first (idempotent)."""
         for s in self._subs:
             s.close()
-        with self._lock:
+        with self._wake:
             self._closed = True
-            pubs, self._pubs = list(self._pubs.values()), {}
-        for p in pubs:
+            self._wake.notify()
+        self._thread.join(timeout)
+        for p in list(self._pubs.values()):
             with contextlib.suppress(zenoh.ZError):  # the session closed first: nothing to undeclare
                 p.undeclare()
+        self._pubs = {}
 
     def __enter__(self) -> RemotePublisher:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _runs(items: list[tuple[str, bytes]]) -> list[tuple[str, list[bytes]]]:
+    """Consecutive messages of one topic grouped, in order."""
+    out: list[tuple[str, list[bytes]]] = []
+    for topic, data in items:
+        if out and out[-1][0] == topic:
+            out[-1][1].append(data)
+        else:
+            out.append((topic, [data]))
+    return out
 
 
 @dataclass
@@ -180,8 +209,8 @@ class RemoteSubscriber:
     def _on_sample(self, sample: Any) -> None:
         where = topic_of(str(sample.key_expr))
         try:
-            frame = decode(sample.payload.to_bytes())
-            ok = where is not None and topic_for(frame) == where[1]
+            frames = decode_all(sample.payload.to_bytes())
+            ok = where is not None and all(topic_for(f) == where[1] for f in frames)
         except WireVersionError:
             self._count("version")
             return
@@ -195,11 +224,12 @@ class RemoteSubscriber:
             self._count("foreign")
             return
         with self._lock:
-            self.counts.received += 1
-            self.counts.by_topic[where[1]] = self.counts.by_topic.get(where[1], 0) + 1
+            self.counts.received += len(frames)
+            self.counts.by_topic[where[1]] = self.counts.by_topic.get(where[1], 0) + len(frames)
         _from_remote.active = True  # a RemotePublisher on this bus does not send it back out
         try:
-            self.bus.publish(where[1], frame)
+            for frame in frames:
+                self.bus.publish(where[1], frame)
         finally:
             _from_remote.active = False
 

@@ -13,7 +13,9 @@ little-endian, fields in the order below. Times are int64 ns, ``t_device_ns`` ab
   ``probability, duration_s, peak_force, impulse`` (f64), ``link``, ``point, force, point_std`` (3
   floats each), the flags (u8 count, then each a string);
 - device event: ``t_host_ns``, ``source``, ``kind``, ``message`` (u16 length), the counters (u8
-  count, then each a name and an f64).
+  count, then each a name and an f64);
+- batch (kind 5): ``count`` (u16), then each message (u32 length, then the message, header and all):
+  frames of one topic sent together when they come faster than they can be sent one by one.
 
 Versions: a reader decodes its own major version only (another is :class:`WireVersionError`). A
 writer of a newer minor version may append fields after the ones above: an older reader decodes
@@ -43,15 +45,20 @@ from .frames import (
 
 MAGIC = b"FT"
 MAJOR, MINOR = 1, 0
-KIND_WRENCH, KIND_JOINTS, KIND_CONTACT, KIND_DEVICE = 1, 2, 3, 4
+KIND_WRENCH, KIND_JOINTS, KIND_CONTACT, KIND_DEVICE, KIND_BATCH = 1, 2, 3, 4, 5
 CONTACT_KIND_CODES = {"onset": 0, "update": 1, "offset": 2}
 _CONTACT_KINDS = {v: k for k, v in CONTACT_KIND_CODES.items()}
 NO_DEVICE_TIME = -(2**63)
 
 _HEADER = struct.Struct("<2sBBB")
 _SENSOR = struct.Struct("<qqqI")  # t_host_ns, t_device_ns, seq, flags
+_WRENCH_HEAD = struct.Struct("<2sBBBqqqIB")  # header, sensor fields, the source's length
+_WRENCH_VALUES = struct.Struct("<6d")
 _JOINTS_N = struct.Struct("<BB")
 _CONTACT = struct.Struct("<qBIdddd")
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+MAX_BATCH = 0xFFFF
 _F64 = struct.Struct("<d")
 _I64 = struct.Struct("<q")
 
@@ -92,9 +99,54 @@ def encode(frame: Any) -> bytes:
     raise TypeError(f"not a bus frame: {type(frame).__name__}")
 
 
+def encode_batch(messages: list[bytes]) -> bytes:
+    """One message carrying ``messages`` (each from :func:`encode`), in order; at most MAX_BATCH."""
+    if not 0 < len(messages) <= MAX_BATCH:
+        raise ValueError(f"a batch holds 1 to {MAX_BATCH} messages, got {len(messages)}")
+    return (_HEADER.pack(MAGIC, MAJOR, MINOR, KIND_BATCH) + _U16.pack(len(messages))
+            + b"".join(_U32.pack(len(m)) + m for m in messages))
+
+
+def decode_all(data: bytes | bytearray | memoryview) -> list[Any]:
+    """The frames of a message or of a batch of them, in order; :class:`WireError` as :func:`decode`
+    (for a batch: the first bad message's, or a batch whose lengths do not add up)."""
+    buf = bytes(data)
+    if len(buf) < _HEADER.size + 2 or buf[4] != KIND_BATCH or buf[:2] != MAGIC or buf[2] != MAJOR:
+        return [decode(buf)]
+    (count,) = _U16.unpack_from(buf, _HEADER.size)
+    pos, out = _HEADER.size + 2, []
+    for _ in range(count):
+        if pos + 4 > len(buf):
+            raise WireError(f"batch: truncated after {len(out)} of {count} messages")
+        (n,) = _U32.unpack_from(buf, pos)
+        if pos + 4 + n > len(buf):
+            raise WireError(f"batch: message {len(out) + 1} of {count} truncated")
+        out.append(decode(buf[pos + 4:pos + 4 + n]))
+        pos += 4 + n
+    if pos != len(buf) and buf[3] <= MINOR:
+        raise WireError(f"batch: {len(buf) - pos} bytes after its {count} messages")
+    return out
+
+
 def decode(data: bytes | bytearray | memoryview) -> Any:
     """The frame of one message; :class:`WireError` for anything that is not one of ours."""
     buf = memoryview(data).cast("B") if not isinstance(data, bytes) else data
+    if len(buf) > _WRENCH_HEAD.size and buf[4] == KIND_WRENCH:  # the stream that counts: one struct each part
+        magic, major, minor, _, t_host, t_dev, seq, flags, n = _WRENCH_HEAD.unpack_from(buf)
+        end = _WRENCH_HEAD.size + n
+        if (magic == MAGIC and major == MAJOR and n and len(buf) >= end + 48
+                and (minor > MINOR or len(buf) == end + 48)):
+            values = _WRENCH_VALUES.unpack_from(buf, end)
+            if all(map(math.isfinite, values)):
+                wrench = np.array(values)
+                wrench.flags.writeable = False
+                try:
+                    source = bytes(buf[_WRENCH_HEAD.size:end]).decode("utf-8")
+                except UnicodeDecodeError:
+                    raise WireError("kind 1: the source is not UTF-8") from None
+                return WrenchFrame(t_host, None if t_dev == NO_DEVICE_TIME else t_dev, seq, source, wrench,
+                                   _wrench_flag(flags))
+        # anything odd: the general path says what
     if len(buf) < _HEADER.size:
         raise WireForeignError(f"{len(buf)} bytes: shorter than the header")
     magic, major, minor, kind = _HEADER.unpack_from(buf)
@@ -102,6 +154,8 @@ def decode(data: bytes | bytearray | memoryview) -> Any:
         raise WireForeignError(f"not an ftc-hw frame (magic {bytes(magic)!r})")
     if major != MAJOR:
         raise WireVersionError(f"format version {major}.{minor}: this reader decodes {MAJOR}.x")
+    if kind == KIND_BATCH:
+        raise WireError("a batch of messages: decode_all takes it apart")
     reader = _Reader(buf, _HEADER.size)
     try:
         frame = _DECODERS[kind](reader) if kind in _DECODERS else None
@@ -151,6 +205,11 @@ class _Reader:
         out = self.buf[self.pos:self.pos + n]
         self.pos += n
         return out
+
+
+@cache
+def _wrench_flag(bits: int) -> WrenchFlag:
+    return WrenchFlag(bits)
 
 
 @cache
