@@ -16,12 +16,16 @@ from ftc_hw.sim_devices.world.scenarios import sample_contacts
 # time, after the others (which it runs on every core: they compute, nothing in them is timed).
 REALTIME_DIRS = {"app", "devices", "sim", "cli", "record"}
 REALTIME_MODULES = {"test_bus_remote.py", "test_monitor.py", "test_stream_loss.py", "test_pipeline_events.py"}
+# in those folders, modules that only compute (worlds stepped as fast as they go, files, codecs)
+COMPUTE_MODULES = {"test_monitor_eval.py", "test_device_params.py", "test_dxl_protocol.py", "test_shells.py",
+                   "test_world.py", "test_solve_cli.py", "test_warm.py", "test_vendor_output.py", "test_cli.py",
+                   "test_reality.py", "test_sim_link.py", "test_record.py"}
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
         path = Path(str(item.fspath))
-        if (path.parent.name in REALTIME_DIRS or path.name in REALTIME_MODULES
+        if ((path.parent.name in REALTIME_DIRS and path.name not in COMPUTE_MODULES) or path.name in REALTIME_MODULES
                 or "world_feeder" in getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.realtime)
 

@@ -46,3 +46,17 @@ def test_columns_are_chosen_by_name_or_glob_and_an_unknown_one_is_named():
     assert select_columns(ALL_COLUMNS, None) == ALL_COLUMNS
     with pytest.raises(ValueError, match="no column matches only:nothing, typo: the columns are ideal"):
         select_columns(ALL_COLUMNS, ["typical", "only:nothing", "typo"])
+
+
+def test_a_contact_that_comes_while_the_last_one_is_still_reported_is_detected_and_counted_merged():
+    spans = ((1.0, 1.3, 30.0), (1.5, 1.8, 30.0), (3.0, 3.3, 30.0))
+    held = _run([1.002], [], contact_spans=spans) | {"offsets": [2.0]}  # open over the second touch
+    s = _summarize(_run([], [], contact_spans=()), [held])
+    assert s["contacts_over_10N"] == 3 and s["detected_over_10N"] == 2 and s["merged_over_10N"] == 1
+    assert abs(s["delay_ms_median"] - 2.0) < 1e-9  # the merged one has no onset delay of its own
+    # closed before it came, or opened by a false alarm: missed
+    closed = _run([1.002], [], contact_spans=spans) | {"offsets": [1.4]}
+    alarm = _run([0.5], [], contact_spans=spans) | {"offsets": []}
+    for run in (closed, alarm):
+        s = _summarize(_run([], [], contact_spans=()), [run])
+        assert s["merged_over_10N"] == 0 and s["detected_over_10N"] == (1 if run is closed else 0)
