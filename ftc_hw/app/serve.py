@@ -32,7 +32,7 @@ from ftc_hw.bus.remote import RemotePublisher, open_session
 from ftc_hw.devices.registry import role_of
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 
-from .rig import build_rig
+from .rig import RigError, build_rig, check_located
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 _PRELOAD = ["numpy", "zenoh", "ftc_hw.bus.remote", "ftc_hw.devices.registry", "ftc_hw.app.rig",
@@ -156,6 +156,11 @@ def run_serve(cfg: ServeConfig, say: Callable[[str], None] = print) -> int:
     except SceneError as exc:
         raise ServeError(str(exc)) from None
     specs = served_devices(scene, cfg.devices)
+    if not cfg.sim:
+        try:  # said before any process starts: each device must say where it is
+            check_located(specs)
+        except RigError as exc:
+            raise ServeError(str(exc)) from None
     rig = cfg.rig or scene.name
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(_PRELOAD)

@@ -16,6 +16,7 @@ import pytest
 
 from ftc_hw.app.remote_rig import RemoteRig
 from ftc_hw.app.rig import RigError
+from ftc_hw.app.serve import ServeConfig, ServeError, run_serve
 from ftc_hw.app.session import MonitorConfig, MonitorSetupError, run_monitor
 from ftc_hw.bus import EVENTS_DEVICE, Bus, Watchdog
 from ftc_hw.bus.remote import RemoteSubscriber, open_session
@@ -107,6 +108,10 @@ def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_bac
 
 
 def test_nothing_served_there_is_a_clear_error_and_the_options_that_act_here_are_refused(tmp_path):
+    with pytest.raises(ServeError, match="no address for device 'ft'"):  # before any process starts
+        run_serve(ServeConfig("dxl-arm"))
+    with pytest.raises(ServeError, match="no device nope in scene dxl-arm"):
+        run_serve(ServeConfig("dxl-arm", devices=("nope",), sim=True))
     with pytest.raises(RigError, match="is ftc serve listening there"):
         RemoteRig(Bus(), free_endpoint(), "dxl-arm", ["wrench/ft"], timeout=1.0).open()
     for extra, said in (({"sim": True}, "--sim"), ({"reflex": "stop"}, "--reflex"), ({"faults": ("ft:kill@1",)},
