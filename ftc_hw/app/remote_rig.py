@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from ftc_hw.bus import EVENTS_CONTACT, Bus
@@ -17,8 +18,10 @@ from .rig import RigError
 class RemoteRig:
     """Frames from ``endpoint`` (a client of the ``ftc serve`` router there) for ``topics`` of ``rig``."""
 
-    def __init__(self, bus: Bus, endpoint: str, rig: str, topics: Sequence[str], timeout: float = 20.0) -> None:
+    def __init__(self, bus: Bus, endpoint: str, rig: str, topics: Sequence[str], timeout: float = 20.0,
+                 zenoh_config: Path | None = None) -> None:
         self.bus, self.endpoint, self.rig, self.topics, self.timeout = bus, endpoint, rig, tuple(topics), timeout
+        self.zenoh_config = zenoh_config
         self.adapters: tuple[Any, ...] = ()
         self.arm = None
         self._session: Any = None
@@ -30,10 +33,11 @@ class RemoteRig:
         end = time.monotonic() + self.timeout
         while self._session is None:  # the server may be starting: try again until the timeout
             try:
-                self._session = open_session(connect=[self.endpoint], mode="client")
+                self._session = open_session(connect=[self.endpoint], mode="client", config_file=self.zenoh_config)
             except RemoteError as exc:
                 if time.monotonic() >= end:
-                    raise RigError(f"{exc} (for {self.timeout:g} s: is ftc serve listening there?)") from None
+                    raise RigError(f"{exc} (for {self.timeout:g} s: is ftc serve listening there, and do the "
+                                   "credentials of --zenoh-config match its?)") from None
                 time.sleep(0.5)
         if self._sub is None:
             self._sub = RemoteSubscriber(self._session, self.bus, self.rig)

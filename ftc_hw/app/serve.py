@@ -58,17 +58,18 @@ class ServeConfig:
     hold_s: float = 2.0
     duration: float | None = None  # seconds (with sim: of the scenario), None: until stopped
     max_backoff_s: float = 5.0
+    zenoh_config: Path | None = None  # a Zenoh JSON5 file (TLS, user-password, access control): docs/bus.md
 
 
 def reader_main(scene_ref: str, overrides: tuple[str, ...], rig_file: Path | None, device: str, rig: str,
-                router: str, endpoint: Any) -> None:
+                router: str, endpoint: Any, zenoh_config: Path | None = None) -> None:
     """One device's reader (a process): its adapter on a local bus, the bus forwarded to Zenoh, until
     SIGTERM. Its adapter reconnects by itself; an exception ends the process (the supervisor restarts it)."""
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     scene = load_rig_scene(scene_ref, overrides, rig_file)
     spec = next(d for d in scene.devices if d.name == device)
-    session = open_session(connect=[router], mode="client")
+    session = open_session(connect=[router], mode="client", config_file=zenoh_config)
     bus = Bus(history=2000)
     with RemotePublisher(session, bus, rig):
         the_rig = build_rig(scene, bus=bus, devices=[spec], endpoints={device: endpoint} if endpoint else None)
@@ -170,14 +171,15 @@ def run_serve(cfg: ServeConfig, say: Callable[[str], None] = print) -> int:
             signal.signal(sig, lambda *_: stop.set())
         world = _start_world(cfg, scene, stack, say) if cfg.sim else None
         endpoints = world.endpoints if world is not None else {}
-        session = stack.enter_context(contextlib.closing(open_session(listen=list(cfg.listen), mode="router")))
+        session = stack.enter_context(contextlib.closing(open_session(listen=list(cfg.listen), mode="router",
+                                                                      config_file=cfg.zenoh_config)))
         bus = Bus(history=1000)
         stack.enter_context(RemotePublisher(session, bus, rig, prefixes=(EVENTS_DEVICE,)))
 
         def start(spec: DeviceSpec) -> Any:
             p = ctx.Process(target=reader_main, name=f"ftc-reader-{spec.name}", daemon=True,
                             args=(str(scene.path), cfg.device_overrides, cfg.rig_file, spec.name, rig,
-                                  cfg.listen[0], endpoints.get(spec.name)))
+                                  cfg.listen[0], endpoints.get(spec.name), cfg.zenoh_config))
             p.start()
             return p
 

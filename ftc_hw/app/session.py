@@ -73,6 +73,7 @@ class MonitorConfig:
     refine: bool = False  # keep refining the calibration's identified model while the arm moves free
     remote: str | None = None  # a Zenoh endpoint: the devices' frames from ftc serve there, not adapters here
     remote_rig: str | None = None  # the rig's name in ftc/<rig>/... (default: the scene's name)
+    zenoh_config: Path | None = None  # with remote: a Zenoh JSON5 file (TLS, credentials), docs/bus.md
 
 
 @dataclass
@@ -295,7 +296,8 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "")
                       + (f" served at {cfg.remote}" if cfg.remote else "") + " ...")
         try:
-            rig = (RemoteRig(bus, cfg.remote, cfg.remote_rig or scene.name, topics[:2], cfg.connect_timeout_s)
+            rig = (RemoteRig(bus, cfg.remote, cfg.remote_rig or scene.name, topics[:2], cfg.connect_timeout_s,
+                             cfg.zenoh_config)
                    if cfg.remote else
                    build_rig(scene, bus=bus, devices=[d for d in (ft_dev, arm_dev) if d is not None],
                              endpoints=world.endpoints if world is not None else None, timeout=cfg.connect_timeout_s))

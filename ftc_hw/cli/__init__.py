@@ -68,6 +68,10 @@ DeviceOption = Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
     "--device", metavar="NAME.KEY=VALUE", help="Where a scene device is, or one of its params, e.g. "
     "ft.address=/dev/ttyUSB0, ft.channel=/dev/ttyACM0 (CAN), arm.address=192.168.1.10, arm.baudrate=57600; "
     "repeatable, applied after --rig.")]
+ZenohConfigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
+    "--zenoh-config", metavar="FILE.json5", exists=True, dir_okay=False,
+    help="A Zenoh configuration file under the session: TLS, user-password credentials, access control "
+         "(docs/bus.md).")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
 
@@ -210,6 +214,7 @@ def monitor(
         "tcp/127.0.0.1:7447) instead of opening them here; the contact events go back there (docs/bus.md).")] = None,
     remote_name: Annotated[Optional[str], typer.Option(  # noqa: UP045
         help="With --remote: the rig's name in ftc/NAME/... (default: the scene's name, as ftc serve).")] = None,
+    zenoh_config: ZenohConfigOption = None,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
@@ -219,7 +224,7 @@ def monitor(
                                          reflex.value if reflex else None, events, truth, noise, view, level.value,
                                          tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
                                          reality=reality.value, refine=refine, remote=remote,
-                                         remote_name=remote_name))
+                                         remote_name=remote_name, zenoh_config=zenoh_config))
 
 
 @app.command()
@@ -410,12 +415,13 @@ def serve(
                                         "plays (a monitor connecting then tares at rest).")] = 2.0,
     duration: Annotated[Optional[float], typer.Option(  # noqa: UP045
         min=0.1, help="Seconds to serve (with --sim: of the scenario); default until Ctrl-C.")] = None,
+    zenoh_config: ZenohConfigOption = None,
 ) -> None:
     """Each device's reader in its own process, supervised (restarted when it dies), publishing to Zenoh."""
     from ftc_hw.cli.serve import run_serve_command  # lazy: CLI start-up
 
     raise typer.Exit(run_serve_command(scene, tuple(device or ()), rig, tuple(listen or ()), name, sim, scenario,
-                                       seed, reality.value, hold, duration))
+                                       seed, reality.value, hold, duration, zenoh_config))
 
 
 @app.command()

@@ -15,7 +15,8 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
                         truth: Path | None, noise: bool, view: bool, level: str = "dynamics",
                         faults: tuple[str, ...] = (), *, device_overrides: tuple[str, ...] = (),
                         rig: Path | None = None, reality: str = "ideal", refine: bool = False,
-                        remote: str | None = None, remote_name: str | None = None) -> int:
+                        remote: str | None = None, remote_name: str | None = None,
+                        zenoh_config: Path | None = None) -> int:
     if truth is not None and not sim:
         typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
         return 2
@@ -32,7 +33,7 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
                         record=record, reflex=reflex, events=events, truth=truth, noise=noise, view=view,
                         level=None if level == "scene" else level, faults=faults,
                         device_overrides=device_overrides, rig=rig, reality=reality, refine=refine,
-                        remote=remote, remote_rig=remote_name)
+                        remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config)
     out = run_guarded(cfg, make_console())
     return out if isinstance(out, int) else out.exit_code
 

@@ -11,12 +11,12 @@ from ftc_hw.bus.remote import RemoteError
 
 def run_serve_command(scene: str, devices: tuple[str, ...], rig: Path | None, listen: tuple[str, ...],
                       name: str | None, sim: bool, scenario: str, seed: int, reality: str, hold: float,
-                      duration: float | None) -> int:
+                      duration: float | None, zenoh_config: Path | None = None) -> int:
     names = tuple(d for d in devices if "=" not in d)  # a device to serve; NAME.KEY=VALUE: an override
     overrides = tuple(d for d in devices if "=" in d)
     cfg = ServeConfig(scene, devices=names, rig=name, listen=listen or (DEFAULT_LISTEN,), device_overrides=overrides,
                       rig_file=rig, sim=sim, scenario=scenario, seed=seed, reality=reality, hold_s=hold,
-                      duration=duration)
+                      duration=duration, zenoh_config=zenoh_config)
     try:
         return run_serve(cfg, say=lambda line: typer.echo(line))
     except (ServeError, RemoteError) as exc:

@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -19,17 +20,32 @@ from ftc_hw.app.rig import RigError
 from ftc_hw.app.serve import ServeConfig, ServeError, run_serve
 from ftc_hw.app.session import MonitorConfig, MonitorSetupError, run_monitor
 from ftc_hw.bus import EVENTS_DEVICE, Bus, Watchdog
-from ftc_hw.bus.remote import RemoteSubscriber, open_session
+from ftc_hw.bus.remote import RemoteError, RemoteSubscriber, open_session
 from tests.foundation.test_bus_remote import free_endpoint, wait_for
 
 pytestmark = pytest.mark.timeout(90)
 
 
-def test_a_killed_reader_process_is_stale_at_once_and_streams_again_within_a_second():
+def credentials(tmp_path: Path) -> tuple[Path, Path, Path]:
+    """A cell's Zenoh user-password files: the server's (its dictionary), a client's, a wrong one."""
+    (tmp_path / "users.txt").write_text("cell:cell-secret\nmonitor:m0nitor\n")
+    files = []
+    for name, user, password, extra in (("server", "cell", "cell-secret", f', dictionary_file: "{tmp_path}/users.txt"'),
+                                        ("client", "monitor", "m0nitor", ""), ("wrong", "monitor", "guess", "")):
+        path = tmp_path / f"{name}.json5"
+        usrpwd = f'user: "{user}", password: "{password}"{extra}'
+        path.write_text(f"{{ transport: {{ auth: {{ usrpwd: {{ {usrpwd} }} }} }} }}")
+        files.append(path)
+    return files[0], files[1], files[2]
+
+
+def test_a_killed_reader_process_is_stale_at_once_and_streams_again_within_a_second(tmp_path):
+    """With user-password credentials (docs/bus.md): a session with the wrong ones or none gets nothing."""
     endpoint = free_endpoint()
+    server_cfg, client_cfg, wrong_cfg = credentials(tmp_path)
     serve = subprocess.Popen([sys.executable, "-m", "ftc_hw", "serve", "--scene", "dxl-arm", "--sim", "--duration",
-                              "20", "--hold", "0", "--listen", endpoint], stdout=subprocess.PIPE,
-                             stderr=subprocess.STDOUT, text=True)
+                              "20", "--hold", "0", "--listen", endpoint, "--zenoh-config", str(server_cfg)],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
     try:
         while not any(line.startswith("serving ") for line in lines):
@@ -38,7 +54,10 @@ def test_a_killed_reader_process_is_stale_at_once_and_streams_again_within_a_sec
             lines.append(line)
         pids = dict(re.findall(r"(\w+) \([\w-]+, pid (\d+)\)", lines[-1]))
         assert set(pids) == {"ft", "arm"}, lines[-1]
-        session = open_session(connect=[endpoint], mode="client")
+        for cfg in (wrong_cfg, None):
+            with pytest.raises(RemoteError, match="cannot open a Zenoh session"):
+                open_session(connect=[endpoint], mode="client", config_file=cfg)
+        session = open_session(connect=[endpoint], mode="client", config_file=client_cfg)
         bus = Bus()
         with RemoteSubscriber(session, bus, "dxl-arm") as sub:
             wait_for(lambda: sub.counts.by_topic.get("wrench/ft", 0) > 100 and "joints/arm" in sub.counts.by_topic,
