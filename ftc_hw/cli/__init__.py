@@ -425,6 +425,23 @@ def serve(
 
 
 @app.command()
+def record(
+    remote: Annotated[str, typer.Option(metavar="ENDPOINT", help="The Zenoh endpoint of ftc serve, e.g. "
+                                        "tcp/127.0.0.1:7447.")],
+    out: Annotated[Path, typer.Option(help="The MCAP file to write.")],
+    name: Annotated[str, typer.Option(help="The rig's name in ftc/NAME/... (ftc serve's --name, by default its "
+                                      "scene's name).")],
+    duration: Annotated[Optional[float], typer.Option(  # noqa: UP045
+        min=0.1, help="Seconds to record; default until Ctrl-C.")] = None,
+    zenoh_config: ZenohConfigOption = None,
+) -> None:
+    """Record what ftc serve (and a remote monitor's events) publish on Zenoh, in a process of its own."""
+    from ftc_hw.cli.serve import run_record_command  # lazy: CLI start-up
+
+    raise typer.Exit(run_record_command(remote, name, out, duration, zenoh_config))
+
+
+@app.command()
 def calibrate(
     scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
     sim: Annotated[bool, typer.Option("--sim", help="Run against emulated devices (a hidden payload).")] = False,

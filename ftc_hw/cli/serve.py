@@ -1,4 +1,5 @@
-"""``ftc serve``: arguments to :mod:`ftc_hw.app.serve`."""
+"""``ftc serve`` and ``ftc record --remote``: arguments to :mod:`ftc_hw.app.serve` and
+:mod:`ftc_hw.app.remote_record`."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,3 +23,14 @@ def run_serve_command(scene: str, devices: tuple[str, ...], rig: Path | None, li
     except (ServeError, RemoteError) as exc:
         typer.echo(f"error: {exc}", err=True)
         return 1
+
+
+def run_record_command(remote: str, name: str, out: Path, duration: float | None, zenoh_config: Path | None) -> int:
+    from ftc_hw.app.remote_record import record_remote  # lazy: only this command records
+
+    try:
+        result = record_remote(remote, name, out, duration, zenoh_config, say=lambda line: typer.echo(line))
+    except (RemoteError, OSError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        return 1
+    return 0 if not result.drops and not any(result.seq_missing.values()) else 3

@@ -21,6 +21,7 @@ from ftc_hw.app.serve import ServeConfig, ServeError, run_serve
 from ftc_hw.app.session import MonitorConfig, MonitorSetupError, run_monitor
 from ftc_hw.bus import EVENTS_DEVICE, Bus, Watchdog
 from ftc_hw.bus.remote import RemoteError, RemoteSubscriber, open_session
+from ftc_hw.record.reader import read_recording
 from tests.foundation.test_bus_remote import free_endpoint, wait_for
 
 pytestmark = pytest.mark.timeout(90)
@@ -103,6 +104,9 @@ def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_bac
         assert said[1].startswith("serving "), said  # the router listens from now on
         session = open_session(connect=[endpoint], mode="client")
         watcher = Bus()
+        recorder = subprocess.Popen([sys.executable, "-m", "ftc_hw", "record", "--remote", endpoint, "--name",
+                                     "dxl-arm", "--out", str(tmp_path / "all.mcap"), "--duration", "30"],
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         with RemoteSubscriber(session, watcher, "dxl-arm"):
             events, rec = tmp_path / "events.jsonl", tmp_path / "run.mcap"
             mon = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--remote", endpoint,
@@ -118,6 +122,12 @@ def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_bac
             assert len(seen) == len(written) and [e.kind for e in seen] == [e["kind"] for e in written]
             assert all(abs(e.t_host_ns / 1e9 - w["t"]) < 1e-6 for e, w in zip(seen, written, strict=True))
         session.close()
+        recorder.send_signal(signal.SIGINT)  # a recorder of its own: every topic, the monitor's events too
+        said, _ = recorder.communicate(timeout=30)
+        missing = said.split("missing by sequence number: ", 1)[1].split("}", 1)[0]
+        assert recorder.returncode == 0 and "'wrench/ft': 0" in missing and "'joints/arm': 0" in missing, said
+        kept = read_recording(tmp_path / "all.mcap")
+        assert len(kept.topic("events/contact")) == len(written) and len(kept.topic("wrench/ft")) > 500
         serve.kill()  # the world and readers off the cores: the replay computes alone
         replay = subprocess.run([sys.executable, "-m", "ftc_hw", "replay", str(rec), "--speed", "0", "--check"],
                                 capture_output=True, text=True, timeout=60)
