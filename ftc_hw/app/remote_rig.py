@@ -4,13 +4,17 @@ taken from Zenoh into the monitor's bus, and its contact events published back. 
 ``adapters`` (none here: the readers' counters are in their own processes)."""
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ftc_hw.bus import EVENTS_CONTACT, Bus
-from ftc_hw.bus.remote import RemoteError, RemotePublisher, RemoteSubscriber, open_session
+import zenoh
+
+from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent
+from ftc_hw.bus.remote import RemoteError, RemotePublisher, RemoteSubscriber, open_session, stop_key
+from ftc_hw.bus.wire import encode
 
 from .rig import RigError
 
@@ -22,6 +26,8 @@ class RemoteRig:
                  zenoh_config: Path | None = None) -> None:
         self.bus, self.endpoint, self.rig, self.topics, self.timeout = bus, endpoint, rig, tuple(topics), timeout
         self.zenoh_config = zenoh_config
+        self.arm_name = topics[1].split("/", 1)[1] if len(topics) > 1 else "arm"
+        self._stop_pub: Any = None
         self.adapters: tuple[Any, ...] = ()
         self.arm = None
         self._session: Any = None
@@ -57,6 +63,16 @@ class RemoteRig:
                        f"within {self.timeout:g} s (is ftc serve --scene ... running there, with --name "
                        f"{self.rig}?); received {counts}")
 
+    def stop_arm(self, onset: ContactEvent) -> None:
+        """The reflex across the process boundary: the onset to the arm's reader (``ftc serve``), which
+        stops the arm and says so (a ``stopped`` event with its latency from the onset sample)."""
+        if self._stop_pub is None:
+            if self._session is None:
+                raise RigError("not connected")
+            self._stop_pub = self._session.declare_publisher(stop_key(self.rig, self.arm_name), express=True,
+                                                             congestion_control=zenoh.CongestionControl.BLOCK)
+        self._stop_pub.put(encode(onset))
+
     @property
     def counts(self) -> dict[str, Any]:
         """What was taken and dropped (after close: at close)."""
@@ -68,6 +84,10 @@ class RemoteRig:
         """Idempotent: stops taking frames and publishing events, closes the session."""
         if self._sub is not None:
             self._final = self.counts
+        if self._stop_pub is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._stop_pub.undeclare()
+            self._stop_pub = None
         for part in (self._pub, self._sub):
             if part is not None:
                 part.close()

@@ -28,7 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
-from ftc_hw.bus.remote import RemotePublisher, open_session
+from ftc_hw.bus.remote import RemotePublisher, open_session, stop_key
+from ftc_hw.bus.wire import decode
 from ftc_hw.devices.registry import role_of
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 
@@ -74,9 +75,35 @@ def reader_main(scene_ref: str, overrides: tuple[str, ...], rig_file: Path | Non
     with RemotePublisher(session, bus, rig):
         the_rig = build_rig(scene, bus=bus, devices=[spec], endpoints={device: endpoint} if endpoint else None)
         with the_rig.open():
+            adapter = the_rig.adapter(device)
+            command = (session.declare_subscriber(stop_key(rig, device), _stopper(adapter, bus, device))
+                       if role_of(spec.kind) == "arm" else None)
             while not stop.wait(0.2):
                 pass
+            if command is not None:
+                command.undeclare()
     session.close()
+
+
+def _stopper(adapter: Any, bus: Bus, device: str) -> Callable[[Any], None]:
+    """The arm's side of the reflex across processes: a remote monitor's onset stops the arm here, at
+    once, in Zenoh's thread; a ``stopped`` event says when, from the onset sample (one host's clock)."""
+
+    def on_command(sample: Any) -> None:
+        t0 = time.monotonic_ns()
+        try:
+            onset = decode(sample.payload.to_bytes())
+            adapter.stop()
+            t1 = time.monotonic_ns()
+            bus.publish(EVENTS_DEVICE, DeviceEvent.make(
+                t1, device, "stopped", f"stopped on a remote monitor's command (contact {onset.contact_id})",
+                {"sent_after_onset_ms": (t0 - onset.t_host_ns) / 1e6, "stop_call_ms": (t1 - t0) / 1e6,
+                 "contact_id": float(onset.contact_id)}))
+        except Exception as exc:  # noqa: BLE001 - said on the bus; the reader goes on
+            bus.publish(EVENTS_DEVICE, DeviceEvent.make(time.monotonic_ns(), device, "error",
+                                                        f"stop command failed: {exc!r}"))
+
+    return on_command
 
 
 @dataclass

@@ -23,7 +23,16 @@ from rich.live import Live
 from ftc_hw import __version__
 from ftc_hw.app.evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.app.view import LiveView, evaluation_table, stream_table
-from ftc_hw.bus import EVENTS_CONTACT, STREAM_EVENT_KINDS, Bus, ContactEvent, DeviceEvent, joints_topic, wrench_topic
+from ftc_hw.bus import (
+    EVENTS_CONTACT,
+    EVENTS_DEVICE,
+    STREAM_EVENT_KINDS,
+    Bus,
+    ContactEvent,
+    DeviceEvent,
+    joints_topic,
+    wrench_topic,
+)
 from ftc_hw.calibration.file import CalibrationError, load_calibration
 from ftc_hw.compensation import Drift
 from ftc_hw.devices.base import frozen_heap, responsive_readers
@@ -112,10 +121,12 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any],
 
 
 class StopReflex:
-    """On every contact onset, ``arm.stop()`` from its own thread (never in the pipeline's)."""
+    """On every contact onset, ``stop(onset)`` from its own thread (never in the pipeline's): the local
+    arm adapter's ``stop()``, or a remote monitor's command to the arm's reader process
+    (:meth:`~ftc_hw.app.remote_rig.RemoteRig.stop_arm`)."""
 
-    def __init__(self, bus: Bus, arm: Any) -> None:
-        self.arm = arm
+    def __init__(self, bus: Bus, stop: Callable[[ContactEvent], None]) -> None:
+        self.stop = stop
         self.stops: list[dict[str, Any]] = []
         self.errors: list[str] = []
         self._pending: list[ContactEvent] = []
@@ -138,7 +149,7 @@ class StopReflex:
                 ev = self._pending.pop(0)
                 t0 = time.monotonic_ns()
                 try:
-                    self.arm.stop()
+                    self.stop(ev)
                     self.stops.append({"onset_t_host_ns": ev.t_host_ns,
                                        "sent_after_onset_ms": (t0 - ev.t_host_ns) / 1e6,
                                        "stop_call_ms": (time.monotonic_ns() - t0) / 1e6})
@@ -198,8 +209,8 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
 def _check_remote(cfg: MonitorConfig) -> None:
     if cfg.remote is None:
         return
-    clash = [what for what, on in (("--sim", cfg.sim), ("--reflex", cfg.reflex), ("--fault", cfg.faults)) if on]
-    if clash:  # the reflex and the faults act on devices in this process
+    clash = [what for what, on in (("--sim", cfg.sim), ("--fault", cfg.faults)) if on]
+    if clash:  # the faults act on emulators this process starts
         raise MonitorSetupError(f"--remote takes the devices' frames from ftc serve: not with {', '.join(clash)} "
                                 "(start the world with ftc serve --sim)")
 
@@ -323,7 +334,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
             except RigError as exc:
                 raise MonitorSetupError(str(exc)) from None
             if cfg.reflex == "stop":
-                reflex = StopReflex(bus, rig.arm)
+                reflex = StopReflex(bus, rig.stop_arm if isinstance(rig, RemoteRig) else lambda _ev: rig.arm.stop())
             if world is not None:
                 console.print("waiting for the first frames (the sensor is tared at rest) ...")
                 _tare_then_go(cfg, monitor, world)
@@ -388,6 +399,9 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
     out.counters = dict(monitor.counters)
     if reflex is not None:
         out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
+        if cfg.remote:  # the arm's reader process says when it stopped the arm
+            out.reflex["stopped_by_reader"] = [dict(e.counters) for e in monitor.bus.history(EVENTS_DEVICE)
+                                               if e.kind == "stopped"]
     if world is not None and world.done and "error" not in (world.result or {}):
         out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s,
                                   crlb=crlb_of_truth(scene), solver_rms=solver_rms_of_truth(scene))
@@ -464,6 +478,11 @@ def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], 
         console.print(f"reflex stop: {len(stops)} sent" + (f", {min(sent):.2f}-{max(sent):.2f} ms after the onset "
                                                           "sample" if sent else "")
                       + (f"; errors: {out.reflex['errors']}" if out.reflex["errors"] else ""))
+        by_reader = [r["sent_after_onset_ms"] for r in out.reflex.get("stopped_by_reader", [])]
+        if cfg.remote:
+            console.print(f"the arm's reader process stopped it {len(by_reader)}x"
+                          + (f", {min(by_reader):.2f}-{max(by_reader):.2f} ms after the onset sample" if by_reader
+                             else ""))
     if recorder is not None:
         console.print(f"recorded {sum(recorder.counts.values())} messages -> {recorder.path} "
                       f"(drops {recorder.drops})")

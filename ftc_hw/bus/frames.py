@@ -72,8 +72,9 @@ class JointFlag(enum.IntFlag):
 ContactKind = Literal["onset", "update", "offset"]
 # sensor_lost / arm_lost: the monitor lost the F/T or the joint stream (it is blind: no contact is
 # judged; an open contact is closed by an offset flagged "lost"); sensor_back / arm_back: it returned
+# stopped: an arm's reader stopped it on a remote monitor's command (ftc serve), its latency in the counters
 DeviceEventKind = Literal["connect", "disconnect", "error", "stale", "recovered", "reconnecting",
-                          "sensor_lost", "sensor_back", "arm_lost", "arm_back"]
+                          "sensor_lost", "sensor_back", "arm_lost", "arm_back", "stopped"]
 CONTACT_KINDS: frozenset[str] = frozenset(get_args(ContactKind))
 DEVICE_EVENT_KINDS: frozenset[str] = frozenset(get_args(DeviceEventKind))
 STREAM_EVENT_KINDS: frozenset[str] = frozenset({"sensor_lost", "sensor_back", "arm_lost", "arm_back"})

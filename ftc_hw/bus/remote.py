@@ -49,6 +49,11 @@ def key_expr(rig: str, topic: str) -> str:
     return f"{KEY_ROOT}/{rig}/{topic}"
 
 
+def stop_key(rig: str, arm: str) -> str:
+    """Where a remote monitor commands an arm's reader to stop: the onset ContactEvent is the payload."""
+    return key_expr(rig, f"command/{arm}/stop")
+
+
 def topic_of(key: str) -> tuple[str, str] | None:
     """``(rig, topic)`` of one of our key expressions, or None for another key."""
     parts = key.split("/", 2)
@@ -208,6 +213,8 @@ class RemoteSubscriber:
 
     def _on_sample(self, sample: Any) -> None:
         where = topic_of(str(sample.key_expr))
+        if where is not None and where[1].startswith("command/"):
+            return  # a command to a reader (stop_key), not a bus topic
         try:
             frames = decode_all(sample.payload.to_bytes())
             ok = where is not None and all(topic_for(f) == where[1] for f in frames)

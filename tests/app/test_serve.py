@@ -110,13 +110,21 @@ def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_bac
         with RemoteSubscriber(session, watcher, "dxl-arm"):
             events, rec = tmp_path / "events.jsonl", tmp_path / "run.mcap"
             mon = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--remote", endpoint,
-                                  "--duration", "8", "--no-view", "--events", str(events), "--record", str(rec)],
+                                  "--duration", "8", "--no-view", "--events", str(events), "--record", str(rec),
+                                  "--reflex", "stop"],
                                  capture_output=True, text=True, timeout=60)
             out = mon.stdout + mon.stderr
             clean_or_loaded(mon.returncode, out)  # seven processes on this host's cores: its load may show
             written = [json.loads(line) for line in events.read_text().splitlines()]
             onsets = [e for e in written if e["kind"] == "onset"]
-            assert len(onsets) >= 2 and "'foreign': 0, 'corrupt': 0" in out, out[-2000:]
+            assert len(onsets) >= 1 and "'foreign': 0, 'corrupt': 0" in out, out[-2000:]
+            # the reflex across the process boundary: each onset to the arm's reader, which stopped the arm
+            # and said so on the bus (its latency from the onset sample, one host's clock)
+            said = re.search(r"the arm's reader process stopped it (\d+)x, ([0-9.]+)-([0-9.]+) ms after the onset", out)
+            assert said and int(said.group(1)) == len(onsets), out[-3000:]
+            stopped = [e for e in watcher.history(EVENTS_DEVICE) if e.kind == "stopped"]
+            assert len(stopped) == len(onsets) and all(e.source == "arm" for e in stopped)
+            assert all(0 < e.counters["sent_after_onset_ms"] < 100 for e in stopped), [e.counters for e in stopped]
             time.sleep(0.3)
             seen = watcher.history("events/contact")
             assert len(seen) == len(written) and [e.kind for e in seen] == [e["kind"] for e in written]
