@@ -152,7 +152,6 @@ def test_nothing_served_there_is_a_clear_error_and_the_options_that_act_here_are
         run_serve(ServeConfig("dxl-arm", devices=("nope",), sim=True))
     with pytest.raises(RigError, match="is ftc serve listening there"):
         RemoteRig(Bus(), free_endpoint(), "dxl-arm", ["wrench/ft"], timeout=1.0).open()
-    for extra, said in (({"sim": True}, "--sim"), ({"reflex": "stop"}, "--reflex"), ({"faults": ("ft:kill@1",)},
-                                                                                       "--fault")):
+    for extra, said in (({"sim": True}, "--sim"), ({"faults": ("ft:kill@1",)}, "--fault")):  # the reflex goes
         with pytest.raises(MonitorSetupError, match=f"not with {said}"):
             run_monitor(MonitorConfig("dxl-arm", remote=free_endpoint(), view=False, **extra))

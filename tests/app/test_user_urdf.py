@@ -48,7 +48,11 @@ def test_a_users_urdf_with_mesh_links_calibrates_monitors_and_identifies(tmp_pat
     # 3 ms only when the monitor kept up (a run its host left behind says so: exit 3, its load reasons)
     assert len(ev.contacts) == 3 and (ev.all_in_time or loaded), report
     assert ev.false_alarms == [] and ev.splits == 0, report
+    # a run whose host left F/T frames unjudged says contacts may be missed (exit 3): only then may one be
+    judged_all = not any("of F/T frames not judged" in r for r in loaded)
     for c in ev.contacts:
+        if not c.detected and not judged_all:
+            continue
         assert c.link_right >= 0.8 and c.est_link == c.link and c.trusted >= 5, report
         assert c.err_median_mm <= MEDIAN_ERR_MM["ur5e"] and c.force_err_median_n < 10.0, report
     check_pairs(lines, report)
