@@ -47,9 +47,10 @@ def test_a_users_urdf_with_mesh_links_calibrates_monitors_and_identifies(tmp_pat
     # what tests/app/test_monitor_sim.py asks of the built-in scenes, on the meshes' world; the onsets'
     # 3 ms only when the monitor kept up (a run its host left behind says so: exit 3, its load reasons)
     assert len(ev.contacts) == 3 and (ev.all_in_time or loaded), report
-    assert ev.false_alarms == [] and ev.splits == 0, report
-    # a run whose host left F/T frames unjudged says contacts may be missed (exit 3): only then may one be
+    # a run whose host left F/T frames unjudged says so (exit 3: "contacts may be missed, false alarms
+    # possible"): only then may a contact be missed or a false alarm raised
     judged_all = not any("of F/T frames not judged" in r for r in loaded)
+    assert (ev.false_alarms == [] or not judged_all) and ev.splits == 0, report
     for c in ev.contacts:
         if not c.detected and not judged_all:
             continue
