@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ftc_hw.bus import Bus
-from ftc_hw.bus.remote import RemoteError, RemoteSubscriber, open_session
+from ftc_hw.bus.remote import RemoteSubscriber, connect_session
 from ftc_hw.record.writer import McapRecorder
 
 
@@ -30,15 +30,7 @@ def record_remote(endpoint: str, rig: str, out: Path, duration: float | None = N
                   zenoh_config: Path | None = None, say: Callable[[str], None] = print,
                   connect_timeout: float = 20.0) -> RecordOutcome:
     """Record until ``duration`` seconds are up, or SIGINT/SIGTERM; RemoteError if nothing serves there."""
-    end = time.monotonic() + connect_timeout
-    while True:
-        try:
-            session = open_session(connect=[endpoint], mode="client", config_file=zenoh_config)
-            break
-        except RemoteError:
-            if time.monotonic() >= end:
-                raise
-            time.sleep(0.5)
+    session = connect_session(endpoint, connect_timeout, config_file=zenoh_config)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -53,9 +45,7 @@ def record_remote(endpoint: str, rig: str, out: Path, duration: float | None = N
         sub.close()
         recorder.stop()
         session.close()
-    result = RecordOutcome(dict(recorder.counts), drops=recorder.drops, remote={
-        "received": sub.counts.received, "foreign": sub.counts.foreign, "corrupt": sub.counts.corrupt,
-        "version": sub.counts.version})
+    result = RecordOutcome(dict(recorder.counts), drops=recorder.drops, remote=sub.counts.summary())
     result.seq_missing = {t: bus.stats(t).seq_missing for t in bus.topics() if t.startswith(("wrench/", "joints/"))}
     say(f"recorded {sum(result.counts.values())} messages ({', '.join(f'{t} {n}' for t, n in result.counts.items())}); "
         f"missing by sequence number: {result.seq_missing}; from Zenoh: {result.remote}; writer drops {result.drops}")

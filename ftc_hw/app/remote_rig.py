@@ -13,7 +13,7 @@ from typing import Any
 import zenoh
 
 from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent
-from ftc_hw.bus.remote import RemoteError, RemotePublisher, RemoteSubscriber, open_session, stop_key
+from ftc_hw.bus.remote import RemoteError, RemotePublisher, RemoteSubscriber, connect_session, stop_key
 from ftc_hw.bus.wire import encode
 
 from .rig import RigError
@@ -36,15 +36,12 @@ class RemoteRig:
         self._final: dict[str, Any] = {}
 
     def open(self) -> RemoteRig:
-        end = time.monotonic() + self.timeout
-        while self._session is None:  # the server may be starting: try again until the timeout
+        if self._session is None:
             try:
-                self._session = open_session(connect=[self.endpoint], mode="client", config_file=self.zenoh_config)
+                self._session = connect_session(self.endpoint, self.timeout, config_file=self.zenoh_config)
             except RemoteError as exc:
-                if time.monotonic() >= end:
-                    raise RigError(f"{exc} (for {self.timeout:g} s: is ftc serve listening there, and do the "
-                                   "credentials of --zenoh-config match its?)") from None
-                time.sleep(0.5)
+                raise RigError(f"{exc} (for {self.timeout:g} s: is ftc serve listening there, and do the "
+                               "credentials of --zenoh-config match its?)") from None
         if self._sub is None:
             self._sub = RemoteSubscriber(self._session, self.bus, self.rig)
             self._pub = RemotePublisher(self._session, self.bus, self.rig, prefixes=(EVENTS_CONTACT,))
@@ -76,9 +73,9 @@ class RemoteRig:
     @property
     def counts(self) -> dict[str, Any]:
         """What was taken and dropped (after close: at close)."""
-        c = self._sub.counts if self._sub is not None else None
-        return self._final if c is None else {"received": c.received, "foreign": c.foreign, "corrupt": c.corrupt,
-                                     "version": c.version, "events_sent": self._pub.sent if self._pub else 0}
+        if self._sub is None:
+            return self._final
+        return self._sub.counts.summary() | {"events_sent": self._pub.sent if self._pub else 0}
 
     def close(self) -> None:
         """Idempotent: stops taking frames and publishing events, closes the session."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import json
 import threading
+import time
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -99,6 +100,19 @@ def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (), *, mod
     except zenoh.ZError as exc:
         raise RemoteError(f"cannot open a Zenoh session (listen {list(listen)}, connect {list(connect)}): "
                           f"{exc}") from None
+
+
+def connect_session(endpoint: str, timeout: float, *, config_file: Path | None = None) -> zenoh.Session:
+    """A client session to the router at ``endpoint``, tried again every 0.5 s for ``timeout`` seconds
+    (the server may be starting); then :class:`RemoteError`."""
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            return open_session(connect=[endpoint], mode="client", config_file=config_file)
+        except RemoteError:
+            if time.monotonic() >= end:
+                raise
+            time.sleep(0.5)
 
 
 class RemotePublisher:
@@ -198,6 +212,10 @@ class RemoteCounts:
     corrupt: int = 0  # magic right, body wrong (truncated, bad value)
     version: int = 0  # another major version of the format
     by_topic: dict[str, int] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, int]:
+        """What a run's summary says: taken, and dropped by why."""
+        return {"received": self.received, "foreign": self.foreign, "corrupt": self.corrupt, "version": self.version}
 
 
 class RemoteSubscriber:
