@@ -69,13 +69,15 @@ class FaultConfig:
 
 class FaultInjector:
     """Decides the fault of each frame and applies byte-level faults. ``counts`` holds what was done;
-    ``damaged`` the sample numbers the faults destroyed (callers append)."""
+    ``damaged`` the sample numbers the faults destroyed (callers append); ``at`` the sample numbers each
+    fault hit, for callers that name the sample (a client that starts late saw only the later ones)."""
 
     def __init__(self, config: FaultConfig, clock=time.monotonic) -> None:
         self.config = config
         self.rng = random.Random(config.seed)
         self.counts: Counter[str] = Counter()
         self.damaged: list[int] = []
+        self.at: dict[str, list[int]] = {}
         self.clock = clock
         self.t0 = clock()
         self._cooldown = 0
@@ -88,8 +90,9 @@ class FaultInjector:
     def elapsed(self) -> float:
         return self.clock() - self.t0
 
-    def next_fault(self, kind: str = "") -> str | None:
-        """The fault of the next frame (None: send it as is). ``kind`` also counts it as ``kind.fault``."""
+    def next_fault(self, kind: str = "", sample: int | None = None) -> str | None:
+        """The fault of the next frame (None: send it as is). ``kind`` also counts it as ``kind.fault``;
+        ``sample`` (the frame's sample number) is kept in ``at``."""
         u = self.rng.random()  # one draw per frame, always
         if self._cooldown > 0:
             self._cooldown -= 1
@@ -102,6 +105,8 @@ class FaultInjector:
                 self.counts[name] += 1
                 if kind:
                     self.counts[f"{kind}.{name}"] += 1
+                if sample is not None:
+                    self.at.setdefault(name, []).append(sample)
                 return name
         return None
 
@@ -142,4 +147,5 @@ class FaultInjector:
         return self.config.delay_ms / 1000.0
 
     def snapshot(self) -> dict[str, Any]:
-        return {"faults": dict(self.counts), "damaged": list(self.damaged)}
+        return {"faults": dict(self.counts), "damaged": list(self.damaged),
+                "fault_at": {k: list(v) for k, v in self.at.items()}}

@@ -76,7 +76,7 @@ class SerialStreamEmulator(Emulator):
             return
         frame = self.fmt.encode(rec[1:7], seq=n, t_device_ns=round(float(rec[0]) * 1e9) + self.t_offset_ns,
                                 status=self.saturation_bits(rec))
-        fault = faults.next_fault()
+        fault = faults.next_fault(sample=n)
         if fault in _DESTROYS:
             faults.damaged.append(n)
         if fault == "delay":
