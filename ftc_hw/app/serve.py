@@ -19,7 +19,10 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
+import os
 import signal
+import socket
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -27,15 +30,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import zenoh
+
 from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
 from ftc_hw.bus.remote import RemotePublisher, open_session, stop_key
 from ftc_hw.bus.wire import decode
 from ftc_hw.devices.registry import role_of
+from ftc_hw.priority import READER_NICE, prefer_cpu
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 
 from .rig import RigError, build_rig, check_located
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+COUNTERS_PERIOD_S = 1.0  # how often a reader process says its adapter's counters
+# A reader process's threads (poll loop, Zenoh's callbacks) are light: a stop command waits at most this
+# long for the interpreter (at the monitor's 0.5 ms the reflex's median crossing was 1.1-1.3 ms, here 0.8)
+READER_PROCESS_SWITCH_S = 0.0001
 _PRELOAD = ["numpy", "zenoh", "ftc_hw.bus.remote", "ftc_hw.devices.registry", "ftc_hw.app.rig",
             "ftc_hw.scene"]
 
@@ -63,11 +73,17 @@ class ServeConfig:
 
 
 def reader_main(scene_ref: str, overrides: tuple[str, ...], rig_file: Path | None, device: str, rig: str,
-                router: str, endpoint: Any, zenoh_config: Path | None = None) -> None:
+                router: str, endpoint: Any, zenoh_config: Path | None = None, owner_pid: int = 0) -> None:
     """One device's reader (a process): its adapter on a local bus, the bus forwarded to Zenoh, until
-    SIGTERM. Its adapter reconnects by itself; an exception ends the process (the supervisor restarts it)."""
+    SIGTERM or until ``owner_pid`` (the process that started it: ftc serve, a monitor) is gone. Its adapter
+    reconnects by itself; an exception ends the process (the supervisor restarts it)."""
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    sys.setswitchinterval(READER_PROCESS_SWITCH_S)
+    # ahead of ordinary processes, behind the devices (ftc_hw.priority), Zenoh's threads too: frames and
+    # stop commands must not wait for a core. (The FIFO real-time class, tried for an arm's poll loop,
+    # kept RTDE on a saturated 2-core host but starved the F/T reader and the monitor: docs/bus.md)
+    prefer_cpu(READER_NICE, exact=True)
     scene = load_rig_scene(scene_ref, overrides, rig_file)
     spec = next(d for d in scene.devices if d.name == device)
     session = open_session(connect=[router], mode="client", config_file=zenoh_config)
@@ -76,34 +92,60 @@ def reader_main(scene_ref: str, overrides: tuple[str, ...], rig_file: Path | Non
         the_rig = build_rig(scene, bus=bus, devices=[spec], endpoints={device: endpoint} if endpoint else None)
         with the_rig.open():
             adapter = the_rig.adapter(device)
-            command = (session.declare_subscriber(stop_key(rig, device), _stopper(adapter, bus, device))
-                       if role_of(spec.kind) == "arm" else None)
-            while not stop.wait(0.2):
-                pass
+            command = _StopCommands(session, rig, adapter, bus) if role_of(spec.kind) == "arm" else None
+            while not stop.wait(COUNTERS_PERIOD_S) and _alive(owner_pid):  # orphaned: its owner was killed
+                _say_counters(bus, adapter)
             if command is not None:
-                command.undeclare()
+                command.close()
+        _say_counters(bus, adapter, final=True)  # closed: its last word, sent before the session closes
     session.close()
 
 
-def _stopper(adapter: Any, bus: Bus, device: str) -> Callable[[Any], None]:
-    """The arm's side of the reflex across processes: a remote monitor's onset stops the arm here, at
-    once, in Zenoh's thread; a ``stopped`` event says when, from the onset sample (one host's clock)."""
+class _StopCommands:
+    """The arm's side of the reflex across processes: a remote monitor's onset (on the arm's stop key)
+    stops the arm at once, in Zenoh's thread (a hand-over to another thread cost a wake-up); a
+    ``stopped`` event says when, from the onset sample (one host's clock), and how long the call took."""
 
-    def on_command(sample: Any) -> None:
+    def __init__(self, session: Any, rig: str, adapter: Any, bus: Bus) -> None:
+        self.adapter, self.bus = adapter, bus
+        self._sub = session.declare_subscriber(stop_key(rig, adapter.name),
+                                               lambda sample: self._stop(sample.payload.to_bytes()))
+
+    def _stop(self, payload: bytes) -> None:
         t0 = time.monotonic_ns()
+        name = self.adapter.name
         try:
-            onset = decode(sample.payload.to_bytes())
-            adapter.stop()
+            onset = decode(payload)
+            self.adapter.stop()
             t1 = time.monotonic_ns()
-            bus.publish(EVENTS_DEVICE, DeviceEvent.make(
-                t1, device, "stopped", f"stopped on a remote monitor's command (contact {onset.contact_id})",
+            self.bus.publish(EVENTS_DEVICE, DeviceEvent.make(
+                t1, name, "stopped", f"stopped on a remote monitor's command (contact {onset.contact_id})",
                 {"sent_after_onset_ms": (t0 - onset.t_host_ns) / 1e6, "stop_call_ms": (t1 - t0) / 1e6,
                  "contact_id": float(onset.contact_id)}))
         except Exception as exc:  # noqa: BLE001 - said on the bus; the reader goes on
-            bus.publish(EVENTS_DEVICE, DeviceEvent.make(time.monotonic_ns(), device, "error",
-                                                        f"stop command failed: {exc!r}"))
+            self.bus.publish(EVENTS_DEVICE, DeviceEvent.make(time.monotonic_ns(), name, "error",
+                                                             f"stop command failed: {exc!r}"))
 
-    return on_command
+    def close(self) -> None:
+        with contextlib.suppress(zenoh.ZError):
+            self._sub.undeclare()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's: the pid was reused, its owner is gone
+        return False
+    return True
+
+
+def _say_counters(bus: Bus, adapter: Any, final: bool = False) -> None:
+    """The adapter's counters as a ``counters`` device event (the message: its kind), for the monitor."""
+    counters = {k: float(v) for k, v in adapter.counters.items()} | ({"final": 1.0} if final else {})
+    bus.publish(EVENTS_DEVICE, DeviceEvent.make(time.monotonic_ns(), adapter.name, "counters", adapter.kind,
+                                                counters))
 
 
 @dataclass
@@ -177,6 +219,83 @@ def served_devices(scene: Scene, names: Sequence[str]) -> list[DeviceSpec]:
     return specs
 
 
+class ServedReaders:
+    """A Zenoh router on ``listen`` and a supervised reader process per device, publishing there; the
+    supervisor polled in its own thread. ``start()``, ``stop()`` (idempotent; readers say their final
+    counters first), a context manager. ``endpoints``: where each device's emulator is (sim), else None."""
+
+    def __init__(self, scene: Scene, specs: Sequence[DeviceSpec], rig: str, listen: Sequence[str], *,
+                 endpoints: dict[str, Any] | None = None, device_overrides: tuple[str, ...] = (),
+                 rig_file: Path | None = None, zenoh_config: Path | None = None, max_backoff_s: float = 5.0) -> None:
+        self.scene, self.specs, self.rig, self.listen = scene, list(specs), rig, list(listen)
+        self.endpoints = endpoints or {}
+        self.device_overrides, self.rig_file, self.zenoh_config = device_overrides, rig_file, zenoh_config
+        self.bus = Bus(history=1000)
+        self.supervisor = Supervisor(self._start_reader, self.specs, self.bus, max_backoff_s=max_backoff_s)
+        self._stack = contextlib.ExitStack()
+        self._quit = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.session: Any = None  # the router's Zenoh session, once started
+
+    def _start_reader(self, spec: DeviceSpec) -> Any:
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(_PRELOAD)
+        p = ctx.Process(target=reader_main, name=f"ftc-reader-{spec.name}", daemon=True,
+                        args=(str(self.scene.path), self.device_overrides, self.rig_file, spec.name, self.rig,
+                              self.listen[0], self.endpoints.get(spec.name), self.zenoh_config, os.getpid()))
+        p.start()
+        return p
+
+    def start(self) -> ServedReaders:
+        if self._thread is not None:
+            return self
+        session = self._stack.enter_context(contextlib.closing(open_session(
+            listen=self.listen, mode="router", config_file=self.zenoh_config)))
+        self.session = session
+        self._stack.enter_context(RemotePublisher(session, self.bus, self.rig, prefixes=(EVENTS_DEVICE,)))
+        self._stack.callback(self.supervisor.stop_all)
+        self.supervisor.start_all()
+        self._thread = threading.Thread(target=self._poll, name="ftc-reader-supervisor", daemon=True)
+        self._thread.start()
+        return self
+
+    def _poll(self) -> None:
+        while not self._quit.wait(0.01):
+            self.supervisor.poll()
+
+    @property
+    def restarts(self) -> int:
+        return sum(c.restarts for c in self.supervisor.children.values())
+
+    def describe(self) -> str:
+        return ", ".join(f"{s.name} ({s.kind}, pid {self.supervisor.children[s.name].proc.pid})" for s in self.specs)
+
+    def stop_readers(self) -> None:
+        """The supervisor stops restarting and every reader process is stopped (each says its final
+        counters first); the router stays up until ``stop()`` so that they arrive."""
+        self._quit.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+        self.supervisor.stop_all()
+
+    def stop(self) -> None:
+        self.stop_readers()
+        self._stack.close()
+
+    def __enter__(self) -> ServedReaders:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def free_loopback_endpoint() -> str:
+    """A Zenoh TCP endpoint on 127.0.0.1 at a port free now (for a monitor's own readers)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
 def run_serve(cfg: ServeConfig, say: Callable[[str], None] = print) -> int:
     """Serve until ``cfg.duration`` is up or SIGINT/SIGTERM; 0 when every reader ran to the end."""
     try:
@@ -190,41 +309,25 @@ def run_serve(cfg: ServeConfig, say: Callable[[str], None] = print) -> int:
         except RigError as exc:
             raise ServeError(str(exc)) from None
     rig = cfg.rig or scene.name
-    ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(_PRELOAD)
     stop = threading.Event()
     with contextlib.ExitStack() as stack:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: stop.set())
         world = _start_world(cfg, scene, stack, say) if cfg.sim else None
-        endpoints = world.endpoints if world is not None else {}
-        session = stack.enter_context(contextlib.closing(open_session(listen=list(cfg.listen), mode="router",
-                                                                      config_file=cfg.zenoh_config)))
-        bus = Bus(history=1000)
-        stack.enter_context(RemotePublisher(session, bus, rig, prefixes=(EVENTS_DEVICE,)))
-
-        def start(spec: DeviceSpec) -> Any:
-            p = ctx.Process(target=reader_main, name=f"ftc-reader-{spec.name}", daemon=True,
-                            args=(str(scene.path), cfg.device_overrides, cfg.rig_file, spec.name, rig,
-                                  cfg.listen[0], endpoints.get(spec.name), cfg.zenoh_config))
-            p.start()
-            return p
-
-        sup = Supervisor(start, specs, bus, max_backoff_s=cfg.max_backoff_s)
-        stack.callback(sup.stop_all)
-        sup.start_all()
-        say(f"serving {', '.join(f'{s.name} ({s.kind}, pid {sup.children[s.name].proc.pid})' for s in specs)} "
-            f"as ftc/{rig}/... on {', '.join(cfg.listen)}")
+        readers = stack.enter_context(ServedReaders(
+            scene, specs, rig, cfg.listen, endpoints=world.endpoints if world is not None else None,
+            device_overrides=cfg.device_overrides, rig_file=cfg.rig_file, zenoh_config=cfg.zenoh_config,
+            max_backoff_s=cfg.max_backoff_s))
+        say(f"serving {readers.describe()} as ftc/{rig}/... on {', '.join(cfg.listen)}")
         t_go = time.monotonic() + cfg.hold_s if world is not None else None
         end = None if cfg.duration is None else time.monotonic() + cfg.duration + (cfg.hold_s if world else 0.0)
         while not stop.is_set() and (end is None or time.monotonic() < end):
-            sup.poll()
             if t_go is not None and time.monotonic() >= t_go:
                 world.go()
                 say(f"the world plays {cfg.scenario}")
                 t_go = None
             stop.wait(0.01)
-        restarts = sum(c.restarts for c in sup.children.values())
+        restarts = readers.restarts
     say(f"stopped; reader restarts: {restarts}")
     return 0 if restarts == 0 else 3
 

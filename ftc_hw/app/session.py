@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import signal
 import tempfile
 import threading
@@ -45,7 +46,8 @@ from ftc_hw.sim_devices.host import WorldHost
 
 from .faults import Fault, FaultError, FaultPlan
 from .remote_rig import RemoteRig
-from .rig import RigError, build_rig, check_located, pick_device, require_device
+from .rig import Rig, RigError, build_rig, check_located, pick_device, require_device
+from .serve import ServedReaders, free_loopback_endpoint
 from .sim_joints import SimJointSource
 from .vendor_output import vendor_stderr
 
@@ -83,6 +85,7 @@ class MonitorConfig:
     remote: str | None = None  # a Zenoh endpoint: the devices' frames from ftc serve there, not adapters here
     remote_rig: str | None = None  # the rig's name in ftc/<rig>/... (default: the scene's name)
     zenoh_config: Path | None = None  # with remote: a Zenoh JSON5 file (TLS, credentials), docs/bus.md
+    readers: str = "auto"  # without remote: "process" (each reader in its own, as ftc serve), "thread", "auto"
 
 
 @dataclass
@@ -121,12 +124,13 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any],
 
 
 class StopReflex:
-    """On every contact onset, ``stop(onset)`` from its own thread (never in the pipeline's): the local
-    arm adapter's ``stop()``, or a remote monitor's command to the arm's reader process
-    (:meth:`~ftc_hw.app.remote_rig.RemoteRig.stop_arm`)."""
+    """On every contact onset, ``stop(onset)``: the local arm adapter's ``stop()`` from a thread of its own
+    (it waits for the device: never in the pipeline's thread), or, ``inline``, a command to the arm's
+    reader process (:meth:`~ftc_hw.app.remote_rig.RemoteRig.stop_arm`: a Zenoh put that does not wait)
+    at once in the thread that published the onset (a hand-over cost 0.2-0.3 ms, ftc bench reflex)."""
 
-    def __init__(self, bus: Bus, stop: Callable[[ContactEvent], None]) -> None:
-        self.stop = stop
+    def __init__(self, bus: Bus, stop: Callable[[ContactEvent], None], inline: bool = False) -> None:
+        self.stop, self.inline = stop, inline
         self.stops: list[dict[str, Any]] = []
         self.errors: list[str] = []
         self._pending: list[ContactEvent] = []
@@ -137,24 +141,29 @@ class StopReflex:
         self._thread.start()
 
     def _on_event(self, ev: ContactEvent) -> None:
-        if ev.kind == "onset":
+        if ev.kind != "onset":
+            return
+        if self.inline:
+            self._send(ev)
+        else:
             self._pending.append(ev)
             self._wake.set()
+
+    def _send(self, ev: ContactEvent) -> None:
+        t0 = time.monotonic_ns()
+        try:
+            self.stop(ev)
+            self.stops.append({"onset_t_host_ns": ev.t_host_ns, "sent_after_onset_ms": (t0 - ev.t_host_ns) / 1e6,
+                               "stop_call_ms": (time.monotonic_ns() - t0) / 1e6})
+        except Exception as exc:  # noqa: BLE001 - reported, the monitor goes on
+            self.errors.append(f"{type(exc).__name__}: {exc}")
 
     def _run(self) -> None:
         while not self._quit:
             self._wake.wait(0.5)
             self._wake.clear()
             while self._pending:
-                ev = self._pending.pop(0)
-                t0 = time.monotonic_ns()
-                try:
-                    self.stop(ev)
-                    self.stops.append({"onset_t_host_ns": ev.t_host_ns,
-                                       "sent_after_onset_ms": (t0 - ev.t_host_ns) / 1e6,
-                                       "stop_call_ms": (time.monotonic_ns() - t0) / 1e6})
-                except Exception as exc:  # noqa: BLE001 - reported, the monitor goes on
-                    self.errors.append(f"{type(exc).__name__}: {exc}")
+                self._send(self._pending.pop(0))
 
     def close(self) -> None:
         self._sub.close()
@@ -201,9 +210,33 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
         console.print(f"calibration {cfg.calibration}: bias{', payload' if cal_kwargs.get('payload') else ''} and "
                       f"its corrections ({cal_meta['applied']})")
     # readers that poll, and the reflex, while the pipeline computes; vendor C++ lines made readable
+    # the pipeline in the readers' tier too (readers of our own processes are preferred there): on a host
+    # with no core to spare an ordinary-priority monitor fell behind the world and emulators (docs/bus.md)
     with responsive_readers(), vendor_stderr() as vendor:
         out.vendor_lines = vendor.counts
         return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out, faults)
+
+
+SIM_PROCESS_READERS_MIN_CPUS = 4
+
+
+def readers_mode(cfg: MonitorConfig) -> tuple[str, str]:
+    """Where this run's readers run, "process" or "thread", and why. ``auto``: in processes of their own,
+    except with a simulated world on a host of fewer than 4 cores, where the world and the emulators
+    already take most of the cores: measured on 2 cores (docs/bus.md), reader processes (their own
+    interpreters, Zenoh) there left the pipeline seconds behind and RTDE missed as many packets."""
+    if cfg.readers != "auto":
+        return cfg.readers, f"--readers {cfg.readers}"
+    cpus = os.cpu_count() or 1
+    if cfg.sim and cpus < SIM_PROCESS_READERS_MIN_CPUS:
+        return "thread", (f"the simulated world and its emulators share this host's {cpus} cores: readers in "
+                          f"threads (--readers process to override; docs/bus.md)")
+    return "process", "readers in processes of their own (--readers thread to keep them here)"
+
+
+def _served(cfg: MonitorConfig) -> bool:
+    """Whether the devices' readers run in processes of their own (ftc serve's, or this run's)."""
+    return bool(cfg.remote) or readers_mode(cfg)[0] == "process"
 
 
 def _check_remote(cfg: MonitorConfig) -> None:
@@ -307,11 +340,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "")
                       + (f" served at {cfg.remote}" if cfg.remote else "") + " ...")
         try:
-            rig = (RemoteRig(bus, cfg.remote, cfg.remote_rig or scene.name, topics[:2], cfg.connect_timeout_s,
-                             cfg.zenoh_config)
-                   if cfg.remote else
-                   build_rig(scene, bus=bus, devices=[d for d in (ft_dev, arm_dev) if d is not None],
-                             endpoints=world.endpoints if world is not None else None, timeout=cfg.connect_timeout_s))
+            rig = _make_rig(cfg, scene, bus, [d for d in (ft_dev, arm_dev) if d is not None], topics[:2], world)
         except RigError as exc:
             raise MonitorSetupError(str(exc)) from None
         if arm_dev is None:
@@ -320,6 +349,8 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
 
         def pump() -> None:
             for ev in ev_sub.drain():
+                if isinstance(ev, DeviceEvent) and ev.kind == "counters":
+                    continue  # a reader's counters, each second: the summary's
                 view.add(ev)
                 stream = isinstance(ev, DeviceEvent) and ev.kind in STREAM_EVENT_KINDS
                 if isinstance(ev, ContactEvent) or stream:
@@ -333,8 +364,14 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                 rig.open().wait()
             except RigError as exc:
                 raise MonitorSetupError(str(exc)) from None
+            if isinstance(rig, RemoteRig) and rig.readers is not None:
+                console.print(f"readers in processes of their own: {rig.readers.describe()}, over Zenoh on "
+                              f"{rig.endpoint}")
+            elif not cfg.remote:
+                console.print(readers_mode(cfg)[1])
             if cfg.reflex == "stop":
-                reflex = StopReflex(bus, rig.stop_arm if isinstance(rig, RemoteRig) else lambda _ev: rig.arm.stop())
+                reflex = (StopReflex(bus, rig.stop_arm, inline=True) if isinstance(rig, RemoteRig) else
+                          StopReflex(bus, lambda _ev: rig.arm.stop()))
             if world is not None:
                 console.print("waiting for the first frames (the sensor is tared at rest) ...")
                 _tare_then_go(cfg, monitor, world)
@@ -362,9 +399,26 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
             console.print(out.drift.summary())
         if isinstance(rig, RemoteRig):
             out.remote = rig.counts
+            if rig.readers is not None and rig.readers.restarts:
+                out.degraded.append(f"reader processes restarted {rig.readers.restarts}x (crashed or killed)")
         _judge_degraded(monitor, rig.adapters, out, cfg.sim)
         _summary(console, cfg, bus, topics, out, rig.adapters, recorder, world)
     return out
+
+
+def _make_rig(cfg: MonitorConfig, scene: Scene, bus: Bus, devices: list[DeviceSpec], topics: list[str],
+              world: WorldHost | None) -> Rig | RemoteRig:
+    """The devices' frames onto ``bus``: from ftc serve at ``cfg.remote``; from reader processes of our own
+    (the default: nothing this process computes can make a reader miss a packet); or from adapters here."""
+    endpoints = world.endpoints if world is not None else None
+    if cfg.remote:
+        return RemoteRig(bus, cfg.remote, cfg.remote_rig or scene.name, topics, cfg.connect_timeout_s, cfg.zenoh_config)
+    if readers_mode(cfg)[0] == "process":
+        listen = free_loopback_endpoint()
+        readers = ServedReaders(scene, devices, scene.name, [listen], endpoints=endpoints,
+                                device_overrides=cfg.device_overrides, rig_file=cfg.rig)
+        return RemoteRig(bus, listen, scene.name, topics, cfg.connect_timeout_s, readers=readers)
+    return build_rig(scene, bus=bus, devices=devices, endpoints=endpoints, timeout=cfg.connect_timeout_s)
 
 
 def _watch(cfg: MonitorConfig, console: Console, view: LiveView, monitor: LiveMonitor, world: WorldHost | None,
@@ -399,7 +453,7 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
     out.counters = dict(monitor.counters)
     if reflex is not None:
         out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
-        if cfg.remote:  # the arm's reader process says when it stopped the arm
+        if _served(cfg):  # the arm's reader process says when it stopped the arm
             out.reflex["stopped_by_reader"] = [dict(e.counters) for e in monitor.bus.history(EVENTS_DEVICE)
                                                if e.kind == "stopped"]
     if world is not None and world.done and "error" not in (world.result or {}):
@@ -466,8 +520,8 @@ def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], 
     console.print(f"monitor: {out.counters}")
     for a in adapters:
         console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
-    if cfg.remote:
-        console.print(f"from {cfg.remote} (Zenoh): {out.remote}")
+    if _served(cfg):
+        console.print(f"from {cfg.remote or 'reader processes'} (Zenoh): {out.remote}")
     if out.faults:
         console.print("faults played: " + ", ".join(f"{f} (done at t = {t:.2f} s)" for f, t in out.faults))
     for line, n in out.vendor_lines.items():
@@ -479,7 +533,7 @@ def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], 
                                                           "sample" if sent else "")
                       + (f"; errors: {out.reflex['errors']}" if out.reflex["errors"] else ""))
         by_reader = [r["sent_after_onset_ms"] for r in out.reflex.get("stopped_by_reader", [])]
-        if cfg.remote:
+        if _served(cfg):
             console.print(f"the arm's reader process stopped it {len(by_reader)}x"
                           + (f", {min(by_reader):.2f}-{max(by_reader):.2f} ms after the onset sample" if by_reader
                              else ""))

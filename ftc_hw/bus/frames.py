@@ -73,8 +73,9 @@ ContactKind = Literal["onset", "update", "offset"]
 # sensor_lost / arm_lost: the monitor lost the F/T or the joint stream (it is blind: no contact is
 # judged; an open contact is closed by an offset flagged "lost"); sensor_back / arm_back: it returned
 # stopped: an arm's reader stopped it on a remote monitor's command (ftc serve), its latency in the counters
+# counters: a reader process's adapter counters (ftc serve: every second, and a final one flagged "final")
 DeviceEventKind = Literal["connect", "disconnect", "error", "stale", "recovered", "reconnecting",
-                          "sensor_lost", "sensor_back", "arm_lost", "arm_back", "stopped"]
+                          "sensor_lost", "sensor_back", "arm_lost", "arm_back", "stopped", "counters"]
 CONTACT_KINDS: frozenset[str] = frozenset(get_args(ContactKind))
 DEVICE_EVENT_KINDS: frozenset[str] = frozenset(get_args(DeviceEventKind))
 STREAM_EVENT_KINDS: frozenset[str] = frozenset({"sensor_lost", "sensor_back", "arm_lost", "arm_back"})

@@ -38,6 +38,15 @@ class Reflex(StrEnum):
     stop = "stop"
 
 
+class Readers(StrEnum):
+    """Where the devices' readers run: each in its own process (as ftc serve runs them), in threads here,
+    or auto (processes, except with --sim on a host of fewer than 4 cores)."""
+
+    auto = "auto"
+    process = "process"
+    thread = "thread"
+
+
 class RealityChoice(StrEnum):
     """How the simulated world's arm differs from the model (docs/reality.md)."""
 
@@ -215,6 +224,11 @@ def monitor(
     remote_name: Annotated[Optional[str], typer.Option(  # noqa: UP045
         help="With --remote: the rig's name in ftc/NAME/... (default: the scene's name, as ftc serve).")] = None,
     zenoh_config: ZenohConfigOption = None,
+    readers: Annotated[Readers, typer.Option(
+        help="process: each device's reader in its own process, its frames over Zenoh on loopback (nothing the "
+             "pipeline computes can make it miss a packet); thread: in this process; auto: process, except with "
+             "--sim on a host of fewer than 4 cores, whose cores the simulated world needs (docs/bus.md).")
+    ] = Readers.auto,
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
@@ -224,7 +238,8 @@ def monitor(
                                          reflex.value if reflex else None, events, truth, noise, view, level.value,
                                          tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
                                          reality=reality.value, refine=refine, remote=remote,
-                                         remote_name=remote_name, zenoh_config=zenoh_config))
+                                         remote_name=remote_name, zenoh_config=zenoh_config,
+                                         readers=readers.value))
 
 
 @app.command()
@@ -354,6 +369,17 @@ def bench_arms(
     from ftc_hw.bench.arms import run  # lazy: CLI start-up
 
     run(json_path=json_path, duration=duration, stops=stops)
+
+
+@bench_app.command("reflex")
+def bench_reflex(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    stops: Annotated[int, typer.Option(min=1, help="Onsets per arm.")] = 200,
+) -> None:
+    """The stop reflex across the process boundary (the arm's reader in its own process), beside in-process."""
+    from ftc_hw.bench.reflex import run  # lazy: CLI start-up
+
+    run(json_path=json_path, stops=stops)
 
 
 @app.command()

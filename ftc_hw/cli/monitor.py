@@ -16,7 +16,7 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
                         faults: tuple[str, ...] = (), *, device_overrides: tuple[str, ...] = (),
                         rig: Path | None = None, reality: str = "ideal", refine: bool = False,
                         remote: str | None = None, remote_name: str | None = None,
-                        zenoh_config: Path | None = None) -> int:
+                        zenoh_config: Path | None = None, readers: str = "auto") -> int:
     if truth is not None and not sim:
         typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
         return 2
@@ -33,7 +33,7 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
                         record=record, reflex=reflex, events=events, truth=truth, noise=noise, view=view,
                         level=None if level == "scene" else level, faults=faults,
                         device_overrides=device_overrides, rig=rig, reality=reality, refine=refine,
-                        remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config)
+                        remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config, readers=readers)
     out = run_guarded(cfg, make_console())
     return out if isinstance(out, int) else out.exit_code
 

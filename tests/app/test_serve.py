@@ -145,6 +145,92 @@ def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_bac
         serve.wait(5)
 
 
+def _tls_files(tmp_path: Path) -> tuple[Path, Path]:
+    """A test CA and a server certificate for localhost (openssl), and the Zenoh files: the server's (its
+    key and certificate, and the CA: its readers connect through TLS too) and a client's (the CA)."""
+    def openssl(*args: str) -> None:
+        subprocess.run(["openssl", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "2",
+            "-subj", "/CN=ftc-test-ca")
+    openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out", "server.csr", "-subj",
+            "/CN=localhost")
+    (tmp_path / "ext.cnf").write_text("subjectAltName=DNS:localhost\n")
+    openssl("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-out",
+            "server.pem", "-days", "2", "-extfile", "ext.cnf")
+    ca = f'root_ca_certificate: "{tmp_path}/ca.pem"'
+    server, client = tmp_path / "server.json5", tmp_path / "client.json5"
+    server.write_text(f'{{ transport: {{ link: {{ tls: {{ listen_private_key: "{tmp_path}/server.key", '
+                      f'listen_certificate: "{tmp_path}/server.pem", {ca} }} }} }} }}')
+    client.write_text(f"{{ transport: {{ link: {{ tls: {{ {ca} }} }} }} }}")
+    return server, client
+
+
+def test_served_over_tls_only_a_client_that_trusts_the_cell_s_ca_gets_frames(tmp_path):
+    server_cfg, client_cfg = _tls_files(tmp_path)
+    endpoint = free_endpoint().replace("tcp/127.0.0.1", "tls/localhost")
+    serve = subprocess.Popen([sys.executable, "-m", "ftc_hw", "serve", "--scene", "dxl-arm", "--sim", "--duration",
+                              "30", "--hold", "0", "--listen", endpoint, "--zenoh-config", str(server_cfg)],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        said = [serve.stdout.readline() for _ in range(2)]
+        assert said[1].startswith("serving "), said
+        for cfg, where in ((None, endpoint), (None, endpoint.replace("tls/localhost", "tcp/127.0.0.1"))):
+            with pytest.raises(RemoteError, match="cannot open a Zenoh session"):  # no CA; not TLS at all
+                open_session(connect=[where], mode="client", config_file=cfg)
+        session = open_session(connect=[endpoint], mode="client", config_file=client_cfg)
+        with RemoteSubscriber(session, Bus(), "dxl-arm") as sub:
+            wait_for(lambda: sub.counts.by_topic.get("wrench/ft", 0) > 50 and "joints/arm" in sub.counts.by_topic,
+                     20.0, "both devices' frames over TLS")
+        session.close()
+    finally:
+        serve.kill()
+        serve.wait(5)
+
+
+def test_a_killed_monitor_leaves_the_devices_and_the_recorder_running_and_nothing_is_lost(tmp_path):
+    endpoint = free_endpoint()
+    serve = subprocess.Popen([sys.executable, "-m", "ftc_hw", "serve", "--scene", "dxl-arm", "--sim", "--duration",
+                              "40", "--hold", "1", "--listen", endpoint], stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True)
+    monitor = None
+    try:
+        said = [serve.stdout.readline() for _ in range(2)]
+        assert said[1].startswith("serving "), said
+        recorder = subprocess.Popen([sys.executable, "-m", "ftc_hw", "record", "--remote", endpoint, "--name",
+                                     "dxl-arm", "--out", str(tmp_path / "all.mcap")],
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        monitor = subprocess.Popen([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--remote",
+                                    endpoint, "--duration", "60", "--no-view"], stdout=subprocess.PIPE,
+                                   stderr=subprocess.STDOUT, text=True)
+        lines = []
+        while not lines or not lines[-1].startswith("connecting to "):
+            lines.append(monitor.stdout.readline())
+            assert lines[-1], "".join(lines)
+        time.sleep(3.0)
+        monitor.kill()  # SIGKILL, mid-run
+        t_kill = time.monotonic_ns()
+        monitor.wait(5)
+        time.sleep(3.0)  # devices and recorder go on
+        assert serve.poll() is None and recorder.poll() is None
+        recorder.send_signal(signal.SIGINT)
+        recorded, _ = recorder.communicate(timeout=40)
+        missing = recorded.split("missing by sequence number: ", 1)[1].split("}", 1)[0]
+        assert recorder.returncode == 0 and "'wrench/ft': 0" in missing and "'joints/arm': 0" in missing, recorded
+        serve.send_signal(signal.SIGINT)
+        rest, _ = serve.communicate(timeout=30)
+        assert serve.returncode == 0 and "reader restarts: 0" in rest, rest
+        kept = read_recording(tmp_path / "all.mcap")
+        for topic, rate in (("wrench/ft", 100), ("joints/arm", 300)):
+            after = [m for m in kept.topic(topic) if m.t_host_ns > t_kill]
+            assert len(after) > 2 * rate, (topic, len(after))  # the 3 s after the kill, recorded
+    finally:
+        for p in (serve, monitor):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.wait(5)
+
+
 def test_nothing_served_there_is_a_clear_error_and_the_options_that_act_here_are_refused(tmp_path):
     with pytest.raises(ServeError, match="no address for device 'ft'"):  # before any process starts
         run_serve(ServeConfig("dxl-arm"))
