@@ -49,4 +49,3 @@ def preferred_cpu(nice: int = DEVICE_NICE) -> Iterator[bool]:
         if raised and os.getpriority(os.PRIO_PROCESS, 0) != before:
             with suppress(OSError):
                 os.setpriority(os.PRIO_PROCESS, 0, before)
-
