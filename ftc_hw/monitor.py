@@ -130,6 +130,7 @@ class LiveMonitor:
         self._joint_count = 0
         self._why_none = ""  # why the last _joints_at gave None: before, old, late, gap
         self._lags: deque[int] = deque(maxlen=20_000)  # ns from a frame's arrival to its judgement
+        self._waiting: deque = deque()  # the worker's F/T frames waiting for the joint stream
         self.lost_after_ns = {"sensor": int(ft_lost_s * 1e9), "arm": int(arm_lost_s * 1e9)}
         self._rx_ns: dict[str, int | None] = {"sensor": None, "arm": None}  # host time of the newest frame
         self._arm_back_t: int | None = None  # aligned time of the first joint sample after a loss
@@ -155,6 +156,9 @@ class LiveMonitor:
         self._thread.join(timeout=5.0)
         self._thread = None
         self.counters["ft_frames_dropped"] = self._sub.drops
+        unjudged = self._sub.pending + len(self._waiting)  # a backlog the run ended with: never judged
+        if unjudged:
+            self.counters["ft_frames_unjudged_at_stop"] = unjudged
         if self._lags:  # from a frame's arrival to its judgement (the recent ones)
             lags = np.array(self._lags) / 1e6
             self.counters["judge_lag_ms_p50"] = round(float(np.median(lags)))
@@ -174,6 +178,7 @@ class LiveMonitor:
         # joint state is interpolated rather than extrapolated; the onset time does not change.
         # The wait is in the worker's time: frames queued behind a waiting one wait with it.
         pending: deque = deque()
+        self._waiting = pending
         while not self._stop.is_set():
             try:
                 frame = self._sub.get(timeout=0.001 if pending else 0.01)

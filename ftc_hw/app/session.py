@@ -488,7 +488,8 @@ def _judge_degraded(monitor: LiveMonitor, adapters, out: MonitorOutcome, sim: bo
     if c.get("contacts_lost"):
         out.degraded.append(f"{c['contacts_lost']} open contact(s) closed by a lost stream (offsets flagged lost)")
     frames = c.get("frames", 0)
-    unjudged = {k: c.get(k, 0) for k in ("ft_frames_dropped", "no_joint_state", "blind_frames")}
+    unjudged = {k: c.get(k, 0) for k in ("ft_frames_dropped", "no_joint_state", "blind_frames",
+                                         "ft_frames_unjudged_at_stop")}
     total = frames + sum(unjudged.values())
     if total and sum(unjudged.values()) > DROPPED_SHARE * total:
         detail = ", ".join(f"{k} {v}" for k, v in unjudged.items() if v)

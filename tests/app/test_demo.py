@@ -42,7 +42,7 @@ def run_in_pty(args: list[str], timeout: float = 180) -> tuple[int, str]:
 
 def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary(clean_or_loaded):
     rc, out = run_in_pty([sys.executable, "-m", "ftc_hw", "demo", "--duration", "5", "--identify-seconds", "15"])
-    clean_or_loaded(rc, re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out))
+    loaded = clean_or_loaded(rc, re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out))
     assert "Traceback" not in out and "Error" not in out, out[-4000:]
     assert "\x1b[" in out  # a terminal: rich drew (and redrew) the live view with escape sequences
     plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out)
@@ -61,4 +61,8 @@ def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary(clean_or_load
     identifying = said.split("step 1/2", 1)[1].split("ftc demo scene ur5e", 1)[0]
     assert ("step 2/2: the monitor with that calibration" in said and "identified first" in said) or (
         "DEGRADED run" in identifying and "its identification failed" in said), said[-6000:]
-    assert "1/1 contacts detected" in said and "false alarms" in said, said[-3000:]
+    # the collision found; only a run that said its host left F/T frames unjudged (exit 3: "contacts may
+    # be missed") may miss it
+    judged_all = not any("of F/T frames not judged" in r for r in loaded)
+    found = re.search(r"(\d)/1 contacts detected, \d+ within 3 ms of their first sample, \d+ false alarms", said)
+    assert found and (found.group(1) == "1" or not judged_all), said[-3000:]
