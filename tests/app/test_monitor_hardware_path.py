@@ -9,6 +9,8 @@ import subprocess
 import sys
 from importlib import resources
 
+import pytest
+
 from ftc_hw.record.events import read_events
 from ftc_hw.record.reader import read_recording
 from ftc_hw.sim_devices.host import free_loopback
@@ -44,6 +46,7 @@ def test_monitor_connects_to_the_devices_at_the_scene_addresses(tmp_path, clean_
     assert read_events(tmp_path / "e.jsonl") == []
 
 
+@pytest.mark.compute
 def test_a_scene_without_an_arm_device_needs_sim():
     proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "leng2016", "--duration", "1",
                            "--no-view"], capture_output=True, text=True, timeout=60)
@@ -66,7 +69,7 @@ def test_monitor_reaches_emulators_placed_by_sim_address(tmp_path, clean_or_load
         channel = endpoints["ft"]["channel"]
         proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "ur5e", "--duration", "2",
                                "--device", f"arm.address={address}", "--device", f"ft.channel={channel}",
-                               "--record", str(tmp_path / "r.mcap"), "--no-view"],
+                               "--record", str(tmp_path / "r.mcap"), "--no-view", "--readers", "thread"],
                               capture_output=True, text=True, timeout=120)
     finally:
         sim.terminate()
@@ -75,9 +78,13 @@ def test_monitor_reaches_emulators_placed_by_sim_address(tmp_path, clean_or_load
     counts = read_recording(tmp_path / "r.mcap").counts()
     # both links streamed (1 kHz and 500 Hz; the 2 s include connecting, on a loaded machine) and were paired
     assert counts["wrench/ft"] >= 100 and counts["joints/arm"] >= 100 and counts["monitor/input"] >= 100, counts
+    # the readers in the monitor's threads (--readers thread): their adapters' counters, no reader process
     assert "ft (ft-can): {" in proc.stdout and "arm (ur-rtde): {" in proc.stdout
+    assert "--readers thread" in proc.stdout and "readers in processes" not in proc.stdout
+    assert "'final'" not in proc.stdout.split("arm (ur-rtde): ", 1)[1].split("}", 1)[0]
 
 
+@pytest.mark.compute
 def test_without_addresses_the_monitor_says_how_to_give_them():
     proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "ur5e", "--duration", "1",
                            "--no-view"], capture_output=True, text=True, timeout=60)

@@ -40,6 +40,7 @@ def test_a_scene_rig_is_its_f_t_sensor_and_its_arm(scene_name, ft_class, arm_cla
     rig.close()  # never opened: closing is harmless
 
 
+@pytest.mark.compute
 def test_overrides_put_the_rig_where_they_say():
     scene = load_rig_scene("ur5e", ["ft.channel=/dev/ttyFTC1", "ft.base_id=9", "arm.address=192.0.2.10"])
     rig = build_rig(scene)
@@ -47,6 +48,7 @@ def test_overrides_put_the_rig_where_they_say():
     rig.close()
 
 
+@pytest.mark.compute
 def test_a_scene_without_an_arm_device_says_so():
     scene = load_scene("leng2016")
     assert pick_device(scene, "arm") is None
@@ -55,6 +57,7 @@ def test_a_scene_without_an_arm_device_says_so():
     assert isinstance(build_rig(scene, devices=[_addressed(pick_device(scene, "ft"))]).ft, SerialStreamFTAdapter)
 
 
+@pytest.mark.compute
 def test_an_unknown_kind_is_a_rig_error():
     scene = load_scene("leng2016")
     with pytest.raises(RigError, match="no adapter for device kind 'laser'"):

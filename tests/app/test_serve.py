@@ -166,6 +166,7 @@ def _tls_files(tmp_path: Path) -> tuple[Path, Path]:
     return server, client
 
 
+@pytest.mark.compute
 def test_served_over_tls_only_a_client_that_trusts_the_cell_s_ca_gets_frames(tmp_path):
     server_cfg, client_cfg = _tls_files(tmp_path)
     endpoint = free_endpoint().replace("tcp/127.0.0.1", "tls/localhost")
@@ -211,7 +212,7 @@ def test_a_killed_monitor_leaves_the_devices_and_the_recorder_running_and_nothin
         monitor.kill()  # SIGKILL, mid-run
         t_kill = time.monotonic_ns()
         monitor.wait(5)
-        time.sleep(3.0)  # devices and recorder go on
+        time.sleep(2.0)  # devices and recorder go on
         assert serve.poll() is None and recorder.poll() is None
         recorder.send_signal(signal.SIGINT)
         recorded, _ = recorder.communicate(timeout=40)
@@ -223,7 +224,7 @@ def test_a_killed_monitor_leaves_the_devices_and_the_recorder_running_and_nothin
         kept = read_recording(tmp_path / "all.mcap")
         for topic, rate in (("wrench/ft", 100), ("joints/arm", 300)):
             after = [m for m in kept.topic(topic) if m.t_host_ns > t_kill]
-            assert len(after) > 2 * rate, (topic, len(after))  # the 3 s after the kill, recorded
+            assert len(after) > 1.5 * rate, (topic, len(after))  # the 2 s after the kill, recorded
     finally:
         for p in (serve, monitor):
             if p is not None and p.poll() is None:
@@ -231,6 +232,7 @@ def test_a_killed_monitor_leaves_the_devices_and_the_recorder_running_and_nothin
                 p.wait(5)
 
 
+@pytest.mark.compute
 def test_nothing_served_there_is_a_clear_error_and_the_options_that_act_here_are_refused(tmp_path):
     with pytest.raises(ServeError, match="no address for device 'ft'"):  # before any process starts
         run_serve(ServeConfig("dxl-arm"))
