@@ -21,7 +21,6 @@ import contextlib
 import multiprocessing as mp
 import os
 import signal
-import socket
 import sys
 import threading
 import time
@@ -134,9 +133,7 @@ class _StopCommands:
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # someone else's: the pid was reused, its owner is gone
+    except (ProcessLookupError, PermissionError):  # gone, or the pid reused by someone else's process
         return False
     return True
 
@@ -231,6 +228,8 @@ class ServedReaders:
         self.endpoints = endpoints or {}
         self.device_overrides, self.rig_file, self.zenoh_config = device_overrides, rig_file, zenoh_config
         self.bus = Bus(history=1000)
+        self._ctx = mp.get_context("forkserver")
+        self._ctx.set_forkserver_preload(_PRELOAD)
         self.supervisor = Supervisor(self._start_reader, self.specs, self.bus, max_backoff_s=max_backoff_s)
         self._stack = contextlib.ExitStack()
         self._quit = threading.Event()
@@ -238,9 +237,7 @@ class ServedReaders:
         self.session: Any = None  # the router's Zenoh session, once started
 
     def _start_reader(self, spec: DeviceSpec) -> Any:
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(_PRELOAD)
-        p = ctx.Process(target=reader_main, name=f"ftc-reader-{spec.name}", daemon=True,
+        p = self._ctx.Process(target=reader_main, name=f"ftc-reader-{spec.name}", daemon=True,
                         args=(str(self.scene.path), self.device_overrides, self.rig_file, spec.name, self.rig,
                               self.listen[0], self.endpoints.get(spec.name), self.zenoh_config, os.getpid()))
         p.start()
@@ -287,13 +284,6 @@ class ServedReaders:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
-
-
-def free_loopback_endpoint() -> str:
-    """A Zenoh TCP endpoint on 127.0.0.1 at a port free now (for a monitor's own readers)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def run_serve(cfg: ServeConfig, say: Callable[[str], None] = print) -> int:

@@ -34,6 +34,7 @@ from ftc_hw.bus import (
     joints_topic,
     wrench_topic,
 )
+from ftc_hw.bus.remote import free_loopback_endpoint
 from ftc_hw.calibration.file import CalibrationError, load_calibration
 from ftc_hw.compensation import Drift
 from ftc_hw.devices.base import frozen_heap, responsive_readers
@@ -47,7 +48,7 @@ from ftc_hw.sim_devices.host import WorldHost
 from .faults import Fault, FaultError, FaultPlan
 from .remote_rig import RemoteRig
 from .rig import Rig, RigError, build_rig, check_located, pick_device, require_device
-from .serve import ServedReaders, free_loopback_endpoint
+from .serve import ServedReaders
 from .sim_joints import SimJointSource
 from .vendor_output import vendor_stderr
 
@@ -209,9 +210,9 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
     if cal_meta and cal_meta.get("applied"):
         console.print(f"calibration {cfg.calibration}: bias{', payload' if cal_kwargs.get('payload') else ''} and "
                       f"its corrections ({cal_meta['applied']})")
-    # readers that poll, and the reflex, while the pipeline computes; vendor C++ lines made readable
-    # the pipeline in the readers' tier too (readers of our own processes are preferred there): on a host
-    # with no core to spare an ordinary-priority monitor fell behind the world and emulators (docs/bus.md)
+    # readers that poll, and the reflex, while the pipeline computes (the pipeline in the readers' tier even
+    # when they run in processes of their own: at ordinary priority it fell behind the world and emulators
+    # on a host with no core to spare, docs/bus.md); vendor C++ lines made readable
     with responsive_readers(), vendor_stderr() as vendor:
         out.vendor_lines = vendor.counts
         return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out, faults)

@@ -13,7 +13,6 @@ a no-op callback subscriber on the topic), on loopback TCP:
 from __future__ import annotations
 
 import multiprocessing as mp
-import socket
 import time
 from typing import Any
 
@@ -21,15 +20,9 @@ import numpy as np
 
 from ftc_hw.bus.bus import Bus
 from ftc_hw.bus.frames import WrenchFrame
-from ftc_hw.bus.remote import RemotePublisher, RemoteSubscriber, open_session
+from ftc_hw.bus.remote import RemotePublisher, RemoteSubscriber, free_loopback_endpoint, open_session
 
 _RIG, _TOPIC = "bench", "wrench/bench"
-
-
-def _endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def _subscriber(endpoint: str, expect: int, ready: Any, out: Any) -> None:
@@ -60,7 +53,7 @@ def _subscriber(endpoint: str, expect: int, ready: Any, out: Any) -> None:
 
 
 def _run(n_subs: int, frames: int, rate_hz: float | None) -> dict[str, Any]:
-    endpoint = _endpoint()
+    endpoint = free_loopback_endpoint()
     session = open_session(listen=[endpoint])
     bus = Bus(history=1000)
     pub = RemotePublisher(session, bus, _RIG, prefixes=(_TOPIC,))

@@ -30,10 +30,11 @@ from rich.table import Table
 
 from ftc_hw.app.remote_rig import RemoteRig
 from ftc_hw.app.rig import build_rig
-from ftc_hw.app.serve import ServedReaders, free_loopback_endpoint
+from ftc_hw.app.serve import ServedReaders
 from ftc_hw.app.session import StopReflex
 from ftc_hw.bench.report import table_console
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, joints_topic
+from ftc_hw.bus.remote import free_loopback_endpoint
 from ftc_hw.devices.base import responsive_readers
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost
@@ -79,10 +80,7 @@ def across_processes(scene: Any, device: Any, world: WorldHost, stops: int, seed
         said = {int(e.counters["contact_id"]): e.counters for e in bus.history(EVENTS_DEVICE) if e.kind == "stopped"}
     finally:
         rig.close()
-    got = [said[i] for i in sorted(said)]
-    return {"received_ms": [c["sent_after_onset_ms"] for c in got],
-            "returned_ms": [c["sent_after_onset_ms"] + c["stop_call_ms"] for c in got],
-            "missing": stops - len(got), "errors": reflex.errors}
+    return _latencies([said[i] for i in sorted(said)], stops, reflex.errors)
 
 
 def in_process(scene: Any, device: Any, world: WorldHost, stops: int, seed: int) -> dict[str, Any]:
@@ -95,9 +93,14 @@ def in_process(scene: Any, device: Any, world: WorldHost, stops: int, seed: int)
             _play(rig.bus, reflex, stops, seed)
         finally:
             reflex.close()
-    return {"received_ms": [s["sent_after_onset_ms"] for s in reflex.stops],
-            "returned_ms": [s["sent_after_onset_ms"] + s["stop_call_ms"] for s in reflex.stops],
-            "missing": stops - len(reflex.stops), "errors": reflex.errors}
+    return _latencies(reflex.stops, stops, reflex.errors)
+
+
+def _latencies(stopped: list[Any], stops: int, errors: list[str]) -> dict[str, Any]:
+    """From each stop's ``sent_after_onset_ms`` and ``stop_call_ms``: onset to stop sent, to stop() returned."""
+    return {"received_ms": [s["sent_after_onset_ms"] for s in stopped],
+            "returned_ms": [s["sent_after_onset_ms"] + s["stop_call_ms"] for s in stopped],
+            "missing": stops - len(stopped), "errors": errors}
 
 
 def bench_arm(scene_name: str, kind: str, address: str | None, stops: int, seed: int) -> dict[str, Any]:

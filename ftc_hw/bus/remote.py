@@ -21,11 +21,14 @@ from __future__ import annotations
 
 import contextlib
 import json
+import socket
 import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from itertools import groupby
+from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +103,13 @@ def open_session(listen: Sequence[str] = (), connect: Sequence[str] = (), *, mod
     except zenoh.ZError as exc:
         raise RemoteError(f"cannot open a Zenoh session (listen {list(listen)}, connect {list(connect)}): "
                           f"{exc}") from None
+
+
+def free_loopback_endpoint() -> str:
+    """A TCP endpoint on 127.0.0.1 at a port free now (a private router: a monitor's own readers, a bench)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def connect_session(endpoint: str, timeout: float, *, config_file: Path | None = None) -> zenoh.Session:
@@ -194,13 +204,7 @@ class RemotePublisher:
 
 def _runs(items: list[tuple[str, bytes]]) -> list[tuple[str, list[bytes]]]:
     """Consecutive messages of one topic grouped, in order."""
-    out: list[tuple[str, list[bytes]]] = []
-    for topic, data in items:
-        if out and out[-1][0] == topic:
-            out[-1][1].append(data)
-        else:
-            out.append((topic, [data]))
-    return out
+    return [(topic, [data for _, data in run]) for topic, run in groupby(items, key=itemgetter(0))]
 
 
 @dataclass
