@@ -22,6 +22,7 @@ from .tracking import FUSED_FLAGS, ContactTrack, fuse_point, link_pose, report
 
 G_REFRESH_NS = 10_000_000
 QDD_RING = 64
+LAG_WINDOW_SAMPLES = 3  # the lag window spans at least this many sensor samples
 # an arm's reaction to a contact that counts against the sensor noise (chi-square, 1 dof, p = 0.999)
 IMPACT_CHI2 = 10.83
 IMPACT_PASSES = 2
@@ -121,6 +122,12 @@ class ContactPipeline:
         self._g_cache: np.ndarray | None = None
         self._g_time = 0
         self._lag_window_ns = int(2 * qdd_tau * 1e9)
+        # The acceleration estimate lags by about a sample at a slow sensor's rate: the detector's window
+        # holds a few samples, or a change one sample back is forgotten while the wrench still shows it
+        # (a joint sticking at a reversal on dxl-arm, 100 Hz: 2 tau = 4 ms saw one step, a 7-sigma
+        # alarm). The solver keeps 2 tau: a longer one cost dxl-arm's ideal p95 4.7 -> 6.5 mm.
+        self._judge_window_ns = max(self._lag_window_ns, round(LAG_WINDOW_SAMPLES / scene.sensor.rate_hz * 1e9))
+        self._judge_change = np.zeros(scene.n_joints)
         # how long after a contact's start the estimated acceleration may still miss the arm's
         # reaction to it (None: never re-weigh; see _impact_solve)
         self.impact_window_ns = None if impact_window_s is None else int(impact_window_s * 1e9)
@@ -189,12 +196,12 @@ class ContactPipeline:
         need_dyn = self.level == "dynamics"
         if need_dyn and qd is None:
             raise ValueError("dynamics compensation needs the joint velocities qd")
-        lag_error = held = None
+        lag_error = judge_lag = held = None
         qdd_estimated = need_dyn and qdd is None
         if qdd_estimated:
             t_clock = t_ns if t_device_ns is None else t_device_ns
             qdd = self.qdd.update(t_clock * 1e-9, qd)
-            lag_error = self._lag_error(t_clock, qdd)
+            lag_error, judge_lag = self._lag_errors(t_clock, qdd)
             held = self._gap_held(t_clock, lag_error, joint_gap_ns)
         want_tau = self.residuals is not None and current is not None
         # the joint torques come free with the inverse dynamics; at the gravity level they cost an
@@ -202,7 +209,12 @@ class ContactPipeline:
         loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau and need_dyn)
         external = self.compensator.unbiased(raw) - loads
         model_error = None if lag_error is None else self._model_error(t_clock, lag_error)
-        judged = model_error if held is None else self._model_error(t_clock, held)
+        if held is not None:
+            judged = self._model_error(t_clock, held)
+        elif judge_lag is lag_error:
+            judged = model_error
+        else:
+            judged = self._model_error(t_clock, judge_lag)
         if self.identified_error is not None:  # what the identified model may still get wrong
             z = np.zeros_like(q)
             rows = self.identified_error.rows(t_ns, q, z if qd is None else qd, z if qdd is None else qdd)
@@ -430,20 +442,25 @@ class ContactPipeline:
         # this frame's own lag error is in the newest bucket: the maximum covers it
         return self._lag_peak.max_since(t_clock - self.gap_hold_ns - self._gap_span, t_clock)
 
-    def _lag_error(self, t_ns: int, qdd: np.ndarray) -> np.ndarray | None:
+    def _lag_errors(self, t_ns: int, qdd: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
         """The largest change of the acceleration estimate over the last lag window (2 tau), per
         joint: the size of the estimator's lag error right now; None when it is negligible (saves an
         inverse dynamics). The largest change, not the change across the window: after a short pulse
-        the estimate comes back down and its two ends can agree while it still lags by the pulse."""
+        the estimate comes back down and its two ends can agree while it still lags by the pulse.
+        Returns the solver's (over 2 tau) and the detector's (over at least three sensor samples:
+        the same object when the sensor is fast enough for 2 tau to hold them)."""
         i = self._qdd_next
-        change = self._qdd_change
-        biggest = window_change(self._qdd_ring, self._qdd_ring_t, t_ns, self._lag_window_ns, qdd, change)
+        solver = self._lag_over(t_ns, qdd, self._lag_window_ns, self._qdd_change)
+        judge = (solver if self._judge_window_ns == self._lag_window_ns
+                 else self._lag_over(t_ns, qdd, self._judge_window_ns, self._judge_change))
         self._qdd_ring[i] = qdd
         self._qdd_ring_t[i] = t_ns
         self._qdd_next = (i + 1) % QDD_RING
-        if self.lag_gain * biggest < self.lag_floor:
-            return None
-        return self.lag_gain * change
+        return solver, judge
+
+    def _lag_over(self, t_ns: int, qdd: np.ndarray, window_ns: int, change: np.ndarray) -> np.ndarray | None:
+        biggest = window_change(self._qdd_ring, self._qdd_ring_t, t_ns, window_ns, qdd, change)
+        return None if self.lag_gain * biggest < self.lag_floor else self.lag_gain * change
 
     @staticmethod
     def _event(t_ns: int, kind: str, e: ContactEstimate | None, probability: float,

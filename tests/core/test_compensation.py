@@ -197,13 +197,33 @@ def test_the_lag_error_sees_a_pulse_whose_ends_agree():
     pipe = ContactPipeline(scene, level="dynamics")
     n = scene.n_joints
     pulse = [0.0, 0.1, 0.2, 0.1, 0.0]
-    out = [pipe._lag_error(i * 1_000_000, np.full(n, a)) for i, a in enumerate(pulse)]
+    out = [pipe._lag_errors(i * 1_000_000, np.full(n, a))[0] for i, a in enumerate(pulse)]
     assert out[0] is None  # nothing to compare with yet
     assert out[-1] is not None and np.allclose(out[-1], pipe.lag_gain * 0.2)
     # a still arm: no lag error, no inverse dynamics spent on it
     still = ContactPipeline(scene, level="dynamics")
-    assert all(still._lag_error(i * 1_000_000, np.zeros(n)) is None for i in range(10))
+    assert all(still._lag_errors(i * 1_000_000, np.zeros(n)) == (None, None) for i in range(10))
     # a sparse stream (100 Hz, longer than the window) still compares with its previous sample
     sparse = ContactPipeline(scene, level="dynamics")
-    sparse._lag_error(0, np.zeros(n))
-    assert np.allclose(sparse._lag_error(10_000_000, np.full(n, 0.5)), sparse.lag_gain * 0.5)
+    sparse._lag_errors(0, np.zeros(n))
+    assert np.allclose(sparse._lag_errors(10_000_000, np.full(n, 0.5))[0], sparse.lag_gain * 0.5)
+
+
+def test_the_detector_s_lag_window_holds_three_samples_of_a_slow_sensor():
+    """dxl-arm's F/T sensor samples at 100 Hz: a change of the acceleration estimate one sample back
+    (a joint that stuck at a reversal) is still in the detector's lag error while the arm's wrench
+    still shows it; a window of 2 tau (4 ms) forgot it one sample later and a stick raised a 7-sigma
+    false alarm. The solver's lag error keeps 2 tau (a longer one cost localization)."""
+    scene = load_scene("dxl-arm")
+    assert scene.sensor.rate_hz == 100.0
+    pipe = ContactPipeline(scene, level="dynamics")
+    n = scene.n_joints
+    step = [np.zeros(n)] + [np.full(n, 0.5)] * 5
+    out = [pipe._lag_errors(i * 10_000_000, a) for i, a in enumerate(step)]
+    assert np.allclose(out[1][0], pipe.lag_gain * 0.5) and np.allclose(out[1][1], pipe.lag_gain * 0.5)
+    for k in (2, 3, 4):  # one, two, three samples later: held (the window and the newest sample before it)
+        assert out[k][1] is not None and np.allclose(out[k][1], pipe.lag_gain * 0.5), k
+        assert out[k][0] is None, k  # the solver's: the previous sample only
+    assert out[5][1] is None  # the step has left the window: no lag left
+    fast = ContactPipeline(load_scene("ur5e"), level="dynamics")  # 1 kHz: 2 tau holds three samples
+    assert fast._judge_window_ns == fast._lag_window_ns
