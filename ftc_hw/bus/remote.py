@@ -128,12 +128,18 @@ def connect_session(endpoint: str, timeout: float, *, config_file: Path | None =
 class RemotePublisher:
     """Forwards a local bus's topics under ``prefixes`` to Zenoh as ``ftc/<rig>/<topic>``.
 
-    The publishing thread (a device's reader) only encodes the frame and hands it over; a sender thread
-    puts it on Zenoh, reliably, blocking when a link is congested (Zenoh's ``BLOCK``: a slow network
-    delays the sender, never loses frames silently). Frames that pile up while the sender is busy go
-    out together, one batch message per topic (``wire.encode_batch``): one at a time when they come
-    at a sensor's rate, batched when they come faster. ``sent`` counts the frames put.
+    Frames go out reliably, blocking when a link is congested (Zenoh's ``BLOCK``: a slow network
+    delays them, never loses them silently). The publishing thread (a device's reader) puts a frame on
+    Zenoh itself when nothing is waiting: no other thread has to wake up for it. While a put is under
+    way, or frames wait, it hands the frame to a sender thread, which sends what piled up together,
+    one batch message per topic (``wire.encode_batch``). A put that blocks for more than
+    ``SLOW_PUT_S`` (the link is congested) sends everything through the sender thread for the next
+    ``CONGESTED_HOLD_S``: a slow network delays that thread, and the reader for at most that one put.
+    ``sent`` counts the frames put.
     """
+
+    SLOW_PUT_S = 0.002
+    CONGESTED_HOLD_S = 1.0
 
     def __init__(self, session: zenoh.Session, bus: Bus, rig: str,
                  prefixes: Iterable[str] = DEFAULT_PREFIXES, max_batch: int = 256) -> None:
@@ -144,6 +150,9 @@ class RemotePublisher:
         self._queue: deque[tuple[str, bytes]] = deque()
         self._wake = threading.Condition()
         self._closed = False
+        self._busy = False  # a put is under way (in the publishing thread or the sender)
+        self._dead = False  # the session closed under us: nothing more can be sent
+        self._handover_until = 0.0  # monotonic s: until then every frame goes through the sender
         self._thread = threading.Thread(target=self._send_loop, name=f"ftc-zenoh-pub-{rig}", daemon=True)
         self._thread.start()
         self._subs = [bus.subscribe(p, self._forward) for p in prefixes]
@@ -153,26 +162,53 @@ class RemotePublisher:
             return  # it came from Zenoh: whoever sent it published it there
         item = (topic_for(frame), encode(frame))
         with self._wake:
-            if self._closed:
+            if self._closed or self._dead:
                 return
-            self._queue.append(item)
-            if len(self._queue) == 1:
-                self._wake.notify()
+            if self._busy or self._queue or time.monotonic() < self._handover_until:
+                self._queue.append(item)
+                if len(self._queue) == 1:
+                    self._wake.notify()
+                return
+            self._busy = True
+        t0 = time.monotonic()
+        try:
+            self._put(item[0], [item[1]])
+        finally:
+            done = time.monotonic()
+            with self._wake:
+                self._busy = False
+                if done - t0 > self.SLOW_PUT_S:
+                    self._handover_until = done + self.CONGESTED_HOLD_S
+                if self._queue:
+                    self._wake.notify()
 
     def _send_loop(self) -> None:
         while True:
             with self._wake:
-                while not self._queue and not self._closed:
+                while (self._busy or not self._queue) and not self._closed:
                     self._wake.wait()
-                if not self._queue:
+                while self._busy:  # closing: the publishing thread's last put first
+                    self._wake.wait(0.01)
+                if not self._queue or self._dead:
                     return  # closed and flushed
                 items = [self._queue.popleft() for _ in range(min(len(self._queue), self.max_batch))]
-            for topic, group in _runs(items):
-                try:
-                    self._publisher(topic).put(group[0] if len(group) == 1 else encode_batch(group))
-                except zenoh.ZError:
-                    return  # the session closed under us: nothing more can be sent
-                self.sent += len(group)
+                self._busy = True
+            try:
+                for topic, group in _runs(items):
+                    self._put(topic, group)
+            finally:
+                with self._wake:
+                    self._busy = False
+
+    def _put(self, topic: str, group: list[bytes]) -> None:
+        if self._dead:
+            return
+        try:
+            self._publisher(topic).put(group[0] if len(group) == 1 else encode_batch(group))
+        except zenoh.ZError:
+            self._dead = True  # the session closed under us
+            return
+        self.sent += len(group)
 
     def _publisher(self, topic: str) -> Any:
         pub = self._pubs.get(topic)
