@@ -156,13 +156,20 @@ def _print(result: dict) -> None:
         table.add_row(f"publish->deliver, {key.replace('_', ' ')}", f"{fps:,.0f} frames/s")
     table.add_row("sample_at median", f"{result['sample_at_us']['median']:.1f} us")
     table.add_row("sample_at p99", f"{result['sample_at_us']['p99']:.1f} us")
-    for n, r in result.get("zenoh", {}).items():
+    zenoh = dict(result.get("zenoh", {}))
+    raw = zenoh.pop("raw", {})
+    for n, r in zenoh.items():
         t, lat = r["throughput"], r["latency"]
         table.add_row(f"zenoh, 2 processes, {n.replace('_', ' ')}, flat out",
                       f"{t['frames_per_s']:,.0f} frames/s ({t['received_min']:,} of {t['frames']:,} delivered)")
         table.add_row(f"zenoh, {n.replace('_', ' ')}, publish->deliver at 1 kHz",
                       f"median {lat['latency_us']['median']:.0f} us, p99 {lat['latency_us']['p99']:.0f} us, "
                       f"max {lat['latency_us']['max']:.0f} us ({lat['received_min']:,} of {lat['frames']:,})")
+    for what, r in raw.items():
+        lat = r["latency_us"]
+        table.add_row(f"zenoh alone (no ftc code), {'at 1 kHz' if what == 'paced' else 'one every 20-60 ms, express'}",
+                      f"median {lat['median']:.0f} us, p99 {lat['p99']:.0f} us, max {lat['max']:.0f} us "
+                      f"({r['received']:,} of {r['messages']:,})")
     table.add_row("python", result["python"])
     table.add_row("machine", result["machine"])
     Console(file=sys.stdout).print(table)

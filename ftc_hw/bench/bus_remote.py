@@ -9,20 +9,32 @@ a no-op callback subscriber on the topic), on loopback TCP:
 - latency: ``latency_frames`` frames paced at ``rate_hz``; publish (the frame's ``t_host_ns``, stamped
   when it is made) to delivery into the subscriber's bus (``time.monotonic_ns()``, one clock on one
   host): median, p99 and max.
+
+Beside them, the transport's own floor on this host (``raw``): Zenoh alone, no ftc code on either side
+(a bytes payload of an encoded wrench frame's size carrying its put time, a Python callback taking
+the arrival time), between the same two kinds of process: at ``rate_hz`` as the latency run, and
+sporadic (one message every 20-60 ms, express, as the stop reflex's commands go: each one wakes
+sleeping threads on both sides).
 """
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
+import random
+import struct
 import time
 from typing import Any
 
 import numpy as np
+import zenoh
 
 from ftc_hw.bus.bus import Bus
 from ftc_hw.bus.frames import WrenchFrame
 from ftc_hw.bus.remote import RemotePublisher, RemoteSubscriber, free_loopback_endpoint, open_session
+from ftc_hw.bus.wire import encode
 
 _RIG, _TOPIC = "bench", "wrench/bench"
+_RAW_KEY = "ftc/bench/raw"
 
 
 def _subscriber(endpoint: str, expect: int, ready: Any, out: Any) -> None:
@@ -94,7 +106,62 @@ def _run(n_subs: int, frames: int, rate_hz: float | None) -> dict[str, Any]:
                            "max": float(lat.max())} if len(lat) else {}}
 
 
+def _raw_subscriber(endpoint: str, expect: int, ready: Any, out: Any) -> None:
+    """Zenoh alone: each message's put time (its first 8 bytes) to its arrival in a Python callback."""
+    session = open_session(connect=[endpoint])
+    lat: list[int] = []
+
+    def on_sample(sample: Any) -> None:
+        lat.append(time.monotonic_ns() - struct.unpack_from("<q", sample.payload.to_bytes())[0])
+
+    sub = session.declare_subscriber(_RAW_KEY, on_sample)
+    ready.set()
+    end = time.monotonic() + 120.0
+    while len(lat) < expect and time.monotonic() < end:
+        time.sleep(0.01)
+    out.put(lat[:expect])
+    with contextlib.suppress(zenoh.ZError):
+        sub.undeclare()
+    session.close()
+
+
+def _raw(messages: int, gaps_s: tuple[float, float], express: bool) -> dict[str, Any]:
+    """Zenoh's own put-to-callback latency between two processes, ``messages`` paced by ``gaps_s``."""
+    endpoint = free_loopback_endpoint()
+    session = open_session(listen=[endpoint])
+    pub = session.declare_publisher(_RAW_KEY, congestion_control=zenoh.CongestionControl.BLOCK,
+                                    reliability=zenoh.Reliability.RELIABLE, express=express)
+    ctx = mp.get_context("spawn")
+    out, ready = ctx.Queue(), ctx.Event()
+    proc = ctx.Process(target=_raw_subscriber, args=(endpoint, messages, ready, out), daemon=True)
+    proc.start()
+    try:
+        if not ready.wait(30.0):
+            raise RuntimeError("the raw subscriber process did not start")
+        time.sleep(0.5)
+        pad = bytes(len(encode(WrenchFrame(0, 0, 0, "bench", np.zeros(6)))) - 8)
+        rng, due = random.Random(0), time.monotonic()
+        for _ in range(messages):
+            time.sleep(max(due - time.monotonic(), 0.0))  # paced as the latency run: late ones catch up
+            due += rng.uniform(*gaps_s)
+            pub.put(struct.pack("<q", time.monotonic_ns()) + pad)
+        lat = np.asarray(out.get(timeout=150.0), dtype=float) / 1e3
+    finally:
+        proc.join(5.0)
+        if proc.is_alive():
+            proc.kill()
+        pub.undeclare()
+        session.close()
+    return {"messages": messages, "received": len(lat),
+            "latency_us": {"median": float(np.median(lat)), "p99": float(np.percentile(lat, 99)),
+                           "max": float(lat.max())} if len(lat) else {}}
+
+
 def measure(frames: int = 100_000, latency_frames: int = 5_000, rate_hz: float = 1000.0) -> dict[str, Any]:
-    """Throughput and latency with 1 and 4 subscriber processes."""
-    return {f"{n}_sub": {"throughput": _run(n, frames, None), "latency": _run(n, latency_frames, rate_hz)}
-            for n in (1, 4)}
+    """Throughput and latency with 1 and 4 subscriber processes; Zenoh's own floor beside them."""
+    result: dict[str, Any] = {
+        f"{n}_sub": {"throughput": _run(n, frames, None), "latency": _run(n, latency_frames, rate_hz)}
+        for n in (1, 4)}
+    result["raw"] = {"paced": _raw(latency_frames, (1.0 / rate_hz, 1.0 / rate_hz), express=False),
+                     "sporadic": _raw(200, (0.02, 0.06), express=True)}
+    return result
