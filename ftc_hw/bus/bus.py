@@ -235,13 +235,16 @@ class Bus:
         *,
         maxsize: int | None | Literal[_Default.DEFAULT] = _DEFAULT,
         prefix: bool | None = None,
+        first: bool = False,
     ) -> Subscription:
         """Subscribe to a topic or a prefix of topics.
 
         ``prefix=None`` treats ``""`` (all topics) and patterns ending in ``"/"`` (e.g. ``"wrench/"``)
         as prefixes, anything else as an exact topic. With ``callback`` the frames are passed to it in
         the publisher's thread, otherwise they are queued (``maxsize`` frames, default
-        ``default_maxsize``; None for unbounded, use with care).
+        ``default_maxsize``; None for unbounded, use with care). Subscribers get a frame in the order
+        they subscribed; ``first`` puts this one ahead of those before it (a reflex that must not wait
+        for a recorder or a forwarder).
         """
         is_prefix = (topic_or_prefix == "" or topic_or_prefix.endswith("/")) if prefix is None else prefix
         if maxsize is _DEFAULT:
@@ -250,10 +253,13 @@ class Bus:
             raise ValueError(f"maxsize must be >= 1 or None, got {maxsize}")
         sub = Subscription(self, topic_or_prefix, is_prefix, callback, maxsize)
         with self._lock:
-            self._subs.append(sub)
+            if first:
+                self._subs.insert(0, sub)
+            else:
+                self._subs.append(sub)
             for name, ts in self._topics.items():
                 if _matches(sub, name):
-                    ts.subs = (*ts.subs, sub._push)
+                    ts.subs = (sub._push, *ts.subs) if first else (*ts.subs, sub._push)
         return sub
 
     def _unsubscribe(self, sub: Subscription) -> None:

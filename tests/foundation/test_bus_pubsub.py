@@ -150,6 +150,23 @@ def test_iteration_ends_when_closed():
     assert out == frames
 
 
+def test_subscribers_get_a_frame_in_subscription_order_and_first_goes_ahead():
+    """The stop reflex subscribes ``first``: an onset reaches it before a recorder or a forwarder that
+    subscribed earlier, on a topic that exists already and on one created after."""
+    bus = Bus()
+    order: list[str] = []
+    bus.publish("wrench/ft0", wf(0))  # the topic exists before the subscriptions
+    bus.subscribe("wrench/", lambda f: order.append("recorder"))
+    bus.subscribe("wrench/ft0", lambda f: order.append("forwarder"))
+    bus.subscribe("wrench/", lambda f: order.append("reflex"), first=True)
+    bus.subscribe("wrench/ft0", lambda f: order.append("view"))
+    bus.publish("wrench/ft0", wf(1))
+    assert order == ["reflex", "recorder", "forwarder", "view"]
+    order.clear()
+    bus.publish("wrench/ft1", wf(2))  # a topic created after them: the same order
+    assert order == ["reflex", "recorder"]
+
+
 def test_callback_subscription_has_no_queue():
     sub = Bus().subscribe("wrench/ft0", lambda f: None)
     with pytest.raises(TypeError):
