@@ -43,8 +43,9 @@ from ftc_hw.scene import Scene
 
 from .calibration_session import DeviceSession, SessionError
 from .drive_excitation import drive_excitation
+from .monitor_config import MonitorConfig, MonitorSetupError
 from .rig import RigError
-from .session import MonitorConfig, MonitorSetupError, run_monitor
+from .session import run_monitor
 
 CONTACT_MARGIN_S = 0.3  # cut this much before a reported contact and after its end
 MIN_SEGMENT_S = 0.5

@@ -10,11 +10,8 @@ import json
 import os
 import signal
 import tempfile
-import threading
 import time
-from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,10 +19,9 @@ from rich.console import Console
 from rich.live import Live
 
 from ftc_hw import __version__
-from ftc_hw.app.evaluate import Evaluation, crlb_of_truth, evaluate, solver_rms_of_truth
-from ftc_hw.app.view import LiveView, evaluation_table, stream_table
+from ftc_hw.app.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
+from ftc_hw.app.view import LiveView
 from ftc_hw.bus import (
-    EVENTS_CONTACT,
     EVENTS_DEVICE,
     STREAM_EVENT_KINDS,
     Bus,
@@ -36,7 +32,6 @@ from ftc_hw.bus import (
 )
 from ftc_hw.bus.remote import free_loopback_endpoint
 from ftc_hw.calibration.file import CalibrationError, load_calibration
-from ftc_hw.compensation import Drift
 from ftc_hw.devices.base import frozen_heap, responsive_readers
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import EventWriter, event_record, read_truth
@@ -46,6 +41,9 @@ from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
 from .faults import Fault, FaultError, FaultPlan
+from .monitor_config import MonitorConfig, MonitorOutcome, MonitorSetupError
+from .monitor_report import judge_degraded, print_summary
+from .reflex import StopReflex
 from .remote_rig import RemoteRig
 from .rig import Rig, RigError, build_rig, check_located, pick_device, require_device
 from .serve import ServedReaders
@@ -53,57 +51,6 @@ from .sim_joints import SimJointSource
 from .vendor_output import vendor_stderr
 
 SETTLE_S = 0.5
-DEGRADED_EXIT = 3  # the run went to its end, but was blind or dropped frames for a while (see degraded)
-DROPPED_SHARE = 0.05  # above this share of F/T frames not judged (or late), a run is degraded
-
-
-class MonitorSetupError(Exception):
-    """The run could not start: scene, devices, calibration or emulators (the message says which)."""
-
-
-@dataclass
-class MonitorConfig:
-    scene: str
-    sim: bool = False
-    scenario: str = "sweep-with-collision"
-    seed: int = 0
-    duration: float | None = None  # simulated seconds with sim, else wall-clock seconds (None: until Ctrl-C)
-    calibration: Path | None = None
-    record: Path | None = None
-    reflex: str | None = None  # "stop"
-    events: Path | None = None
-    truth: Path | None = None
-    noise: bool = True
-    view: bool = True
-    level: str | None = "dynamics"  # compensation level; None: the scene's
-    title: str = "ftc monitor"
-    connect_timeout_s: float = 20.0
-    faults: tuple[str, ...] = ()  # with sim: a fault plan (ftc_hw.app.faults), e.g. ("ft:kill@onset+0.1",)
-    device_overrides: tuple[str, ...] = ()  # NAME.KEY=VALUE (--device), applied after the rig file
-    rig: Path | None = None  # a rig file (--rig): a table of keys per device name
-    reality: str = "ideal"  # with sim: how the world's arm differs from the model (ideal, typical, harsh)
-    refine: bool = False  # keep refining the calibration's identified model while the arm moves free
-    remote: str | None = None  # a Zenoh endpoint: the devices' frames from ftc serve there, not adapters here
-    remote_rig: str | None = None  # the rig's name in ftc/<rig>/... (default: the scene's name)
-    zenoh_config: Path | None = None  # with remote: a Zenoh JSON5 file (TLS, credentials), docs/bus.md
-    readers: str = "auto"  # without remote: "process" (each reader in its own, as ftc serve), "thread", "auto"
-
-
-@dataclass
-class MonitorOutcome:
-    exit_code: int
-    events: list[dict[str, Any]] = field(default_factory=list)
-    evaluation: Evaluation | None = None
-    counters: dict[str, int] = field(default_factory=dict)
-    reflex: dict[str, Any] = field(default_factory=dict)
-    problems: list[str] = field(default_factory=list)
-    t_closed_ns: int = 0  # when the adapters were closed
-    drift: Drift | None = None  # with refine: how far the refined model moved from the calibration's
-    stream_events: list[dict[str, Any]] = field(default_factory=list)  # sensor_lost, arm_back, ...
-    faults: list[tuple[str, float]] = field(default_factory=list)  # (fault, scenario time s when done)
-    vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
-    degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
-    remote: dict[str, Any] = field(default_factory=dict)  # with remote: frames taken, dropped, events sent
 
 
 def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any], dict[str, str]]:
@@ -122,57 +69,6 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any],
     if applied:
         meta["applied"] = ", ".join(applied)
     return kwargs, meta
-
-
-class StopReflex:
-    """On every contact onset, ``stop(onset)``: the local arm adapter's ``stop()`` from a thread of its own
-    (it waits for the device: never in the pipeline's thread), or, ``inline``, a command to the arm's
-    reader process (:meth:`~ftc_hw.app.remote_rig.RemoteRig.stop_arm`: a Zenoh put that does not wait)
-    at once in the thread that published the onset (a hand-over cost 0.2-0.3 ms, ftc bench reflex).
-    It gets the onset before any other subscriber of the monitor's bus."""
-
-    def __init__(self, bus: Bus, stop: Callable[[ContactEvent], None], inline: bool = False) -> None:
-        self.stop, self.inline = stop, inline
-        self.stops: list[dict[str, Any]] = []
-        self.errors: list[str] = []
-        self._pending: list[ContactEvent] = []
-        self._wake = threading.Event()
-        self._quit = False
-        # first: the onset must not wait for the event's recording or its forwarding to Zenoh
-        self._sub = bus.subscribe(EVENTS_CONTACT, callback=self._on_event, first=True)
-        self._thread = threading.Thread(target=self._run, name="stop-reflex", daemon=True)
-        self._thread.start()
-
-    def _on_event(self, ev: ContactEvent) -> None:
-        if ev.kind != "onset":
-            return
-        if self.inline:
-            self._send(ev)
-        else:
-            self._pending.append(ev)
-            self._wake.set()
-
-    def _send(self, ev: ContactEvent) -> None:
-        t0 = time.monotonic_ns()
-        try:
-            self.stop(ev)
-            self.stops.append({"onset_t_host_ns": ev.t_host_ns, "sent_after_onset_ms": (t0 - ev.t_host_ns) / 1e6,
-                               "stop_call_ms": (time.monotonic_ns() - t0) / 1e6})
-        except Exception as exc:  # noqa: BLE001 - reported, the monitor goes on
-            self.errors.append(f"{type(exc).__name__}: {exc}")
-
-    def _run(self) -> None:
-        while not self._quit:
-            self._wake.wait(0.5)
-            self._wake.clear()
-            while self._pending:
-                self._send(self._pending.pop(0))
-
-    def close(self) -> None:
-        self._sub.close()
-        self._quit = True
-        self._wake.set()
-        self._thread.join(5.0)
 
 
 def _devices(scene: Scene, sim: bool, remote: bool = False) -> tuple[DeviceSpec, DeviceSpec | None]:
@@ -404,8 +300,8 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
             out.remote = rig.counts
             if rig.readers is not None and rig.readers.restarts:
                 out.degraded.append(f"reader processes restarted {rig.readers.restarts}x (crashed or killed)")
-        _judge_degraded(monitor, rig.adapters, out, cfg.sim)
-        _summary(console, cfg, bus, topics, out, rig.adapters, recorder, world)
+        judge_degraded(monitor, rig.adapters, out, cfg.sim)
+        print_summary(console, cfg, _served(cfg), bus, topics, out, rig.adapters, recorder)
     return out
 
 
@@ -477,78 +373,3 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
     if out.counters.get("frames", 0) == 0:
         out.problems.append("no F/T frame reached the pipeline")
         out.exit_code = 1
-
-
-def _judge_degraded(monitor: LiveMonitor, adapters, out: MonitorOutcome, sim: bool) -> None:
-    """Why this run cannot be read as clean (lost streams, frames not judged, a host that could not
-    keep up, devices that dropped): each reason a line of the summary; exit code DEGRADED_EXIT."""
-    c = monitor.counters
-    for stream in ("sensor", "arm"):
-        spans = [(back or out.t_closed_ns) - lost for s, lost, back in monitor.losses if s == stream]
-        if spans:
-            what = "F/T sensor stream" if stream == "sensor" else "arm's joint stream (blind meanwhile)"
-            out.degraded.append(f"{what} lost {len(spans)}x, {sum(spans) / 1e9:.2f} s in all")
-    if c.get("contacts_lost"):
-        out.degraded.append(f"{c['contacts_lost']} open contact(s) closed by a lost stream (offsets flagged lost)")
-    frames = c.get("frames", 0)
-    unjudged = {k: c.get(k, 0) for k in ("ft_frames_dropped", "no_joint_state", "blind_frames",
-                                         "ft_frames_unjudged_at_stop")}
-    total = frames + sum(unjudged.values())
-    if total and sum(unjudged.values()) > DROPPED_SHARE * total:
-        detail = ", ".join(f"{k} {v}" for k, v in unjudged.items() if v)
-        out.degraded.append(f"{100 * sum(unjudged.values()) / total:.1f} % of F/T frames not judged ({detail}): "
-                            "contacts may be missed, false alarms possible")
-    if frames and c.get("ft_frames_backlog", 0) > DROPPED_SHARE * frames:
-        out.degraded.append(f"the host could not keep up: {c['ft_frames_backlog']} F/T frames were judged over "
-                            "50 ms after they arrived")
-    # with emulated devices, frames late by their device clock say the simulated world ran behind real
-    # time, not that the monitor did (it judged them as they came): degraded only on real devices
-    if not sim and frames and c.get("ft_frames_late", 0) > DROPPED_SHARE * frames:
-        out.degraded.append(f"the F/T frames came late: {c['ft_frames_late']} reached the monitor over 50 ms "
-                            "after their device time")
-    for a in adapters:
-        drops = a.counters.get("disconnects", 0) + a.counters.get("errors", 0)
-        if drops:
-            out.degraded.append(f"device {a.name} ({a.kind}) dropped {drops}x and reconnected "
-                                f"{a.counters.get('event_connect', 1) - 1}x")
-    if out.degraded and out.exit_code == 0:
-        out.exit_code = DEGRADED_EXIT
-
-
-def _summary(console: Console, cfg: MonitorConfig, bus: Bus, topics: list[str], out: MonitorOutcome, adapters,
-             recorder, world) -> None:
-    console.print(stream_table(bus, topics, out.t_closed_ns or time.monotonic_ns(),
-                               title="streams (stale: at the end of the run)"))
-    kinds = {k: sum(e["kind"] == k for e in out.events) for k in ("onset", "update", "offset")}
-    console.print(f"contact events: {kinds}" + (f" -> {cfg.events}" if cfg.events else ""))
-    console.print(f"monitor: {out.counters}")
-    for a in adapters:
-        console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
-    if _served(cfg):
-        console.print(f"from {cfg.remote or 'reader processes'} (Zenoh): {out.remote}")
-    if out.faults:
-        console.print("faults played: " + ", ".join(f"{f} (done at t = {t:.2f} s)" for f, t in out.faults))
-    for line, n in out.vendor_lines.items():
-        console.print(f"{line} ({n}x)")
-    if out.reflex:
-        stops = out.reflex["stops"]
-        sent = [s["sent_after_onset_ms"] for s in stops]
-        console.print(f"reflex stop: {len(stops)} sent" + (f", {min(sent):.2f}-{max(sent):.2f} ms after the onset "
-                                                          "sample" if sent else "")
-                      + (f"; errors: {out.reflex['errors']}" if out.reflex["errors"] else ""))
-        by_reader = [r["sent_after_onset_ms"] for r in out.reflex.get("stopped_by_reader", [])]
-        if _served(cfg):
-            console.print(f"the arm's reader process stopped it {len(by_reader)}x"
-                          + (f", {min(by_reader):.2f}-{max(by_reader):.2f} ms after the onset sample" if by_reader
-                             else ""))
-    if recorder is not None:
-        console.print(f"recorded {sum(recorder.counts.values())} messages -> {recorder.path} "
-                      f"(drops {recorder.drops})")
-    if out.evaluation is not None:
-        console.print(evaluation_table(out.evaluation))
-        if cfg.truth:
-            console.print(f"ground truth -> {cfg.truth}")
-    for p in out.problems:
-        console.print(f"[yellow]{p}[/]")
-    if out.degraded:
-        console.print(f"[bold red]DEGRADED run[/] (exit code {DEGRADED_EXIT}): " + "; ".join(out.degraded))

@@ -14,7 +14,7 @@ from rich.console import Console
 
 from ftc_hw.app.calibration_session import SessionError
 from ftc_hw.app.identify import IdentifyOptions, run_planned_identify
-from ftc_hw.app.session import MonitorConfig, MonitorOutcome
+from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome
 from ftc_hw.app.view import make_console
 from ftc_hw.scene import SceneError, load_scene
 

@@ -5,7 +5,8 @@ from pathlib import Path
 
 import typer
 
-from ftc_hw.app.session import MonitorConfig, MonitorOutcome, MonitorSetupError, run_monitor
+from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome, MonitorSetupError
+from ftc_hw.app.session import run_monitor
 from ftc_hw.app.view import make_console
 from ftc_hw.sim_devices.world import SCENARIOS
 

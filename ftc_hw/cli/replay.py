@@ -6,7 +6,8 @@ from pathlib import Path
 import typer
 from rich.live import Live
 
-from ftc_hw.app.session import MonitorSetupError, load_pipeline_calibration
+from ftc_hw.app.monitor_config import MonitorSetupError
+from ftc_hw.app.session import load_pipeline_calibration
 from ftc_hw.app.view import LiveView, make_console
 from ftc_hw.bus import Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.monitor import MONITOR_INPUT
