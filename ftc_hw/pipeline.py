@@ -209,12 +209,9 @@ class ContactPipeline:
         loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau and need_dyn)
         external = self.compensator.unbiased(raw) - loads
         model_error = None if lag_error is None else self._model_error(t_clock, lag_error)
-        if held is not None:
-            judged = self._model_error(t_clock, held)
-        elif judge_lag is lag_error:
-            judged = model_error
-        else:
-            judged = self._model_error(t_clock, judge_lag)
+        judge_lag = judge_lag if held is None else held
+        judged = (model_error if judge_lag is lag_error
+                  else None if judge_lag is None else self._model_error(t_clock, judge_lag))
         if self.identified_error is not None:  # what the identified model may still get wrong
             z = np.zeros_like(q)
             rows = self.identified_error.rows(t_ns, q, z if qd is None else qd, z if qdd is None else qdd)

@@ -102,8 +102,14 @@ def _run(n_subs: int, frames: int, rate_hz: float | None) -> dict[str, Any]:
     slowest = max(r["t_last_ns"] for r in results)
     return {"subscribers": n_subs, "frames": frames, "received_min": min(r["received"] for r in results),
             "frames_per_s": frames / max((slowest - t0) / 1e9, 1e-9),
-            "latency_us": {"median": float(np.median(lat)), "p99": float(np.percentile(lat, 99)),
-                           "max": float(lat.max())} if len(lat) else {}}
+            "latency_us": _latency_us(lat)}
+
+
+def _latency_us(lat: np.ndarray) -> dict[str, float]:
+    """Median, p99 and max of latencies in us ({} for none)."""
+    if not len(lat):
+        return {}
+    return {"median": float(np.median(lat)), "p99": float(np.percentile(lat, 99)), "max": float(lat.max())}
 
 
 def _raw_subscriber(endpoint: str, expect: int, ready: Any, out: Any) -> None:
@@ -152,9 +158,7 @@ def _raw(messages: int, gaps_s: tuple[float, float], express: bool) -> dict[str,
             proc.kill()
         pub.undeclare()
         session.close()
-    return {"messages": messages, "received": len(lat),
-            "latency_us": {"median": float(np.median(lat)), "p99": float(np.percentile(lat, 99)),
-                           "max": float(lat.max())} if len(lat) else {}}
+    return {"messages": messages, "received": len(lat), "latency_us": _latency_us(lat)}
 
 
 def measure(frames: int = 100_000, latency_frames: int = 5_000, rate_hz: float = 1000.0) -> dict[str, Any]:
