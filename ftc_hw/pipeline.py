@@ -207,7 +207,7 @@ class ContactPipeline:
         # the joint torques come free with the inverse dynamics; at the gravity level they cost an
         # extra pass, paid only in contact (below)
         loads, model_tau = self.compensator.loads(q, qd, qdd, joint_torques=want_tau and need_dyn)
-        external = self.compensator.unbiased(raw) - loads
+        external = self.compensator.contact_wrench(self.compensator.unbiased(raw), loads)
         model_error = None if lag_error is None else self._model_error(t_clock, lag_error)
         judge_lag = judge_lag if held is None else held
         judged = (model_error if judge_lag is lag_error
@@ -489,10 +489,11 @@ class ContactPipeline:
 def gain_std_of(scene: Scene) -> np.ndarray:
     """1 sigma of each entry of the sensor's linear error on a contact's wrench (6 x 6): the scene's
     ``sensor.accuracy`` (relative; an off-diagonal term scaled by the two axes' ranges, as crosstalk is
-    specified in per cent of full scale). Not the identification's posterior: free motion tells the
-    error only on the arm's own loads (its weight along z, the moments of gravity), and what it tells
-    there leans on the link masses it fits beside (measured, ur5e typical: coverage 0.77 with the
-    posterior, 0.89 with the accuracy)."""
+    specified in per cent of full scale). Not the identification's posterior, though the identified gain
+    is undone on the contact's wrench: what free motion tells of the gain leans on the link masses it
+    fits beside and on the arm's own loads (its weight along z, the moments of gravity), and its
+    posterior under-covered (measured, ur5e typical: coverage 0.77 with the posterior, 0.89 with the
+    accuracy)."""
     rng = np.asarray(scene.sensor.range, dtype=float)
     return scene.sensor.accuracy * rng[:, None] / rng[None, :]
 

@@ -184,10 +184,10 @@ def _summarize(free: dict[str, Any], contact_runs: list[dict[str, Any]]) -> dict
         points += run["points"]
     resid = free["resid"]
     trusted = [p for p in points if p[3]]  # unflagged (an ambiguous or uncertain event says so itself)
-    err = np.array([p[0] for p in trusted])
-    meshed = [p for p in trusted if p[4] is not None]  # None: no meshes in that run's world
-    mesh_raw = np.array([p[4] for p in meshed], dtype=float)
-    mesh = np.where(np.isfinite(mesh_raw), mesh_raw, [p[0] for p in meshed]) if meshed else np.array([])
+    err, mesh, mesh_raw = _errors(trusted)
+    empty = (np.array([]),) * 3
+    by_run = [_errors([p for p in run["points"] if p[3]]) for run in contact_runs]
+    by_run += [empty] * (len(CONTACT_RUNS) - len(by_run))  # a summary of fewer runs (tests)
     return {
         "residual_rms_N": float(np.sqrt(np.mean(np.sum(resid[:, :3] ** 2, axis=1)))) if len(resid) else math.nan,
         "residual_rms_Nm": float(np.sqrt(np.mean(np.sum(resid[:, 3:] ** 2, axis=1)))) if len(resid) else math.nan,
@@ -202,11 +202,29 @@ def _summarize(free: dict[str, Any], contact_runs: list[dict[str, Any]]) -> dict
         # primitive's point): the other way to localize on a real shell, measured side by side
         "pos_err_mm_median_mesh": _pct(mesh, 50), "pos_err_mm_p95_mesh": _pct(mesh, 95),
         "mesh_misses": int(np.sum(~np.isfinite(mesh_raw))),
+        # by scenario: the sweep's obstacles meet the world's primitives (MuJoCo collides a mesh as its
+        # convex hull), the scripted pokes press its true shell (its meshes where it has them)
+        **{f"pos_err_mm_{q}_{name}{kind}": _pct(values, pct)
+           for name, (e, m, _) in zip(CONTACT_RUNS, by_run, strict=True)
+           for kind, values in (("", e), ("_mesh", m)) for q, pct in (("median", 50), ("p95", 95))},
         "coverage95": float(np.mean([p[1] for p in trusted])) if trusted else math.nan,
         "link_right": float(np.mean([p[2] for p in points])) if points else math.nan,
         "flagged_share": 1.0 - len(trusted) / len(points) if points else math.nan,
         "estimates": len(points),
     }
+
+
+CONTACT_RUNS = ("sweep", "pokes")  # the contact scenarios' short names, in run_job's order
+
+
+def _errors(trusted: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position errors (mm) on the primitives, on the meshes (a miss keeps the primitive's), the raw mesh
+    errors (NaN: the line missed)."""
+    err = np.array([p[0] for p in trusted], dtype=float)
+    meshed = [p for p in trusted if p[4] is not None]  # None: no meshes in that run's world
+    mesh_raw = np.array([p[4] for p in meshed], dtype=float)
+    mesh = np.where(np.isfinite(mesh_raw), mesh_raw, [p[0] for p in meshed]) if meshed else np.array([])
+    return err, mesh, mesh_raw
 
 
 def _held_from_earlier(run: dict[str, Any], earlier: list[tuple[float, float, float]], a: float) -> bool:
@@ -226,7 +244,9 @@ def _pct(values, q: float) -> float:
 
 FIGURES = ("residual_rms_N", "residual_rms_Nm", "statistic_p99_over_threshold", "false_alarms_per_min",
            "delay_ms_median", "delay_ms_p95", "pos_err_mm_median", "pos_err_mm_p95", "coverage95", "link_right",
-           "flagged_share", "pos_err_mm_median_mesh", "pos_err_mm_p95_mesh")
+           "flagged_share", "pos_err_mm_median_mesh", "pos_err_mm_p95_mesh",
+           *(f"pos_err_mm_{q}_{name}{kind}" for name in CONTACT_RUNS for kind in ("", "_mesh")
+             for q in ("median", "p95")))
 COUNTS = ("false_alarms", "free_minutes", "contacts_over_10N", "detected_over_10N", "merged_over_10N", "mesh_misses",
           "estimates")
 WORSE_HIGH = {"coverage95": False, "link_right": False}  # for these, the worst draw is the lowest
@@ -288,7 +308,8 @@ def _table(results: dict[str, Any], names: list[str], columns: tuple[Column, ...
                         f"sweep + {meta['contact_minutes_per_draw']:g} min of each contact scenario per draw "
                         "(median over draws / worst draw)")
     for c in ("scene", "column", "resid N", "resid N m", "stat p99/thr", "false alarms/min", "detected >10 N",
-              "delay ms med/p95", "pos err mm med/p95", "on meshes mm", "coverage 95 %", "link right", "flagged"):
+              "delay ms med/p95", "pos err mm med/p95", "on meshes mm", "pokes mm: prim / meshes", "coverage 95 %",
+              "link right", "flagged"):
         table.add_column(c, justify="left" if c in ("scene", "column") else "right")
     for s in names:
         for c in columns:
@@ -300,7 +321,7 @@ def _table(results: dict[str, Any], names: list[str], columns: tuple[Column, ...
                           + (f" ({r['merged_over_10N']} merged)" if r.get("merged_over_10N") else ""),
                           f"{r['delay_ms_median']:.3g} / {r['delay_ms_p95']:.3g}",
                           f"{r['pos_err_mm_median']:.3g} / {r['pos_err_mm_p95']:.3g}",
-                          _on_meshes(r),
+                          _on_meshes(r), _pokes(r),
                           f"{r['coverage95']:.2f} / {r['coverage95_worst']:.2f}",
                           f"{r['link_right']:.2f} / {r['link_right_worst']:.2f}", f"{r['flagged_share']:.2f}")
     table_console().print(table)
@@ -310,6 +331,13 @@ def _on_meshes(r: dict[str, Any]) -> str:
     if math.isnan(r["pos_err_mm_median_mesh"]):
         return "-"
     return f"{r['pos_err_mm_median_mesh']:.3g} / {r['pos_err_mm_p95_mesh']:.3g} ({r['mesh_misses']} miss)"
+
+
+def _pokes(r: dict[str, Any]) -> str:
+    prim = f"{r['pos_err_mm_median_pokes']:.3g} / {r['pos_err_mm_p95_pokes']:.3g}"
+    if math.isnan(r["pos_err_mm_median_pokes_mesh"]):
+        return prim
+    return f"{prim} | {r['pos_err_mm_median_pokes_mesh']:.3g} / {r['pos_err_mm_p95_pokes_mesh']:.3g}"
 
 
 def _plot(results: dict[str, Any], names: list[str], path: Path) -> None:

@@ -15,12 +15,11 @@ from ..scene import CompensationLevel
 class Compensator:
     def __init__(self, model: ArmModel, level: CompensationLevel | None = None, bias=None,
                  payload: Payload | None = None, gain=None, frame=None) -> None:
-        """``gain``: the sensor's identified linear error on the arm's own loads, ``reading = gain @ loads +
-        bias`` (None: exact). It is what free-motion identification can tell (:mod:`ftc_hw.calibration.
-        free_motion`): a map of the loads the arm's motions make, not of every wrench, so it corrects
-        the predicted loads and leaves the contact's wrench as read. ``frame``: the sensor's reading of a
-        wrench given in the model's sensor frame (6 x 6, e.g. a calibrated mount yaw), undone on every
-        reading (None: the model's frame)."""
+        """``gain``: the sensor's identified linear error, ``reading = gain @ (loads + contact) + bias``
+        (None: exact), as free-motion identification estimates it (:mod:`ftc_hw.calibration.free_motion`):
+        applied to the predicted loads and undone on the contact's wrench, which the same sensor reads.
+        ``frame``: the sensor's reading of a wrench given in the model's sensor frame (6 x 6, e.g. a
+        calibrated mount yaw), undone on every reading (None: the model's frame)."""
         if payload is not None and payload != model.payload:
             model = ArmModel(model.scene, payload, model.inertials)
         self.model = model
@@ -28,9 +27,18 @@ class Compensator:
         if self.level not in ("bias", "gravity", "dynamics"):
             raise ValueError(f"level must be bias, gravity or dynamics, got {self.level!r}")
         self.bias = np.zeros(6) if bias is None else np.asarray(bias, dtype=float).reshape(6).copy()
-        self.gain = None if gain is None else np.asarray(gain, dtype=float).reshape(6, 6).copy()
+        self.gain = gain
         self.frame = None if frame is None else np.asarray(frame, dtype=float).reshape(6, 6).copy()
         self.frame_inv = None if frame is None else np.linalg.inv(self.frame)
+
+    @property
+    def gain(self) -> np.ndarray | None:
+        return self._gain
+
+    @gain.setter
+    def gain(self, gain) -> None:
+        self._gain = None if gain is None else np.asarray(gain, dtype=float).reshape(6, 6).copy()
+        self._gain_inv = None if gain is None else np.linalg.inv(self._gain)
 
     def loads(self, q, qd=None, qdd=None, joint_torques: bool = False):
         """The arm's own wrench on the sensor as read (the gain applied) and, if asked, the joint
@@ -40,7 +48,13 @@ class Compensator:
 
     def external(self, raw, q, qd=None, qdd=None) -> np.ndarray:
         """The external contact wrench (sensor frame, the scene's sign convention)."""
-        return self.unbiased(raw) - self.loads(q, qd, qdd)[0]
+        return self.contact_wrench(self.unbiased(raw), self.loads(q, qd, qdd)[0])
+
+    def contact_wrench(self, unbiased: np.ndarray, loads: np.ndarray) -> np.ndarray:
+        """What is left of a reading (without its bias) once the arm's loads as read are taken away,
+        with the sensor's gain undone."""
+        rest = unbiased - loads
+        return rest if self._gain_inv is None else self._gain_inv @ rest
 
     def unbiased(self, raw) -> np.ndarray:
         """The reading without its bias, in the model's sensor frame."""

@@ -40,6 +40,16 @@ def test_summary_counts_what_the_issue_asks():
     assert c["false_alarms"] == 4 and abs(c["false_alarms_per_min"] - 4 / (2 * s["free_minutes"])) < 1e-12
 
 
+def test_errors_are_also_split_by_scenario():
+    """The sweep's obstacles meet the world's primitives, the pokes its true shell: each run's own figures."""
+    sweep = _run([1.002], [(2.0, True, True, True, 7.0), (6.0, True, True, True, 9.0)])
+    pokes = _run([1.002], [(10.0, True, True, True, 1.0), (30.0, True, True, True, np.nan)])
+    s = _summarize(_run([], [], contact_spans=()), [sweep, pokes])
+    assert s["pos_err_mm_median_sweep"] == 4.0 and s["pos_err_mm_median_sweep_mesh"] == 8.0
+    assert s["pos_err_mm_median_pokes"] == 20.0 and s["pos_err_mm_median_pokes_mesh"] == 15.5  # a miss: 30
+    assert s["pos_err_mm_median"] == 8.0  # pooled over both
+
+
 def test_columns_are_chosen_by_name_or_glob_and_an_unknown_one_is_named():
     assert [c.name for c in select_columns(ALL_COLUMNS, ["ideal", "only:*"])] == (
         ["ideal"] + [f"only:{d}" for d in DIFFERENCES])

@@ -57,6 +57,25 @@ def test_dynamics_level_leaves_exactly_the_contact_in_motion(scene_name):
     assert worst < 1e-6 * (1 + np.abs(scene.sensor.range).max()) + np.max(scene.sensor.quantization)
 
 
+def test_the_identified_gain_is_undone_on_the_contact_s_wrench_too():
+    """The sensor reads the arm's loads and the contact through one gain: both are corrected."""
+    scene = load_scene("ur5e")
+    model = ArmModel(scene)
+    rng = np.random.default_rng(3)
+    gain = np.eye(6) + rng.normal(0.0, 0.01, (6, 6))
+    q, qd, qdd = np.array(scene.robot.home) + 0.3, rng.normal(0, 1, 6), rng.normal(0, 3, 6)
+    contact = [Contact("forearm", model.kinematics(q)["forearm"][:3, 3], np.array([20.0, -35.0, 10.0]))]
+    loads = model.predicted_wrench(q, qd, qdd, level="dynamics")
+    touched = model.predicted_wrench(q, qd, qdd, level="dynamics", contacts=contact)
+    bias = rng.normal(0, 2, 6)
+    reading = gain @ touched + bias
+    want = touched - loads
+    corrected = Compensator(model, "dynamics", bias=bias, gain=gain).external(reading, q, qd, qdd)
+    np.testing.assert_allclose(corrected, want, atol=1e-9 * np.abs(reading).max())
+    left_as_read = Compensator(model, "dynamics", bias=bias).external(reading, q, qd, qdd)
+    assert np.abs(left_as_read - want).max() > 0.1  # N or N m: what the gain costs a 40 N contact
+
+
 def test_gravity_level_misses_the_inertial_load_in_motion():
     scene = load_scene("ur5e")
     model = ArmModel(scene)
