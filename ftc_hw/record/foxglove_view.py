@@ -89,7 +89,7 @@ class FoxgloveView:
         self.reach = max(float(np.linalg.norm(links[k][:3, 3])) + r for k, r in link_reach(arm).items())
         self.marker_m = max(0.005, 0.02 * self.reach)
         self.contact_m_per_n = 0.25 * self.reach / 20.0  # a 20 N push: a quarter of the arm's reach
-        weight = arm.total_mass * float(np.linalg.norm(scene.gravity))
+        weight = max(arm.total_mass * float(np.linalg.norm(scene.gravity)), 1e-6)
         self.wrench_m_per_n = 0.5 * self.reach / weight  # the arm's own weight: half its reach
         self.wrench_m_per_nm = 1.0 / weight  # its weight's moment at half the reach: half the reach
         self.counts: Counter[str] = Counter()  # messages made, per topic
