@@ -137,13 +137,16 @@ def test_transforms_and_surfaces_are_where_the_model_has_them(tmp_path):
     assert set(links) == {s.link for s in ARM.surfaces}
     for t in [t for t in stamps if t % 1_000_000 == 0][::5]:  # the inputs' poses (joints' come 0.3 ms late)
         posed = ARM.posed_surfaces(q_at(t))
-        for link, ent in links.items():
-            base_T_link = fox.pose(link, t)
-            want = [p.base_T_geom[:3, 3] for p in posed if p.surface.link == link]
-            got = [(base_T_link @ of_pose(p["pose"]))[:3, 3] for kind in ("cylinders", "cubes", "spheres")
-                   for p in ent[kind]]
-            for w in want:
-                assert min(np.linalg.norm(g - w) for g in got) < 1e-9
+        for ps in posed:  # each primitive: its centre, axes and size (MuJoCo's half-sizes doubled)
+            kind, size = ps.surface.kind, np.asarray(ps.surface.size)
+            box = {"cylinder": ("cylinders", [2 * size[0], 2 * size[0], 2 * size[1]]),
+                   "capsule": ("cylinders", [2 * size[0], 2 * size[0], 2 * size[1]]),
+                   "ellipsoid": ("spheres", 2 * size[:3]), "sphere": ("spheres", [2 * size[0]] * 3),
+                   "box": ("cubes", 2 * size[:3])}[kind]
+            base_T_link = fox.pose(ps.surface.link, t)
+            assert any(np.allclose(base_T_link @ of_pose(p["pose"]), ps.base_T_geom, atol=1e-9)
+                       and np.allclose([p["size"]["x"], p["size"]["y"], p["size"]["z"]], box[1])
+                       for p in links[ps.surface.link][box[0]]), (ps.surface.geom, kind)
         assert np.allclose(fox.pose("sensor", t), ARM.base_T_sensor(q_at(t)), atol=1e-9)
     # a capsule is a cylinder and two spheres; the 21 ur5e primitives include 2 capsules and 1 ellipsoid
     kinds = [s.kind for s in ARM.surfaces]
