@@ -186,7 +186,7 @@ def _start_recorder(cfg: MonitorConfig, scene: Scene, bus: Bus, monitor_meta: di
     meta = {"scene": {"name": scene.name, "path": str(scene.path), "toml": toml}, "monitor": monitor_meta}
     if cal_meta is not None:
         meta["calibration"] = cal_meta
-    return McapRecorder(bus, cfg.record, metadata=meta).start()
+    return McapRecorder(bus, cfg.record, metadata=meta, scene=scene).start()
 
 
 def _tare_then_go(cfg: MonitorConfig, monitor: LiveMonitor, world: WorldHost) -> None:

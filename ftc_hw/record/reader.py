@@ -1,5 +1,7 @@
 """Reads an ``ftc`` MCAP recording record by record, so that a file cut short (a killed recorder)
 reads up to its last complete chunk: ``Recording.complete`` is False and ``error`` says where it ended.
+The Foxglove channels (``foxglove.*`` schemas: a view of the bus, made from its frames) are skipped,
+counted in ``Recording.view_messages``.
 """
 from __future__ import annotations
 
@@ -13,6 +15,8 @@ from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from .schemas import decode
+
+VIEW_SCHEMAS = "foxglove."
 
 
 class RecordingError(Exception):
@@ -35,6 +39,7 @@ class Recording:
     complete: bool = False  # the footer was read
     error: str | None = None  # why reading stopped early
     bad_messages: int = 0
+    view_messages: int = 0  # messages in Foxglove's schemas, not read (no bus frame in them)
 
     def topic(self, name: str) -> list[Any]:
         return [m.frame for m in self.messages if m.topic == name]
@@ -57,6 +62,9 @@ def read_recording(path: Path | str, topics: set[str] | None = None) -> Recordin
                 elif isinstance(record, Message):
                     topic, schema = channels[record.channel_id]
                     if topics is not None and topic not in topics:
+                        continue
+                    if schema.startswith(VIEW_SCHEMAS):
+                        rec.view_messages += 1
                         continue
                     try:
                         frame = decode(schema, record.data)

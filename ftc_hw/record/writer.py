@@ -10,6 +10,9 @@ last complete chunk (:func:`ftc_hw.record.reader.read_recording` reads such a fi
 A queue subscription decouples the publishers (device reader threads) from the encoding: the
 recorder's thread drains it every ``poll_s``; a full queue drops the oldest frames, counted in
 ``drops`` and written to the final metadata.
+
+Given the ``scene``, the recorder also writes the scene in Foxglove's well-known schemas beside those
+channels (:mod:`.foxglove_view`): the bus's channels are the same bytes with or without it.
 """
 from __future__ import annotations
 
@@ -17,6 +20,7 @@ import json
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +28,10 @@ from mcap.writer import CompressionType, Writer
 
 from ftc_hw import __version__
 from ftc_hw.bus import Bus
+from ftc_hw.scene import Scene
 
+from .foxglove_messages import foxglove_schema
+from .foxglove_view import FoxgloveMessage, FoxgloveView
 from .schemas import SCHEMAS, encode, topic_of
 
 PROFILE = ""  # no well-known MCAP profile (not ROS); the schemas say what the messages are
@@ -32,11 +39,12 @@ LIBRARY = f"ftc-hw/{__version__}"
 
 
 class McapRecorder:
-    """``with McapRecorder(bus, "run.mcap", metadata={...}):`` records every topic under ``prefix``."""
+    """``with McapRecorder(bus, "run.mcap", metadata={...}):`` records every topic under ``prefix``;
+    with ``scene``, the Foxglove channels too."""
 
     def __init__(self, bus: Bus, path: Path | str, *, metadata: dict[str, dict[str, str]] | None = None,
                  prefix: str = "", chunk_size: int = 256 * 1024, flush_s: float = 0.2,
-                 maxsize: int = 200_000, poll_s: float = 0.02) -> None:
+                 maxsize: int = 200_000, poll_s: float = 0.02, scene: Scene | None = None) -> None:
         self.bus = bus
         self.path = Path(path)
         self.metadata = dict(metadata or {})
@@ -48,6 +56,11 @@ class McapRecorder:
         self.counts: Counter[str] = Counter()
         self.skipped = 0  # frames of a type with no schema
         self.drops = 0
+        self.cpu_s = 0.0  # the recorder thread's CPU time (and the final drain's)
+        self.foxglove = FoxgloveView(scene) if scene is not None else None
+        self.foxglove_errors = 0  # frames whose Foxglove messages failed (the first error in the metadata)
+        self.foxglove_error = ""
+        self._fox_seq: dict[str, int] = {}
         self._lock = threading.Lock()
         self._file: Any = None
         self._writer: Writer | None = None
@@ -65,6 +78,9 @@ class McapRecorder:
         self._writer.start(profile=PROFILE, library=LIBRARY)
         for name, data in self.metadata.items():
             self._writer.add_metadata(name, data)
+        if self.foxglove is not None:
+            self._writer.add_metadata("foxglove", self.foxglove.describe())
+            self._feed_foxglove(self.foxglove.start, time.monotonic_ns())
         self._writer.flush()
         self._sub = self.bus.subscribe(self.prefix, maxsize=self.maxsize, prefix=True)
         self._stop.clear()
@@ -83,7 +99,8 @@ class McapRecorder:
         if cid is None:
             sid = self._schemas.get(schema)
             if sid is None:
-                sid = self._writer.register_schema(schema, "jsonschema", json.dumps(SCHEMAS[schema]).encode())
+                body = SCHEMAS[schema] if schema in SCHEMAS else foxglove_schema(schema)
+                sid = self._writer.register_schema(schema, "jsonschema", json.dumps(body).encode())
                 self._schemas[schema] = sid
             cid = self._writer.register_channel(topic, "json", sid)
             self._channels[topic] = cid
@@ -103,11 +120,30 @@ class McapRecorder:
                                      publish_time=frame.t_host_ns if t_dev is None else t_dev,
                                      sequence=int(getattr(frame, "seq", self.counts[topic])) & 0xFFFFFFFF)
         self.counts[topic] += 1
+        if self.foxglove is not None:
+            self._feed_foxglove(self.foxglove.feed, frame)
+
+    def _feed_foxglove(self, make: Callable[[Any], list[FoxgloveMessage]], arg: Any) -> None:
+        try:
+            for m in make(arg):
+                self._write_foxglove(m)
+        except Exception as exc:  # noqa: BLE001 - a view: nothing in it may cost the bus's channels
+            self.foxglove_errors += 1
+            self.foxglove_error = self.foxglove_error or f"{type(exc).__name__}: {exc}"
+
+    def _write_foxglove(self, m: FoxgloveMessage) -> None:
+        data = json.dumps(m.data, separators=(",", ":"), allow_nan=False).encode()
+        seq = self._fox_seq.get(m.topic, 0)
+        self._fox_seq[m.topic] = seq + 1
+        with self._lock:
+            self._writer.add_message(self._channel(m.topic, m.schema), log_time=m.log_time, data=data,
+                                     publish_time=m.log_time, sequence=seq & 0xFFFFFFFF)
 
     def _run(self) -> None:
         # Polls instead of waiting on the subscription: a waiting consumer makes every publish wake
         # it, and those thousands of wake-ups a second took the interpreter from the device readers
         # (a 1 kHz CAN reader fell behind and lost frames). A batch every poll_s costs the same encoding.
+        cpu0 = time.thread_time()
         last_flush = time.monotonic()
         while not self._sub.closed:
             for f in self._sub.drain():
@@ -117,6 +153,7 @@ class McapRecorder:
                     self._writer.flush()  # closes the chunk and flushes the file
                 last_flush = time.monotonic()
             self._stop.wait(self.poll_s)
+        self.cpu_s += time.thread_time() - cpu0
 
     def stop(self, final_metadata: dict[str, dict[str, str]] | None = None) -> None:
         """Write what is queued, then ``final_metadata`` and the summary; close the file."""
@@ -127,17 +164,30 @@ class McapRecorder:
         if self._thread is not None:
             self._thread.join(timeout=30.0)
             self._thread = None
+        cpu0 = time.thread_time()
         for f in self._sub.drain():
             self.write(f)
+        self.cpu_s += time.thread_time() - cpu0
         self.drops = self._sub.drops
         with self._lock:
-            meta = {"recorder": {"drops": str(self.drops), "skipped": str(self.skipped),
-                                 **{f"messages:{k}": str(v) for k, v in sorted(self.counts.items())}}}
+            meta = {"recorder": {"drops": str(self.drops), "skipped": str(self.skipped), "cpu_s": f"{self.cpu_s:.3f}",
+                                 **{f"messages:{k}": str(v) for k, v in sorted(self.counts.items())},
+                                 **self._foxglove_summary()}}
             for name, data in {**meta, **(final_metadata or {})}.items():
                 self._writer.add_metadata(name, {k: str(v) for k, v in data.items()})
             self._writer.finish()
             self._file.close()
             self._writer = None
+
+    def _foxglove_summary(self) -> dict[str, str]:
+        if self.foxglove is None:
+            return {}
+        out = {f"messages:{k}": str(v) for k, v in sorted(self.foxglove.counts.items())}
+        out.update({f"foxglove_skipped:{k}": str(v) for k, v in sorted(self.foxglove.skipped.items())})
+        out["foxglove_errors"] = str(self.foxglove_errors)
+        if self.foxglove_error:
+            out["foxglove_error"] = self.foxglove_error
+        return out
 
     def __enter__(self) -> McapRecorder:
         return self.start()

@@ -1,5 +1,6 @@
 """MCAP recording of the bus: one channel per topic with a JSON Schema, log/publish times, metadata,
-a bit-exact round trip, and a recorder killed with SIGKILL leaves a file readable up to its last chunk."""
+a bit-exact round trip, and a recorder killed with SIGKILL (with or without the Foxglove channels)
+leaves a file readable up to its last chunk."""
 from __future__ import annotations
 
 import json
@@ -97,10 +98,12 @@ RECORDER = textwrap.dedent("""
     import numpy as np
     from ftc_hw.bus import Bus, WrenchFrame
     from ftc_hw.record.writer import McapRecorder
+    from ftc_hw.scene import load_scene
 
     bus = Bus()
+    scene = load_scene("ur5e") if sys.argv[2] == "foxglove" else None
     rec = McapRecorder(bus, sys.argv[1], metadata={"scene": {"name": "ur5e"}}, chunk_size=16 * 1024,
-                       flush_s=0.1).start()
+                       flush_s=0.1, scene=scene).start()
     k = 0
     t_end = time.monotonic() + 60
     while time.monotonic() < t_end:
@@ -112,9 +115,10 @@ RECORDER = textwrap.dedent("""
 """)
 
 
-def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_chunk(tmp_path):
+@pytest.mark.parametrize("view", ["bus", "foxglove"])
+def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_chunk(tmp_path, view):
     path = tmp_path / "killed.mcap"
-    proc = subprocess.Popen([sys.executable, "-c", RECORDER, str(path)], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-c", RECORDER, str(path), view], stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == "ready"
         time.sleep(0.5)
@@ -129,6 +133,7 @@ def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_chunk(tmp_path)
     assert seqs == list(range(len(seqs)))  # everything up to the cut, in order, nothing lost in between
     assert all(np.array_equal(m.frame.wrench, np.full(6, float(m.frame.seq))) for m in got.messages)
     assert got.metadata["scene"] == {"name": "ur5e"}
+    assert (got.view_messages > 0) == (view == "foxglove")  # the wrench's Foxglove messages, cut likewise
     with open(path, "rb") as f, pytest.raises(Exception):  # noqa: B017 - no footer: the summary reader fails
         list(make_reader(f).iter_messages())
 

@@ -1,11 +1,13 @@
 """Record a monitor run on emulated devices, then replay it: the same pipeline on the recorded inputs
-gives the recorded events, bit for bit; another setting gives other events (the comparison can fail)."""
+gives the recorded events, bit for bit; another setting gives other events (the comparison can fail).
+The run's Foxglove channels are valid and put every contact marker on its event's point."""
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 
@@ -13,6 +15,7 @@ from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import read_events
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import pipeline_kwargs_from_json, replay
+from tests.record.foxglove_check import contact_markers_in_base, read_foxglove
 
 
 def ftc(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
@@ -37,6 +40,7 @@ def test_the_recording_has_one_channel_per_topic_and_the_run_as_metadata(recorde
     assert {"wrench/ft", "joints/arm", MONITOR_INPUT, "events/contact", "events/device"} <= topics
     assert all(summary.schemas[c.schema_id].encoding == "jsonschema" and c.message_encoding == "json"
                for c in summary.channels.values())
+    assert {"foxglove/tf", "foxglove/arm", "foxglove/contacts", "foxglove/wrench"} <= topics
     assert metadata["scene"]["name"] == "dxl-arm" and "[[devices]]" in metadata["scene"]["toml"]
     assert metadata["monitor"]["ft_source"] == "ft" and metadata["monitor"]["sim"] == "True"
     assert pipeline_kwargs_from_json(metadata["monitor"]["pipeline"]) == {"level": "dynamics"}
@@ -59,3 +63,16 @@ def test_replay_with_another_setting_gives_other_events(recorded):
     assert same.identical and same.inputs == len(rec.topic(MONITOR_INPUT))
     other = replay(rec, pipeline_kwargs={"level": "gravity"})  # the arm's inertia no longer compensated
     assert not other.identical and other.first_difference() is not None
+
+
+def test_the_recording_shows_each_contact_where_its_event_says_in_foxglove(recorded):
+    fox = read_foxglove(recorded / "run.mcap")  # every Foxglove message valid against its schema in the file
+    placed = contact_markers_in_base(fox)
+    events = [e for e in read_events(recorded / "events.jsonl") if "no_estimate" not in e["flags"]]
+    assert len(placed) == len(events) > 0
+    for ev, centre, _ in placed:
+        assert np.linalg.norm(centre - np.array(ev["point"])) < 1e-3, (ev, centre)
+    rec = fox.metadata["recorder"]
+    assert rec["foxglove_errors"] == "0"
+    skipped = {k for k in rec if k.startswith("foxglove_skipped:")}  # an event without an estimate has no marker
+    assert skipped <= {"foxglove_skipped:contact_no_estimate"}
