@@ -40,11 +40,15 @@ def png_beside(toml: Path) -> Path:
 
 
 def plot_beside(toml: Path, draw: Callable[[], Figure], console: Console) -> Path | None:
-    """Draw and write the figure beside ``toml``; say where, or why not (then return None)."""
+    """Draw and write the figure beside ``toml``; say where, or why not (then return None, and leave no
+    PNG there: an older one would show another fit beside this file)."""
     png = png_beside(toml)
     try:  # whatever goes wrong in a drawing, the calibration is already saved: say so and carry on
-        draw().savefig(png, dpi=DPI)
+        with open(png, "wb") as f:  # opened first: a place that cannot be written costs no drawing
+            draw().savefig(f, format="png", dpi=DPI)
     except Exception as exc:
+        if png.is_file():
+            png.unlink()
         console.print(f"[yellow]warning: no plot of the fit ({escape(str(png))}): "
                       f"{escape(type(exc).__name__ + ': ' + str(exc))}[/]")
         return None
@@ -59,16 +63,17 @@ def parameter_panel(ax: Axes, labels: Sequence[str], estimate: np.ndarray, std: 
     (``estimate ± std``), for a bar too short to read off a panel whose scale the estimate sets."""
     x = np.arange(len(labels))
     estimate, std = np.asarray(estimate, dtype=float), np.asarray(std, dtype=float)
-    for k in range(len(labels)):
-        c = WARN if flagged[k] else "#1f77b4"
-        if np.isfinite(std[k]):
-            ax.errorbar(x[k], estimate[k], yerr=std[k], fmt="o", color=c, capsize=3, ms=4)
-        else:
-            ax.plot(x[k], estimate[k], "x", color=c, ms=7)
-        if values:
-            sd = f"± {std[k]:.2g}" if np.isfinite(std[k]) else "not identified"
-            ax.annotate(f"{estimate[k]:.4g}\n{sd}", (x[k], estimate[k]), xytext=(6, 0), textcoords="offset points",
-                        fontsize=7, color=c, va="center")
+    bad, told = np.asarray(flagged, dtype=bool), np.isfinite(std)
+    for colour, mine in (("#1f77b4", ~bad), (WARN, bad)):  # one artist per kind: a figure of 100 draws fast
+        if np.any(mine & told):
+            ax.errorbar(x[mine & told], estimate[mine & told], yerr=std[mine & told], fmt="o", color=colour,
+                        capsize=3, ms=4)
+        if np.any(mine & ~told):
+            ax.plot(x[mine & ~told], estimate[mine & ~told], "x", color=colour, ms=7)
+    for k in range(len(labels)) if values else ():
+        sd = f"± {std[k]:.2g}" if told[k] else "not identified"
+        ax.annotate(f"{estimate[k]:.4g}\n{sd}", (x[k], estimate[k]), xytext=(6, 0), textcoords="offset points",
+                    fontsize=7, color=WARN if bad[k] else "#1f77b4", va="center")
     if zero_line:
         ax.axhline(0.0, color="0.6", lw=0.8)
     ax.set_xlim(-0.6, len(labels) - 0.4 + (0.8 if values else 0.0))

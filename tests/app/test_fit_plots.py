@@ -45,13 +45,15 @@ def axes_titled(fig, title_start: str):
 
 
 def error_bars(ax) -> tuple[np.ndarray, np.ndarray]:
-    """Each error bar's point and half-length, in plotting order."""
-    y, half = [], []
+    """Each error bar's point and half-length, from left to right."""
+    x, y, half = [], [], []
     for c in ax.containers:
         line, _, (bars,) = c.lines
+        x += list(line.get_xdata())
         y += list(line.get_ydata())
         half += [abs(s[1][1] - s[0][1]) / 2 for s in bars.get_segments()]
-    return np.array(y), np.array(half)
+    order = np.argsort(x, kind="stable")
+    return np.array(y)[order], np.array(half)[order]
 
 
 def flagged_ticks(ax) -> list[bool]:
@@ -74,7 +76,7 @@ def calibration_fit():
     return Identifier(gm, FitOptions(yaw=True, tilt=True)).fit(samples)
 
 
-def test_the_calibration_figure_draws_the_fits_residuals_and_parameters(calibration_fit, tmp_path):
+def test_the_calibration_figure_draws_the_fits_residuals_and_parameters(calibration_fit):
     fit = calibration_fit
     assert fit.verdict == "inconsistent" and fit.poorly_excited  # what the figure must show
     fig = draw_calibration(fit, SCENE.name)
@@ -82,8 +84,8 @@ def test_the_calibration_figure_draws_the_fits_residuals_and_parameters(calibrat
     for title, axes in (("force", slice(0, 3)), ("moment", slice(3, 6))):
         ax = axes_titled(fig, f"{title}:")
         y, half = error_bars(ax)
-        np.testing.assert_array_equal(y, fit.residuals[:, axes].T.reshape(-1))  # per axis, the poses in order
-        np.testing.assert_allclose(half, fit.residual_std[:, axes].T.reshape(-1), rtol=1e-9)
+        np.testing.assert_array_equal(y, fit.residuals[:, axes].reshape(-1))  # pose by pose, x y z side by side
+        np.testing.assert_allclose(half, fit.residual_std[:, axes].reshape(-1), rtol=1e-9)
         assert ax.get_ylabel().endswith("(N)" if title == "force" else "(N m)")
         rings = [line for line in ax.lines if line.get_markerfacecolor() == "none"]  # down-weighted by the fit
         low = fit.weights[:, axes].T < 1.0
@@ -103,24 +105,31 @@ def test_the_calibration_figure_draws_the_fits_residuals_and_parameters(calibrat
         assert ax.get_ylabel() == unit
         assert flagged_ticks(ax) == [n in fit.poorly_excited for n in names]
     assert any(any(flagged_ticks(ax)) for ax in fig.axes)
-    fig.savefig(tmp_path / "cal.png", dpi=DPI)
-    check_png(tmp_path / "cal.png", CALIBRATE_PX)
 
 
 def test_a_plot_that_fails_is_a_warning_and_the_calibration_stays(tmp_path):
     toml = tmp_path / "cal.toml"
     toml.write_text("kept = true\n")
-    (tmp_path / "cal.png").mkdir()  # something in the way of the PNG
     out = io.StringIO()
     console = Console(file=out, width=200)
-    assert plot_beside(toml, lambda: new_figure(2.0, 2.0), console) is None
-    assert "warning: no plot of the fit" in out.getvalue() and "IsADirectoryError" in out.getvalue()
+
+    def older():
+        fig = new_figure(2.0, 2.0)
+        fig.subplots().plot([0.0, 1.0], [1.0, 0.0])
+        return fig
+
+    assert plot_beside(toml, older, console) == tmp_path / "cal.png"
+    check_png(tmp_path / "cal.png", (200, 200))  # an older fit's figure
 
     def broken():
         raise ValueError("no figure today")
 
     assert plot_beside(toml, broken, console) is None
-    assert "ValueError: no figure today" in out.getvalue()
+    assert "warning: no plot of the fit" in out.getvalue() and "ValueError: no figure today" in out.getvalue()
+    assert not (tmp_path / "cal.png").exists()  # not the older fit's figure beside this file
+    (tmp_path / "cal.png").mkdir()  # something in the way of the PNG
+    assert plot_beside(toml, broken, console) is None
+    assert "IsADirectoryError" in out.getvalue()
     assert toml.read_text() == "kept = true\n"
     assert png_beside(tmp_path / "cal.png") == tmp_path / "cal.png.png"  # never over the calibration itself
     assert png_beside(tmp_path / "cal") == tmp_path / "cal.png"

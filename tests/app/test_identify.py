@@ -3,6 +3,7 @@ written into the calibration file on top of what it had, its figure (the fit's o
 parameters against their prior, the PNG beside the file), and the planned excitation within its limits."""
 from __future__ import annotations
 
+import io
 import re
 import subprocess
 import sys
@@ -10,11 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rich.console import Console
 
 from ftc_hw.app import identify_plot
-from ftc_hw.app.identify import IdentifyOptions, identify, motion_segments
+from ftc_hw.app.identify import IdentifyOptions, identify, motion_segments, run_identify
 from ftc_hw.app.identify_plot import draw_identification
-from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, ContactEvent, DeviceEvent
+from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, DeviceEvent
 from ftc_hw.calibration.excitation import SelfCollision, plan_excitation
 from ftc_hw.calibration.file import Calibration, load_calibration, save_calibration
 from ftc_hw.calibration.free_motion import IdentificationError
@@ -22,6 +24,7 @@ from ftc_hw.calibration.joint_friction import V_EPS
 from ftc_hw.model import ArmModel, Payload
 from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
 from ftc_hw.record.reader import RecordedMessage, Recording
+from ftc_hw.record.writer import McapRecorder
 from ftc_hw.scene import load_scene
 from tests.app.test_fit_plots import IDENTIFY_PX, axes_titled, check_png, error_bars, flagged_ticks
 
@@ -158,6 +161,30 @@ def test_the_identification_figure_draws_the_fits_residuals_and_parameters_again
         np.testing.assert_allclose(half, np.array(ident.figures["joint_std"])[fitted, k], rtol=1e-9)
         np.testing.assert_array_equal(ax.lines[0].get_ydata(), getattr(SCENE.robot, key))  # the prior
         assert flagged_ticks(ax) == [not f for f in fitted]
+
+
+def test_identify_on_a_recording_writes_the_file_then_its_figure(tmp_path):
+    """``ftc identify FILE.mcap``'s run: the calibration file, then its PNG beside it; with the PNG's
+    place taken, a warning with the reason and the same calibration and exit code."""
+    rec = _recording(seconds=18.0, currents=True)
+    path = tmp_path / "run.mcap"
+    recorder = McapRecorder(Bus(), path, metadata={"scene": {"name": SCENE.name}})
+    recorder.start()
+    for m in rec.messages:
+        recorder.write(m.frame)
+    recorder.stop()
+    codes = []
+    for name in ("cal", "blocked"):
+        out = io.StringIO()
+        if name == "blocked":
+            (tmp_path / "blocked.png").mkdir()
+        codes.append(run_identify(SCENE, path, IdentifyOptions(out=tmp_path / f"{name}.toml"),
+                                  console=Console(file=out, width=300)))
+        assert load_calibration(tmp_path / f"{name}.toml", scene=SCENE).identification is not None
+        said = out.getvalue()
+    assert codes[0] in (0, 4) and codes[1] == codes[0]
+    check_png(tmp_path / "cal.png", IDENTIFY_PX)
+    assert "warning: no plot of the fit" in said and "IsADirectoryError" in said, said
 
 
 def test_the_plan_is_driven_through_a_dynamixel_arms_protocol(tmp_path):
