@@ -76,6 +76,7 @@ def parameter_panel(ax: Axes, labels: Sequence[str], estimate: np.ndarray, std: 
                     fontsize=7, color=WARN if bad[k] else "#1f77b4", va="center")
     if zero_line:
         ax.axhline(0.0, color="0.6", lw=0.8)
+    ax.ticklabel_format(axis="y", useOffset=False)  # 2000.1 g, not 0.1 under a "+2e3"
     ax.set_xlim(-0.6, len(labels) - 0.4 + (0.8 if values else 0.0))
     slanted = len(labels) > 4 or max(map(len, labels)) > 6
     ax.set_xticks(x, labels, rotation=60 if slanted else 0, ha="right" if slanted else "center", fontsize=7)
