@@ -67,6 +67,9 @@ class FreeMotionFit:
     residual_rms: np.ndarray  # (6,) after the fit, of the thinned samples
     residual_rms_before: np.ndarray  # (6,) the nominal model's (its mean removed)
     samples: int
+    t: np.ndarray  # (samples,) s: the thinned samples' times (the recording's clock)
+    residuals: np.ndarray  # (samples, 6): reading minus the identified model (N, N m)
+    residuals_before: np.ndarray  # (samples, 6): minus the nominal model, its mean removed
     untold: list[str] = field(default_factory=list)  # the directions the data could not tell
     verdict: str = "good"
     reasons: list[str] = field(default_factory=list)
@@ -74,6 +77,15 @@ class FreeMotionFit:
     @property
     def std(self) -> np.ndarray:
         return np.sqrt(np.diag(self.cov))
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """[bias, dpi per body, dG (if fitted)]: in the order of ``labels``, about the model (prior mean 0
+        but for the bias)."""
+        parts = [self.bias, self.delta_pi.reshape(-1)]
+        if len(self.labels) > 6 + self.delta_pi.size:
+            parts.append((self.gain - np.eye(6)).reshape(-1))
+        return np.concatenate(parts)
 
 
 def smooth(x: np.ndarray, n: int) -> np.ndarray:
@@ -151,11 +163,12 @@ class FreeMotionIdentifier:
     def fit(self, data: MotionData | Sequence[MotionData]) -> FreeMotionFit:
         """Fit one stretch of free motion, or several (each low-passed on its own: gaps between them,
         contacts cut out, are never smoothed across)."""
-        rows, resid = [], []
+        rows, resid, times = [], [], []
         for segment in [data] if isinstance(data, MotionData) else data:
             if len(segment.t) < 8 * MIN_SEGMENT_SAMPLES:
                 continue
-            _, w, q, qd, qdd = prepare(segment)
+            t, w, q, qd, qdd = prepare(segment)
+            times.append(t)
             for k in range(len(w)):
                 a, nominal = self.rows(q[k], qd[k], qdd[k])
                 rows.append(a)
@@ -167,9 +180,9 @@ class FreeMotionIdentifier:
         y = np.concatenate(resid)
         if not (np.all(np.isfinite(a)) and np.all(np.isfinite(y))):
             raise IdentificationError("the motion data hold NaN or Inf (repeated time stamps, a broken frame?)")
-        before = np.sqrt(np.mean(np.square(np.array(resid) - np.mean(resid, axis=0)), axis=0))
+        before = np.array(resid) - np.mean(resid, axis=0)
         x, cov, r = self._irls(a, y)
-        return self._result(x, cov, r, before, len(rows))
+        return self._result(x, cov, r, before, np.concatenate(times))
 
     def _irls(self, a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Each axis weighed by its robust residual scale, each sample-axis by Huber's weight: a
@@ -186,12 +199,12 @@ class FreeMotionIdentifier:
             huber = np.where(u <= HUBER_K, 1.0, HUBER_K / np.maximum(u, 1e-12))
         return x, cov, r
 
-    def _result(self, x, cov, r, before, n) -> FreeMotionFit:
+    def _result(self, x, cov, r, before, t) -> FreeMotionFit:
         nb = len(self.bodies)
         dpi = x[6:6 + N_PARAMS * nb].reshape(nb, N_PARAMS)
         gain = np.eye(6) + (x[6 + N_PARAMS * nb:].reshape(6, 6) if self.with_gain else 0.0)
         fit = FreeMotionFit(self.bodies, x[:6].copy(), dpi, gain, cov, self.labels, self.prior_std,
-                            np.sqrt(np.mean(r * r, axis=0)), before, n)
+                            _rms(r), _rms(before), len(t), t, r, before)
         ratio = np.sqrt(np.diag(cov)) / self.prior_std
         fit.untold = [lab for lab, v in zip(self.labels, ratio, strict=True) if v > TOLD and not lab.startswith("bias")]
         if fit.untold:
@@ -199,6 +212,10 @@ class FreeMotionIdentifier:
             fit.reasons.append(f"{len(fit.untold)} of {len(self.labels) - 6} parameters not told apart by this motion "
                                f"(posterior std above {TOLD:g} x prior): they stay at the model's values")
         return fit
+
+
+def _rms(r: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(r * r, axis=0))
 
 
 def _bayes(a: np.ndarray, y: np.ndarray, prior_sqrt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

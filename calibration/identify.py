@@ -44,6 +44,8 @@ class Fit:
     reasons: list[str]
     poorly_excited: list[str]
     residual_rms: np.ndarray  # per axis, of the pose means (N, N m)
+    residuals: np.ndarray  # (poses, 6): each pose's mean reading minus the fitted model (N, N m)
+    residual_std: np.ndarray  # (poses, 6): the expected std of those (the sensor noise, the encoders)
     condition_number: float
     chi2: float
     dof: int
@@ -167,12 +169,14 @@ class Identifier:
         p = self._irls(geoms, y, samples, p, robust=True)
         return self._result(geoms, y, samples, p, limits)
 
-    def _whiteners(self, geoms, samples, p) -> list[np.ndarray]:
-        return [np.linalg.inv(np.linalg.cholesky(self.pose_cov(g, p, s.n))) for g, s in zip(geoms, samples,
-                                                                                              strict=True)]
+    def _pose_covs(self, geoms, samples, p) -> list[np.ndarray]:
+        return [self.pose_cov(g, p, s.n) for g, s in zip(geoms, samples, strict=True)]
+
+    def _whiteners(self, covs: list[np.ndarray]) -> list[np.ndarray]:
+        return [np.linalg.inv(np.linalg.cholesky(c)) for c in covs]
 
     def _irls(self, geoms, y, samples, p, robust: bool, iters: int = 30) -> np.ndarray:
-        lw = self._whiteners(geoms, samples, p)
+        lw = self._whiteners(self._pose_covs(geoms, samples, p))
 
         def residuals(p: np.ndarray) -> np.ndarray:
             return np.concatenate([li @ (yi - self.model(g, p)) for li, yi, g in zip(lw, y, geoms, strict=True)])
@@ -200,7 +204,8 @@ class Identifier:
         return p
 
     def _result(self, geoms, y, samples, p, limits) -> Fit:
-        lw = self._whiteners(geoms, samples, p)
+        covs = self._pose_covs(geoms, samples, p)
+        lw = self._whiteners(covs)
         raw = np.array([yi - self.model(g, p) for yi, g in zip(y, geoms, strict=True)])
         r = np.concatenate([li @ ri for li, ri in zip(lw, raw, strict=True)])
         jw = np.vstack([li @ self.jacobian(g, p) for li, g in zip(lw, geoms, strict=True)])
@@ -223,7 +228,8 @@ class Identifier:
         std = np.sqrt(np.clip(np.diag(cov), 0, None))
         std[unidentified] = np.inf
         fit = Fit(names=list(self.names), estimate=p, cov=cov, std=std, verdict="good", reasons=[],
-                  poorly_excited=[], residual_rms=np.sqrt(np.mean(raw**2, axis=0)), condition_number=cond,
+                  poorly_excited=[], residual_rms=np.sqrt(np.mean(raw**2, axis=0)), residuals=raw,
+                  residual_std=np.sqrt(np.array([np.diag(c) for c in covs])), condition_number=cond,
                   chi2=chi2, dof=dof, weights=w.reshape(len(samples), 6), arm_basis=self.basis)
         _derive(fit, unidentified)
         _judge(fit, samples, r.reshape(len(samples), 6), scale, unidentified, limits, self.scene, raw)

@@ -36,7 +36,9 @@ from ftc_hw.devices.base import DeviceError
 from ftc_hw.model import ArmModel, Payload
 from ftc_hw.scene import Scene, SceneError
 
+from .calibrate_plot import draw_calibration
 from .calibration_session import DeviceSession, SessionError
+from .fit_figure import plot_beside
 
 JOG_TOLERANCE = 0.01  # rad: how close a jogged UR must be to the planned pose
 
@@ -135,9 +137,10 @@ def _ask(console: Console, interactive: bool, question: str, default: bool = Tru
 def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, interactive: bool, poses: int,
                   out: Path | None, json_path: Path | None, sample_s: float = 1.0, seed: int = 0,
                   yaw: bool = False, tilt: bool = False, arm_gravity: bool = False, expected_mass: float = 0.5,
-                  speed: float = 1.0, reality: str = "ideal") -> int:
+                  speed: float = 1.0, reality: str = "ideal", plot: bool = True) -> int:
     """The wizard on ``scene``'s devices (``sim``: emulated, hiding ``sim_payload``, default 0.5 kg 5 cm
-    out along the flange's z). Returns the exit code (module docstring)."""
+    out along the flange's z); ``plot``: the fit drawn to a PNG beside the saved file. Returns the exit
+    code (module docstring)."""
     console = Console()
     payload = sim_payload
     if sim and payload is None:
@@ -241,6 +244,8 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
                 console.print(f"[red]cannot save {out}: {exc}[/]")
                 return 1
             console.print(f"saved {out}")
+            if plot:
+                plot_beside(out, lambda: draw_calibration(fit, scene.name), console)
         if json_path is not None:
             json_path.write_text(json.dumps(json_record(fit, truth), indent=2))
             console.print(f"wrote {json_path}")

@@ -43,6 +43,8 @@ from ftc_hw.scene import Scene
 
 from .calibration_session import DeviceSession, SessionError
 from .drive_excitation import drive_excitation
+from .fit_figure import plot_beside
+from .identify_plot import draw_identification
 from .monitor_config import MonitorConfig, MonitorSetupError
 from .rig import RigError
 from .session import run_monitor
@@ -60,6 +62,7 @@ class IdentifyOptions:
     json_path: Path | None = None
     keep_contacts: bool = False
     gain: bool = True
+    plot: bool = True  # the fit drawn to a PNG beside ``out``
 
 
 def motion_segments(rec: Recording, keep_contacts: bool = False) -> tuple[list[MotionData], dict[str, int]]:
@@ -210,6 +213,8 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
     save_calibration(cal, opts.out)
     _report(console, fit, counts, segments, opts.out, base is not None)
     _report_joints(console, scene, cal.identification)
+    if opts.plot:
+        plot_beside(opts.out, lambda: draw_identification(fit, cal.identification, scene), console)
     if opts.json_path is not None:
         figures = _figures(fit, counts, segments) | {"joints": {k: v.tolist() for k, v in
                                                                  cal.identification.joints.items()}}

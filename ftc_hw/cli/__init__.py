@@ -83,6 +83,8 @@ ZenohConfigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
          "(docs/bus.md).")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
+# calibrate, identify
+PLOT_HELP = "Draw the fit (residuals, parameters with error bars) to a PNG beside the calibration file."
 
 
 def _version(value: bool) -> None:
@@ -408,6 +410,7 @@ def identify(
                                                 "(robust weights instead of cutting them out).")] = False,
     gain: Annotated[bool, typer.Option("--gain/--no-gain", help="Also fit the sensor's linear error on the "
                                        "arm's loads (gain, crosstalk, mount).")] = True,
+    plot: Annotated[bool, typer.Option("--plot/--no-plot", help=PLOT_HELP)] = True,
     device: DeviceOption = None,
     rig: RigOption = None,
 ) -> None:
@@ -416,7 +419,7 @@ def identify(
     from ftc_hw.cli.identify import run_identify_command  # lazy: CLI start-up
 
     opts = IdentifyOptions(out=out, calibration=calibration, json_path=json_path, keep_contacts=keep_contacts,
-                           gain=gain)
+                           gain=gain, plot=plot)
     raise typer.Exit(run_identify_command(recording, scene, sim=sim, plan=plan, plan_file=plan_file,
                                           scenario=scenario, duration=duration, seed=seed, reality=reality.value,
                                           opts=opts, device_overrides=tuple(device or ()), rig=rig))
@@ -486,6 +489,7 @@ def calibrate(
     expected_mass: Annotated[float, typer.Option(min=0.0, help="Payload mass (kg) the plan's expected "
                                                                "accuracy assumes.")] = 0.5,
     speed: Annotated[float, typer.Option(min=0.05, max=3.0, help="Peak joint speed of the moves, rad/s.")] = 1.0,
+    plot: Annotated[bool, typer.Option("--plot/--no-plot", help=PLOT_HELP)] = True,
     device: DeviceOption = None,
     rig: RigOption = None,
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
@@ -497,7 +501,7 @@ def calibrate(
                                            interactive=not non_interactive, poses=poses, out=out,
                                            json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw, tilt=tilt,
                                            arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed,
-                                           reality=reality.value))
+                                           reality=reality.value, plot=plot))
 
 
 @devices_app.command("probe")

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ftc_hw.calibration import load_calibration
+from tests.app.test_fit_plots import CALIBRATE_PX, check_png
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
 
@@ -101,10 +102,12 @@ def test_interactive_wizard_completes_with_keystrokes(tmp_path):
         term.expect(r"Save the calibration to .*cal\.toml\?.*\[y/n\]", 10)
         term.type("y\r")
         term.expect(r"saved .*cal\.toml", 10)
+        term.expect(r"plotted the fit: .*cal\.png", 30)
         code = term.finish(30)
     finally:
         term.kill()
     assert code in (0, 3)
+    check_png(tmp_path / "cal.png", CALIBRATE_PX)
     record = json.loads(js.read_text())
     assert record["truth"]["mass_kg"] == 0.4 and record["truth"]["com_m"] == [0.0, 0.01, 0.05]
     assert record["verdict"] in ("good", "poorly_excited")

@@ -1,7 +1,9 @@
 """``ftc identify``: free motion cut from a recording (contacts, lost streams, long joint gaps), the fit
-written into the calibration file on top of what it had, and the planned excitation within its limits."""
+written into the calibration file on top of what it had, its figure (the fit's own residuals and
+parameters against their prior, the PNG beside the file), and the planned excitation within its limits."""
 from __future__ import annotations
 
+import io
 import re
 import subprocess
 import sys
@@ -9,24 +11,33 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rich.console import Console
 
-from ftc_hw.app.identify import IdentifyOptions, identify, motion_segments
-from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, ContactEvent, DeviceEvent
+from ftc_hw.app import identify_plot
+from ftc_hw.app.identify import IdentifyOptions, identify, motion_segments, run_identify
+from ftc_hw.app.identify_plot import draw_identification
+from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, DeviceEvent
 from ftc_hw.calibration.excitation import SelfCollision, plan_excitation
 from ftc_hw.calibration.file import Calibration, load_calibration, save_calibration
 from ftc_hw.calibration.free_motion import IdentificationError
+from ftc_hw.calibration.joint_friction import V_EPS
 from ftc_hw.model import ArmModel, Payload
 from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
 from ftc_hw.record.reader import RecordedMessage, Recording
+from ftc_hw.record.writer import McapRecorder
 from ftc_hw.scene import load_scene
+from tests.app.test_fit_plots import IDENTIFY_PX, axes_titled, check_png, error_bars, flagged_ticks
 
 SCENE = load_scene("dxl-arm")
 
 
-def _recording(seconds: float = 40.0, rate: float = 100.0, true_arm: ArmModel | None = None) -> Recording:
+def _recording(seconds: float = 40.0, rate: float = 100.0, true_arm: ArmModel | None = None,
+               currents: bool = False) -> Recording:
     """A dxl-arm recording of every joint moving, read through ``true_arm``: a contact at 10-11 s, the
-    sensor lost at 20-21 s, a 50 ms joint gap at 30 s."""
+    sensor lost at 20-21 s, a 50 ms joint gap at 30 s. ``currents``: the motor currents of the scene's
+    torque constants and friction (else zero)."""
     arm = true_arm or ArmModel(SCENE)
+    r = SCENE.robot
     t = np.arange(0.0, seconds, 1.0 / rate)
     home = np.asarray(SCENE.robot.home)
     w = 2 * np.pi * np.array([0.13, 0.21, 0.17, 0.29, 0.0])
@@ -38,7 +49,11 @@ def _recording(seconds: float = 40.0, rate: float = 100.0, true_arm: ArmModel | 
         wrench = arm.predicted_wrench(q, qd, qdd) + np.array([0.2, -0.1, 0.3, 0.01, 0.02, -0.01])
         ns = int(tk * 1e9)
         gap = 50_000_000 if 30.0 <= tk < 30.05 else 0
-        frame = PipelineInput(ns, ns, k, "ft", wrench, q, qd, np.zeros(5), joint_gap_ns=gap)
+        current = np.zeros(5)
+        if currents:
+            tau = arm.joint_torques(q, qd, qdd) + r.friction_viscous * qd + r.friction_coulomb * np.tanh(qd / V_EPS)
+            current = tau / r.torque_constant
+        frame = PipelineInput(ns, ns, k, "ft", wrench, q, qd, current, joint_gap_ns=gap)
         rec.messages.append(RecordedMessage(MONITOR_INPUT, ns, ns, frame))
         for at, topic, ev in ((10.0, EVENTS_CONTACT, "onset"), (11.0, EVENTS_CONTACT, "offset"),
                               (20.0, EVENTS_DEVICE, "sensor_lost"), (21.0, EVENTS_DEVICE, "sensor_back")):
@@ -110,6 +125,68 @@ def test_repeated_time_stamps_are_dropped_not_divided_by():
     assert np.all(np.isfinite(fit.residual_rms)) and cal.identification is not None
 
 
+def test_the_identification_figure_draws_the_fits_residuals_and_parameters_against_the_prior():
+    """Read back from the figure's artists (its PNG on disk: the command's run below)."""
+    delta = {"link4": np.array([0.02, 0.001, 0.0, 0.0005, 0, 0, 0, 0, 0, 0])}
+    segments, _ = motion_segments(_recording(seconds=18.0, true_arm=ArmModel(SCENE, None, delta), currents=True))
+    cal, fit = identify(SCENE, segments, None, "synthetic.mcap")
+    ident = cal.identification
+    assert fit.untold and ident.joints  # what the figure must show
+    fig = draw_identification(fit, ident, SCENE)
+    assert f"verdict {fit.verdict}" in fig.get_suptitle()
+    for title, axes in (("force", range(3)), ("moment", range(3, 6))):
+        dots = [line for line in axes_titled(fig, f"{title}:").lines if line.get_linestyle() == "None"]
+        for line, k in zip(dots, axes, strict=True):
+            np.testing.assert_array_equal(line.get_xdata(), fit.t - fit.t[0])
+            np.testing.assert_array_equal(line.get_ydata(), fit.residuals[:, k])
+    n = 10 * len(fit.bodies)
+    for title, part in (("inertial corrections", slice(6, 6 + n)), ("sensor's linear error", slice(6 + n, 42 + n))):
+        ax = axes_titled(fig, title)
+        y, half = error_bars(ax)
+        prior = fit.prior_std[part]
+        np.testing.assert_allclose(y, fit.estimate[part] / prior, rtol=1e-12)
+        np.testing.assert_allclose(half, fit.std[part] / prior, rtol=1e-9)
+        assert flagged_ticks(ax) == [lab in fit.untold for lab in fit.labels[part]]
+    assert any(flagged_ticks(axes_titled(fig, "inertial corrections")))
+    for title, part in (("force bias", slice(0, 3)), ("torque bias", slice(3, 6))):
+        y, half = error_bars(axes_titled(fig, title))
+        np.testing.assert_allclose(y, fit.bias[part], rtol=1e-12)
+        np.testing.assert_allclose(half, fit.std[part], rtol=1e-9)
+    fitted = ident.figures["joints_fitted"]
+    assert any(fitted) and not all(fitted)  # the gripper does not move: the scene's values kept
+    for k, (title, key, _unit) in enumerate(identify_plot.JOINT_TERMS):
+        ax = axes_titled(fig, title)
+        y, half = error_bars(ax)  # the fitted joints, with their bars
+        np.testing.assert_allclose(y, ident.joints[key][fitted], rtol=1e-12)
+        np.testing.assert_allclose(half, np.array(ident.figures["joint_std"])[fitted, k], rtol=1e-9)
+        np.testing.assert_array_equal(ax.lines[0].get_ydata(), getattr(SCENE.robot, key))  # the prior
+        assert flagged_ticks(ax) == [not f for f in fitted]
+
+
+def test_identify_on_a_recording_writes_the_file_then_its_figure(tmp_path):
+    """``ftc identify FILE.mcap``'s run: the calibration file, then its PNG beside it; with the PNG's
+    place taken, a warning with the reason and the same calibration and exit code."""
+    rec = _recording(seconds=18.0, currents=True)
+    path = tmp_path / "run.mcap"
+    recorder = McapRecorder(Bus(), path, metadata={"scene": {"name": SCENE.name}})
+    recorder.start()
+    for m in rec.messages:
+        recorder.write(m.frame)
+    recorder.stop()
+    codes = []
+    for name in ("cal", "blocked"):
+        out = io.StringIO()
+        if name == "blocked":
+            (tmp_path / "blocked.png").mkdir()
+        codes.append(run_identify(SCENE, path, IdentifyOptions(out=tmp_path / f"{name}.toml"),
+                                  console=Console(file=out, width=300)))
+        assert load_calibration(tmp_path / f"{name}.toml", scene=SCENE).identification is not None
+        said = out.getvalue()
+    assert codes[0] in (0, 4) and codes[1] == codes[0]
+    check_png(tmp_path / "cal.png", IDENTIFY_PX)
+    assert "warning: no plot of the fit" in said and "IsADirectoryError" in said, said
+
+
 def test_the_plan_is_driven_through_a_dynamixel_arms_protocol(tmp_path):
     """``ftc identify --plan`` on an arm that takes goal positions streams the plan to it through its
     protocol (the emulated servos here, the world only physics behind them) while the monitor pairs the
@@ -125,6 +202,8 @@ def test_the_plan_is_driven_through_a_dynamixel_arms_protocol(tmp_path):
     assert seconds >= 10.0, text[-3000:]
     cal = load_calibration(out, scene=SCENE)
     assert "driven through the arm's protocol" in cal.identification.source
+    assert f"plotted the fit: {out.with_suffix('.png')}" in " ".join(proc.stdout.split()), text[-3000:]
+    check_png(out.with_suffix(".png"), IDENTIFY_PX)
     proc = subprocess.run([sys.executable, "-m", "ftc_hw", "identify", "--scene", "ur5e", "--plan"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "--plan-file" in proc.stdout + proc.stderr

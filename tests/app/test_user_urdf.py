@@ -13,6 +13,7 @@ from ftc_hw.app.evaluate import evaluate
 from ftc_hw.calibration.file import load_calibration
 from ftc_hw.record.events import read_events, read_truth
 from ftc_hw.scene import load_scene
+from tests.app.test_fit_plots import CALIBRATE_PX, IDENTIFY_PX, check_png
 from tests.app.test_monitor_sim import MEDIAN_ERR_MM, check_pairs
 from tests.urdf_arm import write_ur5e_urdf
 
@@ -33,6 +34,7 @@ def test_a_users_urdf_with_mesh_links_calibrates_monitors_and_identifies(tmp_pat
     assert proc.returncode in (0, 3) and "verdict: inconsistent" not in proc.stdout and cal.is_file(), report
     said = " ".join(proc.stdout.split())  # rich wraps at the terminal's width
     assert "sets the world's joint targets directly" in said and said.count("sampled ") == 4, report
+    check_png(tmp_path / "cal.png", CALIBRATE_PX)
     record = json.loads(js.read_text())
     assert record["truth"]["mass_kg"] == 2.0
     assert abs(record["mass_kg"] - 2.0) <= 4 * record["std"]["mass_kg"] + 0.01, report
@@ -68,6 +70,7 @@ def test_a_users_urdf_with_mesh_links_calibrates_monitors_and_identifies(tmp_pat
         assert "cannot identify:" in text and "usable samples of free motion" in text, text[-3000:]
         return
     assert proc.returncode in (0, 4), text[-3000:]
+    check_png(ident.with_suffix(".png"), IDENTIFY_PX)
     back = load_calibration(ident, scene=scene)
     assert back.identification is not None and back.identification.source.endswith("run.mcap")
     assert "inertials" in back.pipeline_kwargs(scene)

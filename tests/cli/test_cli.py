@@ -158,3 +158,18 @@ def test_sim_addresses_are_checked_before_anything_starts():
     assert r.exit_code == 2 and "loopback addresses only" in r.output, r.output
     r = runner.invoke(app, ["calibrate", "--scene", "ur5e", "--device", "arm.adress=192.0.2.7"])
     assert r.exit_code == 2 and "did you mean 'address'" in r.output, r.output
+
+
+def test_plot_is_on_by_default_and_no_plot_reaches_calibrate_and_identify(monkeypatch, tmp_path):
+    import ftc_hw.cli.calibrate as calibrate_cli
+    import ftc_hw.cli.identify as identify_cli
+
+    seen = []
+    monkeypatch.setattr(calibrate_cli, "run_calibrate", lambda scene, **kw: seen.append(kw["plot"]) or 0)
+    monkeypatch.setattr(identify_cli, "run_identify", lambda scene, rec, opts, **kw: seen.append(opts.plot) or 0)
+    calibrate, identify = ["calibrate", "--scene", "dxl-arm"], ["identify", str(tmp_path / "run.mcap"), "--scene",
+                                                                 "dxl-arm"]
+    for args in (calibrate, [*calibrate, "--no-plot"], identify, [*identify, "--no-plot"]):
+        r = runner.invoke(app, args)
+        assert r.exit_code == 0, r.output
+    assert seen == [True, False, True, False]
