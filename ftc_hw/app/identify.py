@@ -35,6 +35,7 @@ from ftc_hw.calibration.file import (
 )
 from ftc_hw.calibration.free_motion import FreeMotionFit, FreeMotionIdentifier, IdentificationError, MotionData
 from ftc_hw.calibration.joint_friction import JointFit, fit_joint_friction
+from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import MONITOR_INPUT
@@ -207,10 +208,14 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
                       else str(recording))
         cal, fit = identify(scene, segments, base, source, gain=opts.gain)
     except (IdentificationError, RecordingError, CalibrationError, MonitorSetupError, SessionError, RigError,
-            OSError, np.linalg.LinAlgError) as exc:
+            DeviceError, OSError, np.linalg.LinAlgError) as exc:
         console.print(f"[red]cannot identify:[/] {exc}")
         return 1
-    save_calibration(cal, opts.out)
+    try:
+        save_calibration(cal, opts.out)
+    except (OSError, CalibrationError) as exc:
+        console.print(f"[red]cannot save {opts.out}: {exc}[/]")
+        return 1
     _report(console, fit, counts, segments, opts.out, base is not None)
     _report_joints(console, scene, cal.identification)
     if opts.plot:

@@ -185,6 +185,11 @@ def test_identify_on_a_recording_writes_the_file_then_its_figure(tmp_path):
     assert codes[0] in (0, 4) and codes[1] == codes[0]
     check_png(tmp_path / "cal.png", IDENTIFY_PX)
     assert "warning: no plot of the fit" in said and "IsADirectoryError" in said, said
+    (tmp_path / "a-file").write_text("")  # no folder for the calibration file: said, exit 1, no traceback
+    out = io.StringIO()
+    assert run_identify(SCENE, path, IdentifyOptions(out=tmp_path / "a-file" / "cal.toml"),
+                        console=Console(file=out, width=300)) == 1
+    assert "cannot save" in out.getvalue(), out.getvalue()
 
 
 def test_the_plan_is_driven_through_a_dynamixel_arms_protocol(tmp_path):
