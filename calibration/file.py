@@ -50,6 +50,15 @@ class Identification:
     covariance: np.ndarray | None = None
     gain_fitted: bool = True
 
+    def told_gain(self) -> np.ndarray:
+        """What the pipeline undoes on a contact's wrench: the gain when the data told every one of its
+        terms, else nothing (the identity). A told term's estimate leans on the untold ones beside it:
+        measured on dxl-arm (typical world, 26 of 36 terms untold), undoing the told terms alone took
+        the localization's p95 from 12.4 to 15.4 mm, all of them to 16.9."""
+        if any(u.startswith("gain[") for u in self.untold):
+            return np.eye(6)
+        return self.gain.copy()
+
     def model_error(self) -> dict[str, Any] | None:
         """The pipeline's ``model_error`` keyword (:class:`ftc_hw.compensation.ModelError`)."""
         if self.covariance is None:
@@ -139,6 +148,7 @@ class Calibration:
         if self.identification is not None:
             tables.append(self.identification.inertials)
             out["gain"] = self.identification.gain.copy()
+            out["contact_gain"] = self.identification.told_gain()
             if self.identification.joints:
                 out["joints"] = {k: v.copy() for k, v in self.identification.joints.items()}
             if self.identification.covariance is not None:

@@ -75,15 +75,16 @@ class ContactPipeline:
                  p_false: float = 1e-9, n_on: int = 2, n_off: int = 5, update_period_s: float = 0.02,
                  qdd_tau: float = 0.002, extra_cov=None, track_slide: float | None = 0.01,
                  bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005,
-                 flag_uncertain: bool = True, gap_hold_s: float | None = 0.1, gain=None,
+                 flag_uncertain: bool = True, gap_hold_s: float | None = 0.1, gain=None, contact_gain=None,
                  inertials=None, frame=None, gravity=None, joints=None, model_error=None,
                  refine: bool = False) -> None:
-        """Calibrated corrections (``Calibration.pipeline_kwargs``): ``gain`` the sensor's error on the
-        arm's loads, ``inertials`` link inertial corrections, ``frame`` the sensor's true frame (a
-        mount yaw), ``gravity`` a tilted gravity vector (m/s^2, base frame), ``joints`` identified
-        ``torque_constant``, ``friction_viscous``, ``friction_coulomb`` (per joint), ``model_error`` the
-        identification's parameter covariance (:class:`~ftc_hw.compensation.ModelError`). ``refine``: with
-        a ``model_error``, keep refining the identified parameters while the arm moves free
+        """Calibrated corrections (``Calibration.pipeline_kwargs``): ``gain`` the sensor's linear error
+        (applied to the arm's loads), ``contact_gain`` what of it is undone on the contact's wrench (the
+        identification's told terms; None: ``gain``), ``inertials`` link inertial corrections, ``frame``
+        the sensor's true frame (a mount yaw), ``gravity`` a tilted gravity vector (m/s^2, base frame),
+        ``joints`` identified ``torque_constant``, ``friction_viscous``, ``friction_coulomb`` (per joint),
+        ``model_error`` the identification's parameter covariance (:class:`~ftc_hw.compensation.ModelError`).
+        ``refine``: with a ``model_error``, keep refining the identified parameters while the arm moves free
         (:class:`~ftc_hw.compensation.OnlineRefiner`; ``refiner.drift()`` says how far they moved)."""
         self.scene = scene
         model_scene = scene if gravity is None else replace(scene, gravity=np.asarray(gravity, dtype=float))
@@ -91,7 +92,7 @@ class ContactPipeline:
             model_scene = replace(model_scene, robot=replace(
                 model_scene.robot, **{k: np.asarray(v, dtype=float) for k, v in joints.items()}))
         model = ArmModel(model_scene, payload, inertials)
-        self.compensator = Compensator(model, level, bias, gain=gain, frame=frame)
+        self.compensator = Compensator(model, level, bias, gain=gain, frame=frame, contact_gain=contact_gain)
         self.identified_error = None if model_error is None else ModelError.from_kwargs(model, model_error)
         self.refiner = (OnlineRefiner(self.compensator, self.identified_error, scene.sensor.noise_cov)
                         if refine and self.identified_error is not None else None)

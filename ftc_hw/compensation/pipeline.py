@@ -14,10 +14,11 @@ from ..scene import CompensationLevel
 
 class Compensator:
     def __init__(self, model: ArmModel, level: CompensationLevel | None = None, bias=None,
-                 payload: Payload | None = None, gain=None, frame=None) -> None:
+                 payload: Payload | None = None, gain=None, frame=None, contact_gain=None) -> None:
         """``gain``: the sensor's identified linear error, ``reading = gain @ (loads + contact) + bias``
         (None: exact), as free-motion identification estimates it (:mod:`ftc_hw.calibration.free_motion`):
-        applied to the predicted loads and undone on the contact's wrench, which the same sensor reads.
+        applied to the predicted loads and undone on the contact's wrench, which the same sensor reads;
+        ``contact_gain``: what is undone there instead (the terms the identification told; None: ``gain``).
         ``frame``: the sensor's reading of a wrench given in the model's sensor frame (6 x 6, e.g. a
         calibrated mount yaw), undone on every reading (None: the model's frame)."""
         if payload is not None and payload != model.payload:
@@ -27,7 +28,10 @@ class Compensator:
         if self.level not in ("bias", "gravity", "dynamics"):
             raise ValueError(f"level must be bias, gravity or dynamics, got {self.level!r}")
         self.bias = np.zeros(6) if bias is None else np.asarray(bias, dtype=float).reshape(6).copy()
+        self._contact_fixed = contact_gain is not None
         self.gain = gain
+        if contact_gain is not None:
+            self._contact_inv = np.linalg.inv(np.asarray(contact_gain, dtype=float).reshape(6, 6))
         self.frame = None if frame is None else np.asarray(frame, dtype=float).reshape(6, 6).copy()
         self.frame_inv = None if frame is None else np.linalg.inv(self.frame)
 
@@ -38,7 +42,8 @@ class Compensator:
     @gain.setter
     def gain(self, gain) -> None:
         self._gain = None if gain is None else np.asarray(gain, dtype=float).reshape(6, 6).copy()
-        self._gain_inv = None if gain is None else np.linalg.inv(self._gain)
+        if not self._contact_fixed:
+            self._contact_inv = None if gain is None else np.linalg.inv(self._gain)
 
     def loads(self, q, qd=None, qdd=None, joint_torques: bool = False):
         """The arm's own wrench on the sensor as read (the gain applied) and, if asked, the joint
@@ -54,7 +59,7 @@ class Compensator:
         """What is left of a reading (without its bias) once the arm's loads as read are taken away,
         with the sensor's gain undone."""
         rest = unbiased - loads
-        return rest if self._gain_inv is None else self._gain_inv @ rest
+        return rest if self._contact_inv is None else self._contact_inv @ rest
 
     def unbiased(self, raw) -> np.ndarray:
         """The reading without its bias, in the model's sensor frame."""

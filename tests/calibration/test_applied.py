@@ -67,6 +67,15 @@ def test_identification_round_trips_through_the_file_and_the_recording(tmp_path)
     restored = pipeline_kwargs_from_json(pipeline_kwargs_to_json(kwargs))
     pipe = ContactPipeline(scene, **restored)
     np.testing.assert_allclose(pipe.compensator.gain, gain)
+    # the contact's wrench: a wholly told gain undone; one with an untold term left as read (all of it)
+    told = dataclasses.replace(ident, untold=["gain[3,4]"])
+    contact = np.array([5.0, -8.0, 12.0, 0.4, 2.0, -0.3])
+    for ident_i, undone in ((ident, gain), (told, np.eye(6))):
+        kw = dataclasses.replace(cal, identification=ident_i).pipeline_kwargs(scene)
+        comp = ContactPipeline(scene, **kw).compensator
+        np.testing.assert_allclose(comp.gain, gain)  # the arm's loads: the whole estimate either way
+        np.testing.assert_allclose(comp.contact_wrench(gain @ contact, np.zeros(6)),
+                                   np.linalg.solve(undone, gain @ contact), atol=1e-12)
     bad = dataclasses.replace(cal, identification=dataclasses.replace(ident, gain=np.zeros((6, 6))))
     with pytest.raises(CalibrationError, match="load_gain"):
         load_calibration(save_calibration(bad, tmp_path / "bad.toml"))
