@@ -1,4 +1,5 @@
 """``python -m ftc_hw`` runs the ``ftc`` command."""
 from .cli import app
 
-app(prog_name="ftc")
+if __name__ == "__main__":  # not when a spawned process imports the parent's main module as __mp_main__
+    app(prog_name="ftc")
