@@ -16,6 +16,7 @@ from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
 from .model.arm import link_reach
 from .model.inertials import skew
+from .model.mesh_surface import MeshShell, pipeline_mesh_shell
 from .scene import CompensationLevel, Scene
 from .solver import ContactEstimate, Solver, make_solver
 from .tracking import FUSED_FLAGS, ContactTrack, fuse_point, link_pose, report
@@ -77,7 +78,7 @@ class ContactPipeline:
                  bias_var_ratio: float = 0.01, impact_window_s: float | None = 0.005,
                  flag_uncertain: bool = True, gap_hold_s: float | None = 0.1, gain=None, contact_gain=None,
                  inertials=None, frame=None, gravity=None, joints=None, model_error=None,
-                 refine: bool = False) -> None:
+                 refine: bool = False, surface: str = "meshes") -> None:
         """Calibrated corrections (``Calibration.pipeline_kwargs``): ``gain`` the sensor's linear error
         (applied to the arm's loads), ``contact_gain`` what of it is undone on the contact's wrench (the
         identification's told terms; None: ``gain``), ``inertials`` link inertial corrections, ``frame``
@@ -85,7 +86,10 @@ class ContactPipeline:
         ``joints`` identified ``torque_constant``, ``friction_viscous``, ``friction_coulomb`` (per joint),
         ``model_error`` the identification's parameter covariance (:class:`~ftc_hw.compensation.ModelError`).
         ``refine``: with a ``model_error``, keep refining the identified parameters while the arm moves free
-        (:class:`~ftc_hw.compensation.OnlineRefiner`; ``refiner.drift()`` says how far they moved)."""
+        (:class:`~ftc_hw.compensation.OnlineRefiner`; ``refiner.drift()`` says how far they moved).
+        ``surface``: ``meshes`` puts each event's point where its line of action enters the touched
+        link's meshes, where the scene has them (:func:`~ftc_hw.model.mesh_surface.pipeline_mesh_shell`;
+        ``surface_source`` says which); ``primitives`` leaves it on the solver's primitives."""
         self.scene = scene
         model_scene = scene if gravity is None else replace(scene, gravity=np.asarray(gravity, dtype=float))
         if joints:
@@ -140,6 +144,12 @@ class ContactPipeline:
         # an event whose point is less certain than the touched link is big says nothing of where
         self._link_reach = link_reach(model) if flag_uncertain else None
         self._surface = model.surface_tolerance  # m, 1 sigma per link (the scene's, and a mesh fit's)
+        if surface not in ("meshes", "primitives"):
+            raise ValueError(f"surface: expected 'meshes' or 'primitives', got {surface!r}")
+        self.mesh_shell = pipeline_mesh_shell(scene) if surface == "meshes" else None
+        self.surface_source = "meshes" if self.mesh_shell is not None else "primitives"
+        # the contact's external wrench over the last update period: the line of action followed into the meshes
+        self._recent_external: deque[np.ndarray] = deque(maxlen=max(1, round(update_period_s * scene.sensor.rate_hz)))
         self._gain_std = gain_std_of(scene)
         self._sensor_pose = model.base_T_sensor
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
@@ -266,18 +276,23 @@ class ContactPipeline:
             onset = det.onset_t_ns or t_ns
             self._contact = _ContactRun(self._contact.contact_id + 1, onset, onset)
             self._contact.add(t_ns, external)
+            self._recent_external.clear()
+            self._recent_external.append(np.array(external, dtype=float))
             self._last_update_ns = t_ns
-            ev = self._systematic(self._event(onset, "onset", estimate, det.probability, track, self._link_reach),
-                                  external, q)
+            ev = self.on_meshes(self._systematic(
+                self._event(onset, "onset", estimate, det.probability, track, self._link_reach), external, q), q,
+                wrench=self.recent_external())
             self._contact.onset_link = ev.link
         elif det.change == "offset":
             return [self.close_contact(t_ns, det.probability)]
         else:
             self._contact.add(t_ns, external)
+            self._recent_external.append(np.array(external, dtype=float))
             if t_ns - self._last_update_ns < self.update_period_ns:
                 return []
-            ev = self._systematic(self._event(t_ns, "update", estimate, det.probability, track, self._link_reach),
-                                  external, q)
+            ev = self.on_meshes(self._systematic(
+                self._event(t_ns, "update", estimate, det.probability, track, self._link_reach), external, q), q,
+                wrench=self.recent_external())
             self._last_update_ns = t_ns
         return [self._contact.stamp(ev)]
 
@@ -300,6 +315,34 @@ class ContactPipeline:
         var += np.maximum(np.diag(cov), 0.0)
         std = np.sqrt(np.asarray(ev.point_std, dtype=float) ** 2 + var)
         return replace(ev, point_std=std)
+
+    def recent_external(self) -> np.ndarray | None:
+        """The open contact's external wrench (sensor frame) averaged over the last update period."""
+        return np.mean(self._recent_external, axis=0) if self._recent_external else None
+
+    def on_meshes(self, ev: ContactEvent, q: np.ndarray, shell: MeshShell | None = None,
+                  wrench: np.ndarray | None = None) -> ContactEvent:
+        """The event with its point where the contact's line of action enters its link's meshes
+        (``shell``, else the pipeline's own; unchanged where there are none or the line misses them).
+        The line is the one ``wrench`` (external, sensor frame, e.g. :meth:`recent_external`) acts
+        along, taken where it passes closest to the event's point: the solver's point lies on the
+        primitives, and where the real shell stands out of them the true line misses them, so the
+        solver's point is off it. Without a wrench: the line through the event's point along its force.
+        The uncertainty stays the event's: the scene's ``surface_tolerance_m`` is kept for the real
+        shell's distance from the surface answered on."""
+        shell = shell or self.mesh_shell
+        if shell is None or "no_estimate" in ev.flags:
+            return ev
+        point, force = np.asarray(ev.point, dtype=float), np.asarray(ev.force, dtype=float)
+        f_s = None if wrench is None else np.asarray(wrench[:3], dtype=float)
+        if f_s is not None and float(f_s @ f_s) > 0.0:
+            b_T_s = self._sensor_pose(q)
+            on_line = b_T_s[:3, :3] @ (np.cross(f_s, wrench[3:]) / float(f_s @ f_s)) + b_T_s[:3, 3]
+            force = b_T_s[:3, :3] @ f_s
+            u = force / np.linalg.norm(force)
+            point = on_line + float((point - on_line) @ u) * u
+        entry = shell.entry(ev.link, q, point, force)
+        return ev if entry is None else replace(ev, point=entry)
 
     def restart_motion(self) -> None:
         """The joint stream was lost and is back: what was estimated from its past (the acceleration,

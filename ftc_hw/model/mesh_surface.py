@@ -1,27 +1,32 @@
-"""Localizing on a link's meshes: where a contact's line of action enters the link's true shell.
+"""Localizing on a link's meshes: where a contact's line of action enters the link's shell.
 
 The solver works on primitives; given its estimate (a point on the line of action and the force), the
 contact on a mesh shell is where that line, followed along the force from outside, first meets the
-link's mesh triangles (MuJoCo's ray-mesh test). ``ftc bench reality`` measures this against the
-fitted primitives (docs/reality.md: the primitives are kept)."""
+link's mesh triangles (MuJoCo's ray-mesh test). The pipeline answers on the meshes where the scene has
+them (``[robot] vendor_shell``, or a user's model with mesh collision geoms): :func:`pipeline_mesh_model`.
+"""
 from __future__ import annotations
 
 import mujoco
 import numpy as np
 
+from ..scene import Scene
+from ..scene.vendor import shell_fetched
+from .build import load_spec
+from .joint_map import JointMap
 from .mesh_fit import SURFACE_GROUP
+from .vendor_shell import attach_vendor_shell
 
 _REACH_M = 0.3  # the line is followed from this far before the estimate
 
 
 class MeshShell:
-    """The touchable mesh geoms of a compiled model (the true arm's, or a user's unfitted model)."""
+    """The touchable mesh geoms of a compiled model; one per thread (it poses its own MjData)."""
 
-    def __init__(self, model: mujoco.MjModel, joint_qpos: np.ndarray) -> None:
-        """``joint_qpos``: for each scene joint, its qpos address in ``model`` (int array)."""
+    def __init__(self, model: mujoco.MjModel, scene: Scene) -> None:
         self.model = model
         self.data = mujoco.MjData(model)
-        self.qadr = np.asarray(joint_qpos, dtype=int)
+        self.joints = JointMap(model, scene)
         self.meshes: dict[str, list[int]] = {}
         for g in range(model.ngeom):
             if model.geom_group[g] == SURFACE_GROUP and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
@@ -32,11 +37,36 @@ class MeshShell:
         meshes at joint positions ``q``; None when the link has no mesh or the line misses it."""
         geoms = self.meshes.get(link)
         f = np.linalg.norm(force)
-        if not geoms or f == 0.0:
+        if not geoms or not f > 0.0:
             return None
-        self.data.qpos[self.qadr] = q
+        self.joints.set_qpos(np.asarray(q, dtype=float), self.data.qpos)
         mujoco.mj_kinematics(self.model, self.data)
         u = np.asarray(force, dtype=float) / f
         start = np.asarray(point, dtype=float) - _REACH_M * u
         hits = [h for h in (mujoco.mj_rayMesh(self.model, self.data, g, start, u) for g in geoms) if h >= 0.0]
         return start + min(hits) * u if hits else None
+
+
+def pipeline_mesh_shell(scene: Scene) -> MeshShell | None:
+    """The meshes the pipeline localizes on: the scene's model with its touchable meshes unfitted and
+    the vendor's meshes it names, where fetched (as drawn: the pipeline knows no real arm's shift);
+    None without any."""
+    vendor = scene.robot.vendor_shell if shell_fetched(scene.robot.vendor_shell or "") else None
+    key = (str(scene.path), str(scene.robot.model_path), vendor)
+    if key not in _MODELS:
+        _MODELS[key] = _mesh_model(scene, vendor)
+    model = _MODELS[key]
+    return None if model is None else MeshShell(model, scene)
+
+
+_MODELS: dict[tuple[str, str, str | None], mujoco.MjModel | None] = {}  # compiled once per process
+
+
+def _mesh_model(scene: Scene, vendor: str | None) -> mujoco.MjModel | None:
+    spec = load_spec(scene, fit_meshes=False)
+    if vendor is not None:
+        attach_vendor_shell(spec, scene, vendor, collide=False)
+    model = spec.compile()
+    has_mesh = any(model.geom_group[g] == SURFACE_GROUP and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
+                   for g in range(model.ngeom))
+    return model if has_mesh else None

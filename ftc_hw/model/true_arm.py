@@ -11,6 +11,7 @@ import mujoco
 import numpy as np
 
 from ..scene import Scene, SceneError
+from ..scene.vendor import shell_fetched
 from ..scene.world_spec import WorldSpec
 from .build import descends, load_spec, parse_spec
 from .mesh_fit import SURFACE_GROUP, prepare_user_model
@@ -23,9 +24,12 @@ _INFLATED_AXES = {  # per geom type: which size entries grow by the shell offset
 }
 
 
-def true_arm_spec(scene: Scene) -> mujoco.MjSpec:
+def true_arm_spec(scene: Scene, shell: str = "collide") -> mujoco.MjSpec:
     """The true arm's file, loaded and checked against the scene's model: same joints, bodies for every
-    touchable link and every ``[world.inertials]`` entry, the sensor site."""
+    touchable link and every ``[world.inertials]`` entry, the sensor site. ``shell``: what the vendor
+    meshes (:func:`world_vendor_shell`) are there for: ``collide`` (obstacles meet them: MuJoCo hulls
+    them, seconds on a fresh process), ``rays`` (probes press them) or ``none`` (nothing touches the
+    arm: the meshes, massless, change nothing)."""
     world = scene.world
     if world.model_path is None:
         spec = load_spec(scene, fit_meshes=False)  # a mesh is the true shell, not its fit
@@ -33,12 +37,28 @@ def true_arm_spec(scene: Scene) -> mujoco.MjSpec:
         spec = parse_spec(scene, world.model_path, "world.model")
         prepare_user_model(spec, scene, urdf=world.model_path.suffix.lower() == ".urdf")
         _check_same_arm(scene, spec)
-    if world.vendor_shell is not None:
-        attach_vendor_shell(spec, scene, world.vendor_shell)
+    vendor = world_vendor_shell(scene)
+    if vendor is not None and shell != "none":
+        attach_vendor_shell(spec, scene, vendor, collide=shell == "collide", shifts=world.vendor_shell_shift)
+    elif world.vendor_shell_shift:
+        raise SceneError(scene.path, "world.vendor_shell_shift_m", "a shift of the vendor shell, but no vendor_shell")
     for body in world.inertials:
         if spec.body(body) is None:
             raise SceneError(scene.path, f"world.inertials.{body}", f"no body {body!r} in the world's arm")
     return spec
+
+
+def world_vendor_shell(scene: Scene) -> str | None:
+    """The vendor meshes that are the world's shell: its ``[world] vendor_shell``; else, unless the world
+    offsets the primitives (``shell_offset_m``: that shell is meant), the model's own (``[robot]
+    vendor_shell``, where fetched: the surface the pipeline answers on, so the ideal world is the
+    pipeline's model, meshes and all)."""
+    w = scene.world
+    if w.vendor_shell is not None:
+        return w.vendor_shell
+    name = scene.robot.vendor_shell
+    offset = w.shell_offset or any(w.shell_offsets.values())
+    return name if name is not None and not offset and shell_fetched(name) else None
 
 
 def _check_same_arm(scene: Scene, spec: mujoco.MjSpec) -> None:

@@ -16,3 +16,6 @@ class SceneError(ValueError):
         self.problem = problem
         where = f"{self.path}: {key}: " if key else f"{self.path}: "
         super().__init__(where + problem)
+
+    def __reduce__(self):  # pickled whole: a bench's worker process raises it to the parent
+        return type(self), (self.path, self.key, self.problem)

@@ -262,7 +262,7 @@ class _Parser:
                               "stribeck_velocity", "torque_constant", "sensor_offset_m", "sensor_rotation_rad",
                               "sensor_gain", "coloured_noise_std", "coloured_noise_tau_s", "temperature_drift",
                               "temperature_rise_K", "temperature_tau_s", "shell_offset_m",
-                              "vendor_shell"}, p)
+                              "vendor_shell", "vendor_shell_shift_m"}, p)
         model_path = self.model_file(t, p) if "model" in t else None
 
         def joint_vector(key: str, **kw) -> Any:
@@ -286,7 +286,17 @@ class _Parser:
             temperature_drift=self.vector(t, "temperature_drift", p, 6, default=[0.0] * 6),
             temperature_rise_K=self.number(t, "temperature_rise_K", p, default=0.0),
             temperature_tau_s=self.number(t, "temperature_tau_s", p, positive=True, default=600.0),
-            shell_offset=shell, vendor_shell=self.vendor_shell(t, p))
+            shell_offset=shell, vendor_shell=self.vendor_shell(t, p),
+            vendor_shell_shift=self.shifts(self.get(t, "vendor_shell_shift_m", p, dict, {}),
+                                           p + "vendor_shell_shift_m."))
+
+    def shifts(self, table: dict, p: str) -> Any:
+        """``vendor_shell_shift_m``: per body, where its real shell lies off the vendor's meshes (m, body frame)."""
+        out = {body: self.vector(table, body, p, 3) for body in table}
+        for body, v in out.items():
+            if np.any(np.abs(v) > 0.05):
+                raise self.fail(p + body, f"expected each axis within 0.05 m, got {v.tolist()}")
+        return out
 
     def inertials(self, table: dict) -> Any:
         out = {}

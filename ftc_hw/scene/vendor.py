@@ -1,8 +1,8 @@
 """Vendors' meshes of a robot's shell, as data: where a package on the index ships them, which of the
 vendor model's bodies is which of ours, and where ``ftc scenes meshes`` puts them on this machine.
 
-The simulated world uses them as the true touched surface (``[world] vendor_shell``, or a reality
-draw for a scene whose ``[robot] vendor_shell`` names one); the pipeline keeps the scene's primitives.
+The simulated world uses them as the true touched surface (``[world] vendor_shell``, or the scene's
+``[robot] vendor_shell``), and the pipeline answers on them (``ftc_hw.model.mesh_surface``).
 Nothing here downloads: ``ftc_hw.app.vendor_meshes`` does.
 """
 from __future__ import annotations

@@ -55,6 +55,8 @@ class WorldSpec:
     shell_offset: float = 0.0  # m: the touched surface lies this far outside the model's primitives
     shell_offsets: Mapping[str, float] = field(default_factory=dict)  # m, per geom
     vendor_shell: str | None = None  # the vendor's meshes (ftc_hw.scene.vendor) are the touched surface
+    vendor_shell_shift: Mapping[str, np.ndarray] = field(default_factory=dict)  # m, per body (its frame): the
+    # real shell's offset from the vendor's meshes (casting and assembly tolerance)
 
     @property
     def is_ideal(self) -> bool:

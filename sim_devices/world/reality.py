@@ -17,7 +17,7 @@ import numpy as np
 
 from ftc_hw.model.arm import SURFACE_GROUP
 from ftc_hw.model.build import descends, moves
-from ftc_hw.model.true_arm import true_arm_spec
+from ftc_hw.model.true_arm import true_arm_spec, world_vendor_shell
 from ftc_hw.scene import Scene
 from ftc_hw.scene.vendor import VENDOR_SHELLS, shell_fetched
 from ftc_hw.scene.world_spec import InertialError, WorldSpec
@@ -48,17 +48,20 @@ class Tolerances:
     temperature_rise_K: float  # the sensor warms by 0 .. this during the run
     thermal_rel_per_K: float  # thermal drift per K, +- this x the white noise std
     shell_m: float  # each touchable geom's true surface lies 0.5 .. 1 x this outside its primitive
+    vendor_shift_m: float  # each axis of each body's true shell off the vendor's meshes, where it has them
 
 
 TOLERANCES: dict[Reality, Tolerances] = {
     Reality.TYPICAL: Tolerances(mass_rel=0.03, com_m=0.003, inertia_rel=0.10, friction_rel=0.30, stribeck_rel=0.3,
                                 torque_constant_rel=0.05, mount_m=0.001, mount_rad=math.radians(0.3),
                                 gain_rel=0.01, crosstalk_rel=0.005, coloured_rel=0.5, coloured_tau_s=1.0,
-                                temperature_rise_K=3.0, thermal_rel_per_K=0.3, shell_m=0.003),
+                                temperature_rise_K=3.0, thermal_rel_per_K=0.3, shell_m=0.003,
+                                vendor_shift_m=0.001),
     Reality.HARSH: Tolerances(mass_rel=0.08, com_m=0.008, inertia_rel=0.25, friction_rel=0.60, stribeck_rel=0.6,
                               torque_constant_rel=0.10, mount_m=0.003, mount_rad=math.radians(1.0),
                               gain_rel=0.025, crosstalk_rel=0.015, coloured_rel=1.0, coloured_tau_s=3.0,
-                              temperature_rise_K=8.0, thermal_rel_per_K=0.6, shell_m=0.005),
+                              temperature_rise_K=8.0, thermal_rel_per_K=0.6, shell_m=0.005,
+                              vendor_shift_m=0.002),
 }
 
 DIFFERENCES = ("inertials", "friction", "torque_constant", "mount", "gain", "coloured_noise", "thermal", "shell")
@@ -84,25 +87,29 @@ def with_reality(scene: Scene, reality: Reality | str, seed: int = 0,
     for name in keep:
         changes.update(_compose(name, base, drawn))
     if "shell" in keep:
-        changes.update(_vendor_shell(scene, changes["shell_offsets"], arm[1]))
+        changes.update(_vendor_shell(scene, changes["shell_offsets"], arm[1], drawn.vendor_shell_shift))
     return dataclasses.replace(scene, world=dataclasses.replace(base, **changes))
 
 
-def _vendor_shell(scene: Scene, offsets: dict[str, float], bodies_of: dict[str, str]) -> dict:
-    """The scene's vendor meshes as the shell, where fetched (``ftc scenes meshes``): no drawn offset
-    on the bodies they cover. Not fetched: the drawn offsets stay (``shell_source`` says which)."""
+def _vendor_shell(scene: Scene, offsets: dict[str, float], bodies_of: dict[str, str],
+                  shifts: dict[str, np.ndarray]) -> dict:
+    """The scene's vendor meshes as the shell, where fetched (``ftc scenes meshes``), each body's shifted
+    by its drawn amount: no drawn offset on the primitives of the bodies they cover. Not fetched: the
+    drawn offsets stay (``shell_source`` says which)."""
     name = scene.robot.vendor_shell
     if name is None or scene.world.vendor_shell is not None or not shell_fetched(name):
         return {}
     covered = set(VENDOR_SHELLS[name].bodies)
-    return {"vendor_shell": name, "shell_offsets": {g: v for g, v in offsets.items() if bodies_of[g] not in covered}}
+    return {"vendor_shell": name, "shell_offsets": {g: v for g, v in offsets.items() if bodies_of[g] not in covered},
+            "vendor_shell_shift": {b: shifts[b] for b in covered if b in shifts}}
 
 
 def shell_source(scene: Scene) -> str:
     """What a world's touched surface is: the vendor's meshes, primitives with offsets, or the model."""
     w = scene.world
-    if w.vendor_shell is not None:
-        return f"{w.vendor_shell} meshes"
+    vendor = world_vendor_shell(scene)
+    if vendor is not None:
+        return f"{vendor} meshes" + (" (shifted)" if any(np.any(v) for v in w.vendor_shell_shift.values()) else "")
     if w.shell_offset or any(w.shell_offsets.values()):
         missing = scene.robot.vendor_shell is not None and not shell_fetched(scene.robot.vendor_shell)
         return "primitives + offset" + (" (vendor meshes not fetched: ftc scenes meshes)" if missing else "")
@@ -127,7 +134,7 @@ def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator,
     cross = rng.uniform(-tol.crosstalk_rel, tol.crosstalk_rel, (6, 6)) * full[:, None] / full[None, :]
     np.fill_diagonal(cross, 0.0)
     white = np.sqrt(np.diag(s.noise_cov))
-    return WorldSpec(
+    drawn = WorldSpec(
         inertials=inertials,
         friction_coulomb=coulomb * (1.0 + rng.uniform(-tol.friction_rel, tol.friction_rel, n)),
         friction_viscous=viscous * (1.0 + rng.uniform(-tol.friction_rel, tol.friction_rel, n)),
@@ -142,6 +149,15 @@ def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator,
         temperature_rise_K=float(rng.uniform(0.0, tol.temperature_rise_K)),
         shell_offsets={g: float(rng.uniform(0.5, 1.0) * tol.shell_m) for g in geoms},
     )
+    # drawn last, so the draws above are what they were before this difference existed
+    shifts = {b: rng.uniform(-tol.vendor_shift_m, tol.vendor_shift_m, 3) for b in _shell_bodies(scene)}
+    return dataclasses.replace(drawn, vendor_shell_shift=shifts)
+
+
+def _shell_bodies(scene: Scene) -> list[str]:
+    """The bodies the scene's vendor meshes cover (none without vendor meshes)."""
+    name = scene.robot.vendor_shell
+    return [] if name is None else list(VENDOR_SHELLS[name].bodies)
 
 
 def _compose(name: str, base: WorldSpec, d: WorldSpec) -> dict:
@@ -175,7 +191,7 @@ def _compose(name: str, base: WorldSpec, d: WorldSpec) -> dict:
 def _moving_bodies_and_shells(scene: Scene) -> tuple[list[str], dict[str, str]]:
     """The bodies the sensor carries that a joint moves, and the touchable primitive geoms of the
     bodies it carries (geom -> body)."""
-    m = true_arm_spec(scene).compile()
+    m = true_arm_spec(scene, shell="none").compile()  # the primitives, as the draw has always seen them
     sensor_body = int(m.site_bodyid[m.site(scene.sensor.site).id])
     arm = [b for b in range(1, m.nbody) if descends(m, b, sensor_body)]
     bodies = [m.body(b).name for b in arm if moves(m, b)]

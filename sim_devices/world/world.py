@@ -32,6 +32,8 @@ from .sensor_model import FTSensorModel, SensorReading
 from .trajectory import Hold, Trajectory
 from .true_shell import mesh_point, shell_meshes
 
+_MESH_REACH_M = 0.1  # how far past the hull's contact the line may meet the mesh (the hull's hollows)
+
 
 @dataclass(frozen=True)
 class Probe:
@@ -112,7 +114,7 @@ class World:
         self.setup = setup
         self.rng = np.random.default_rng(seed)
         self.noise = noise
-        spec = true_arm_spec(scene)
+        spec = true_arm_spec(scene, shell="collide" if setup.obstacles else "rays" if setup.probes else "none")
         add_ft_sensors(spec, scene)
         if setup.payload is not None:
             attach_payload(spec, scene, setup.payload)
@@ -327,15 +329,21 @@ class World:
         """Where the contact force's line of action enters the arm geom.
 
         MuJoCo's contact point is midway through the (soft-contact) penetration, a fraction of a mm
-        inside the arm; the same line gives the same wrench, and this point is on the surface.
+        inside the arm; the same line gives the same wrench, and this point is on the surface. A mesh
+        collides as its hull, which bridges the mesh's hollows: the point is where the line meets the
+        mesh's own triangles (the surface a localizer on the meshes answers with).
         """
         norm = float(np.linalg.norm(force))
         m, d = self.model, self.data
         kind = GEOM_KINDS.get(int(m.geom_type[geom]))
-        if norm == 0.0 or kind is None:
+        is_mesh = m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_MESH
+        if norm == 0.0 or (kind is None and not is_mesh):
             return pos.copy()
         u = force / norm
         start = pos - 0.05 * u
+        if is_mesh:  # collided as its part's convex hull: the line enters the mesh itself at or past it
+            dist = mujoco.mj_rayMesh(m, d, geom, start, u)
+            return start + dist * u if 0.0 <= dist <= _MESH_REACH_M else pos.copy()
         dist = ray_distance(kind, m.geom_size[geom], d.geom_xpos[geom], d.geom_xmat[geom], start, u)
         return start + dist * u if 0.0 <= dist <= 0.06 else pos.copy()
 

@@ -23,16 +23,20 @@ def _run(onsets, points, contact_spans=((1.0, 1.3, 30.0), (2.0, 2.3, 5.0))):
 
 def test_summary_counts_what_the_issue_asks():
     free = _run([0.5], [], contact_spans=())  # one alarm with nothing touching
-    hits = _run([1.002, 2.004, 3.5], [(2.0, True, True, True, 1.0), (4.0, False, True, True, np.nan),
-                                      (90.0, False, False, False, 5.0)])
+    # (error as answered, covered, right link, unflagged, error on the primitives, the line missed the meshes,
+    # the true force, N)
+    hits = _run([1.002, 2.004, 3.5], [(2.0, True, True, True, 1.0, False, 30.0),
+                                      (4.0, False, True, True, 4.0, True, 5.0),
+                                      (90.0, False, False, False, 5.0, False, 30.0)])
     s = _summarize(free, [hits])
     assert s["false_alarms"] == 2  # 0.5 s in the free run, 3.5 s in the contact run
     assert s["contacts_over_10N"] == 1 and s["detected_over_10N"] == 1  # the 5 N contact is not counted
     assert abs(s["delay_ms_median"] - 3.0) < 1e-9  # (2 + 4) / 2 ms: every detected contact's delay
     assert s["pos_err_mm_median"] == 3.0 and s["coverage95"] == 0.5  # unflagged only: 2 and 4 mm
     assert abs(s["flagged_share"] - 1 / 3) < 1e-12 and abs(s["link_right"] - 2 / 3) < 1e-12
-    # on the meshes: 1 mm, and the miss keeps its primitive's 4 mm
-    assert s["pos_err_mm_median_mesh"] == 2.5 and s["mesh_misses"] == 1
+    # the same events on the primitives: 1 and 4 mm; one line missed its meshes
+    assert s["pos_err_mm_median_primitives"] == 2.5 and s["mesh_misses"] == 1
+    assert s["pos_err_mm_median_over10N"] == 2.0  # the 5 N event's 4 mm is left out
     assert abs(s["residual_rms_N"] - 0.5) < 1e-12 and abs(s["residual_rms_Nm"] - 0.01) < 1e-12
     worse = dict(s, coverage95=0.2, pos_err_mm_median=9.0)
     c = _combine([s, worse])
@@ -41,12 +45,12 @@ def test_summary_counts_what_the_issue_asks():
 
 
 def test_errors_are_also_split_by_scenario():
-    """The sweep's obstacles meet the world's primitives, the pokes its true shell: each run's own figures."""
-    sweep = _run([1.002], [(2.0, True, True, True, 7.0), (6.0, True, True, True, 9.0)])
-    pokes = _run([1.002], [(10.0, True, True, True, 1.0), (30.0, True, True, True, np.nan)])
+    """The sweep's obstacle and the pokes: each run's own figures, as answered and on the primitives."""
+    sweep = _run([1.002], [(2.0, True, True, True, 7.0, False, 20.0), (6.0, True, True, True, 9.0, False, 20.0)])
+    pokes = _run([1.002], [(10.0, True, True, True, 1.0, False, 20.0), (30.0, True, True, True, None, False, 20.0)])
     s = _summarize(_run([], [], contact_spans=()), [sweep, pokes])
-    assert s["pos_err_mm_median_sweep"] == 4.0 and s["pos_err_mm_median_sweep_mesh"] == 8.0
-    assert s["pos_err_mm_median_pokes"] == 20.0 and s["pos_err_mm_median_pokes_mesh"] == 15.5  # a miss: 30
+    assert s["pos_err_mm_median_sweep"] == 4.0 and s["pos_err_mm_median_sweep_primitives"] == 8.0
+    assert s["pos_err_mm_median_pokes"] == 20.0 and s["pos_err_mm_median_pokes_primitives"] == 1.0  # None: no meshes
     assert s["pos_err_mm_median"] == 8.0  # pooled over both
 
 

@@ -178,3 +178,12 @@ def test_the_hardware_page_lists_every_param_of_every_kind():
     for text, kind in zip(tables, KINDS.values(), strict=True):
         rows = [line.split("`")[1] for line in text.splitlines() if line.startswith("| `")]
         assert rows == list(kind.names), kind.kind
+
+
+def test_a_scene_error_crosses_a_process_boundary_whole():
+    """A bench's worker process raises it; the parent gets the same file, key and problem."""
+    import pickle
+
+    err = pickle.loads(pickle.dumps(SceneError("/x/ur5e.toml", "world.model", "no joint 'elbow'")))
+    assert (err.path, err.key, err.problem) == ("/x/ur5e.toml", "world.model", "no joint 'elbow'")
+    assert str(err) == "/x/ur5e.toml: world.model: no joint 'elbow'"

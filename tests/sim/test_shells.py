@@ -2,17 +2,21 @@
 primitives, the world presses the meshes) and the UR5e vendor meshes under a typical reality."""
 from __future__ import annotations
 
+import dataclasses
 import zipfile
 
+import mujoco
 import numpy as np
 import pytest
 
 from ftc_hw.app.vendor_meshes import VendorFetchError, _unpack
 from ftc_hw.model import ArmModel
 from ftc_hw.model.mesh_fit import SURFACE_GROUP
-from ftc_hw.scene import load_scene
+from ftc_hw.scene import SceneError, load_scene
+from ftc_hw.scene.loader import builtin_dir
 from ftc_hw.scene.vendor import shell_fetched
 from ftc_hw.sim_devices.world import World, build_scenario, with_reality
+from ftc_hw.sim_devices.world.true_shell import shell_meshes
 from tests.urdf_arm import write_ur5e_urdf
 
 UR5E = load_scene("ur5e")
@@ -88,3 +92,48 @@ def test_a_wheel_without_the_named_meshes_is_a_clear_error(tmp_path):
         _unpack(wheel, "pkg/robot", "robot.xml", "LICENSE", tmp_path / "out")
     with pytest.raises(VendorFetchError, match="no pkg/other/robot.xml"):
         _unpack(wheel, "pkg/other", "robot.xml", "LICENSE", tmp_path / "out2")
+
+
+def test_the_sweeps_obstacle_meets_the_vendor_meshes_and_the_truth_is_on_them():
+    """MuJoCo collides the meshes (their parts' hulls), not the primitives they replaced; the truth point
+    is where the contact's line of action meets the mesh's own triangles."""
+    scene = with_reality(UR5E, "typical", seed=0)
+    setup = build_scenario("sweep-with-collision", scene, ArmModel(UR5E), seed=0, duration=3.0)
+    world = World(scene, setup, noise=False)
+    m, d = world.model, world.data
+    touched, on_mesh = set(), []
+    for state, _ in world.run(3.0):
+        for i in range(d.ncon):
+            touched |= {m.geom(int(g)).name for g in (d.contact[i].geom1, d.contact[i].geom2)}
+        for c in state.contacts:
+            if not np.linalg.norm(c.force) > 0.0:
+                continue
+            u = c.force / np.linalg.norm(c.force)
+            hits = [mujoco.mj_rayMesh(m, d, g, c.point - 1e-3 * u, u) for g in shell_meshes(m, m.body(c.link).id)]
+            on_mesh.append(min((h for h in hits if h >= 0.0), default=np.nan))
+    assert on_mesh and touched - {"ftc_obstacle0_geom"} and all(n.startswith("vendor_") for n in touched - {
+        "ftc_obstacle0_geom"})
+    assert np.max(np.abs(np.array(on_mesh) - 1e-3)) < 1e-6  # 1 mm back along the line: the mesh
+
+
+def test_a_drawn_shift_moves_the_vendor_shell_and_a_bad_one_is_named(tmp_path):
+    scene = with_reality(UR5E, "typical", seed=0)
+    shifts = scene.world.vendor_shell_shift
+    assert set(shifts) == {"base", "shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3"}
+    assert all(np.all(np.abs(v) <= 1e-3) for v in shifts.values()) and any(np.any(v) for v in shifts.values())
+    arm = ArmModel(UR5E)
+    setup = build_scenario("static-pokes", scene, arm, seed=1, duration=3.0)
+    unshifted = World(dataclasses.replace(scene, world=dataclasses.replace(scene.world, vendor_shell_shift={})),
+                      setup, noise=False)
+    shifted = World(scene, setup, noise=False)
+    p, q = unshifted.setup.probes[0], shifted.setup.probes[0]
+    # the probe meets the shifted shell along its ray: moved by the shift's part along the normal (or more)
+    n = p.normal_link / np.linalg.norm(p.normal_link)
+    assert np.linalg.norm(q.point_link - p.point_link) > 0.2 * abs(shifts[p.link] @ n)
+    assert np.linalg.norm(q.point_link - p.point_link) > 0.0
+    toml = (builtin_dir() / "ur5e.toml").read_text().replace("[gravity]", "[world.vendor_shell_shift_m]\nelbow = "
+                                                              "[0.0, 0.0, 0.001]\n\n[gravity]")
+    (tmp_path / "ur5e.xml").write_text((builtin_dir() / "ur5e.xml").read_text())
+    (tmp_path / "ur5e.toml").write_text(toml)
+    with pytest.raises(SceneError, match="vendor_shell_shift_m.elbow"):
+        World(load_scene(str(tmp_path / "ur5e.toml")), setup, noise=False)
