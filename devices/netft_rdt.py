@@ -13,11 +13,13 @@ Sequence numbers: ft_sequence (the box's sample counter) is the frame's seq and,
 device clock; rdt_sequence (+1 per packet) tells lost packets (``packets_lost``), duplicated ones
 (``duplicates``) and late ones (``late``: a packet older than one already received, dropped: its
 samples were already counted as a gap). Counters besides the F/T ones: ``packets``, ``records``
-(received whole), ``format_errors`` (a datagram that is not whole records, or not as many as the
-mode sends), ``kernel_drops`` (datagrams the host's socket buffer overflowed, where Linux reports it),
-``device_errors`` (records whose status word has error bits: flagged ``DEVICE_ERROR``, with an
-``error`` event when they appear and ``recovered`` when they clear). A box silent for ``silence_s``
-(rebooted: it forgot the stream) is reconnected, which starts the stream again.
+(received whole), ``box_packets`` (what the box says it sent: the newest rdt_sequence, summed over
+connections; ``box_packets - packets`` were lost on the way or in this host), ``format_errors`` (a
+datagram that is not whole records, or not as many as the mode sends), ``kernel_drops`` (datagrams
+the host's socket buffer overflowed, where Linux reports it), ``device_errors`` (records whose status
+word has error bits: flagged ``DEVICE_ERROR``, with an ``error`` event when they appear and
+``recovered`` when they clear). A box silent for ``silence_s`` (rebooted: it forgot the stream) is
+reconnected, which starts the stream again.
 """
 from __future__ import annotations
 
@@ -80,6 +82,7 @@ class RdtFTAdapter(FTAdapter):
         self._per_packet: int | None = None
         self._last_rdt: int | None = None
         self._late_run = 0
+        self._rdt_base = 0  # box_packets before this connection
 
     def describe(self) -> str:
         cal = self.calibration
@@ -119,6 +122,7 @@ class RdtFTAdapter(FTAdapter):
         sock.settimeout(self.poll_timeout)
         self._last_rdt = None
         self._late_run = 0
+        self._rdt_base = self.counters["box_packets"]
         self._send(CMD_START_BUFFERED if buffered else CMD_START_REALTIME)
         self.silence.heard(time.monotonic())
 
@@ -176,6 +180,7 @@ class RdtFTAdapter(FTAdapter):
                 c["packets_lost"] += step - 1
         self._late_run = 0
         self._last_rdt = rdt
+        c["box_packets"] = self._rdt_base + rdt
         return True
 
     def _disconnect(self) -> None:

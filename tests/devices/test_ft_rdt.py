@@ -50,6 +50,8 @@ def test_realtime_stream_every_sample_in_order(ft_sim, wrench_of):
     c = adapter.counters
     assert c["format_errors"] == c["device_errors"] == c["late"] == 0
     assert c["lost"] == len(undelivered) and c["packets_lost"] == len(undelivered)
+    # the box's own count (rdt_sequence) against the emulator's: the receive count plus what was lost
+    assert c["box_packets"] == stats["packets"] == c["packets"] + c["packets_lost"]
 
 
 def test_buffered_mode_several_records_per_packet(ft_sim, wrench_of):
