@@ -166,7 +166,7 @@ class RdtEmulator(Emulator):
     def on_sample(self, rec) -> None:
         n = self.sample_number(float(rec[0]))
         if self.boot_n is None:
-            self.boot_n = n
+            self.boot_n = self.extra_stats["boot_sample"] = n  # ft_sequence 0
         counts = self.calibration.to_counts(rec[1:7])
         self.last_counts = counts
         if self.client is None:

@@ -71,10 +71,11 @@ def test_buffered_mode_several_records_per_packet(ft_sim, wrench_of):
 
 
 def test_every_fault_counted_nothing_corrupted(ft_sim, wrench_of):
-    faults = {"drop": 0.01, "duplicate": 0.01, "reorder": 0.01, "truncate": 0.01, "delay": 0.002, "delay_ms": 2}
-    adapter, frames, stats, _ = _run(ft_sim, 5000, faults=faults, seed=5)
+    faults = {"drop": 0.01, "duplicate": 0.01, "reorder": 0.01, "truncate": 0.01, "delay": 0.002, "delay_ms": 2,
+              "stall_s": [[0.8, 0.03]]}
+    adapter, frames, stats, _ = _run(ft_sim, 7000, faults=faults, seed=5)
     injected = stats["faults"]
-    assert all(injected.get(k, 0) >= 10 for k in ("drop", "duplicate", "reorder", "truncate"))
+    assert all(injected.get(k, 0) >= 10 for k in ("drop", "duplicate", "reorder", "truncate", "stalled"))
     offset = _seqs_match_world(frames, wrench_of)
     c = adapter.counters
     assert c["format_errors"] == injected["truncate"]
@@ -85,7 +86,8 @@ def test_every_fault_counted_nothing_corrupted(ft_sim, wrench_of):
     missing = set(range(seqs[0], seqs[-1] + 1)) - set(seqs)
     assert len(missing) == c["lost"]
     # lost: exactly the samples of the dropped, truncated and stalled packets and of the late (reordered) ones
-    undelivered = {n - offset for n in stats["damaged"] + stats["fault_at"]["reorder"]}
+    assert (stats["boot_sample"] - offset) % 2001 == 0
+    undelivered = {n - stats["boot_sample"] for n in stats["damaged"] + stats["fault_at"]["reorder"]}
     assert missing == undelivered & set(range(seqs[0], seqs[-1] + 1))
     flagged = {f.seq for f in frames if f.flags & WrenchFlag.SEQ_GAP}
     assert flagged == {n + 1 for n in missing if n + 1 not in missing}
