@@ -14,8 +14,8 @@ Requests: start real-time (one record per packet) or buffered (``comrdtbsiz`` re
 streams every world sample from then on to the requester's address, ``count`` records or until stop;
 set software bias subtracts the newest reading's counts from what follows. ft_sequence is the world
 sample index since the box booted; rdt_sequence counts the packets of the current stream from 1.
-``options["status_error_s"]``: ``[[start, duration], ...]`` s after ready during which records carry
-status bit 31 (the box reports an error).
+``options["status_error_records"]``: ``[[first, count], ...]``: the records sent (from 0, over the
+emulator's life) that carry status bit 31 (the box reports an error).
 
 Faults act on datagrams: ``drop``, ``duplicate``, ``reorder`` (sent after the next one),
 ``truncate`` (cut short), ``delay``, ``stall_s`` (nothing sent; the box's counter runs on) and
@@ -73,7 +73,7 @@ class RdtEmulator(Emulator):
         page = self.options.get("calibration_xml")
         self.page = (str(page).encode() if page is not None
                      else encode_calibration(self.calibration, self.options.get("calibration_fields")))
-        self.error_windows = tuple((float(a), float(b)) for a, b in self.options.get("status_error_s") or ())
+        self.error_records = tuple((int(a), int(b)) for a, b in self.options.get("status_error_records") or ())
         self.sock: socket.socket | None = None
         self.http: ThreadingHTTPServer | None = None
         self.client: tuple[str, int] | None = None
@@ -175,7 +175,7 @@ class RdtEmulator(Emulator):
             self._flush_held(overtaken=False)  # max_frames sent: a packet held back still goes out
             return
         self.check_continuity(n)
-        status = self.saturation_bits(rec) | (STATUS_ERROR if self._error_window() else 0)
+        status = self.saturation_bits(rec) | (STATUS_ERROR if self._reports_error(self.samples - 1) else 0)
         biased = tuple(c - b for c, b in zip(counts, self.bias, strict=True))
         self.pending.append((n, RdtRecord(0, n - self.boot_n, status, biased)))  # type: ignore[arg-type]
         if len(self.pending) >= self.per_packet:
@@ -185,9 +185,8 @@ class RdtEmulator(Emulator):
             if self.remaining == 0:
                 self._stop_stream()
 
-    def _error_window(self) -> bool:
-        t = self.faults.elapsed()
-        return any(a <= t < a + d for a, d in self.error_windows)
+    def _reports_error(self, record: int) -> bool:
+        return any(a <= record < a + n for a, n in self.error_records)
 
     # -- the wire, with its faults -------------------------------------------------------------------
     def send_packet(self) -> None:

@@ -72,8 +72,8 @@ def test_buffered_mode_several_records_per_packet(ft_sim, wrench_of):
 
 def test_every_fault_counted_nothing_corrupted(ft_sim, wrench_of):
     faults = {"drop": 0.01, "duplicate": 0.01, "reorder": 0.01, "truncate": 0.01, "delay": 0.002, "delay_ms": 2,
-              "stall_s": [[0.8, 0.03]]}
-    adapter, frames, stats, _ = _run(ft_sim, 7000, faults=faults, seed=5)
+              "stall_s": [[1.0, 0.03]]}  # the stream runs from the connect (< 1 s after ready) for 1.4 s
+    adapter, frames, stats, _ = _run(ft_sim, 10000, faults=faults, seed=5)
     injected = stats["faults"]
     assert all(injected.get(k, 0) >= 10 for k in ("drop", "duplicate", "reorder", "truncate", "stalled"))
     offset = _seqs_match_world(frames, wrench_of)
@@ -94,9 +94,12 @@ def test_every_fault_counted_nothing_corrupted(ft_sim, wrench_of):
 
 
 def test_status_word_errors_flag_frames_and_send_events(ft_sim):
-    adapter, frames, stats, events = _run(ft_sim, 7000, status_error_s=[[0.6, 0.1]])
+    adapter, frames, stats, events = _run(ft_sim, 3000, status_error_records=[[1000, 500]])
     bad = [f for f in frames if f.flags & WrenchFlag.DEVICE_ERROR]
-    assert 300 <= len(bad) <= 900 and adapter.counters["device_errors"] == len(bad)
+    boot = stats["boot_sample"]
+    first = frames[0].seq + boot  # the world sample of the stream's record 0 (the adapter's first frame)
+    assert {f.seq + boot for f in bad} == {first + i for i in range(1000, 1500)} - set(stats["damaged"])
+    assert adapter.counters["device_errors"] == len(bad) > 0
     seqs = [f.seq for f in bad]
     assert seqs == list(range(seqs[0], seqs[-1] + 1))  # one window
     kinds = [(e.kind, e.message) for e in events if "status word" in e.message]
