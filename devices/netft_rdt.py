@@ -4,7 +4,7 @@ calibration page (:mod:`ftc_hw.codecs.netft_rdt`).
 On connect the adapter reads ``http://<box>:<http_port>/netftapi2.xml`` (unless
 ``read_calibration=False``) and reconciles it with the scene's ``counts_per_force`` /
 ``counts_per_torque`` (an override that must agree with the box when both are known), ``rate_hz``
-(the box's ``comrdtrate``) and, in buffered mode, ``buffer`` (``comrdtbsiz``): a page that is
+(the box's ``comrdtrate``; None: take the box's) and, in buffered mode, ``buffer`` (``comrdtbsiz``): a page that is
 malformed or disagrees fails the connect with a :class:`~ftc_hw.codecs.netft_rdt.CalibrationError`
 naming what (a ``reconnecting`` event says it, and the reader retries). Then it sends start (real-time:
 one record per packet; buffered: ``buffer`` per packet) and publishes every record; close sends stop.
@@ -42,6 +42,7 @@ from ftc_hw.codecs.netft_rdt import (
     DEFAULT_PORT,
     STATUS_ERROR_MASK,
     Calibration,
+    CalibrationError,
     decode_packet,
     encode_request,
     parse_calibration,
@@ -52,6 +53,7 @@ from .base import DeviceError, DeviceIOError
 from .ft_base import FTAdapter, Silence
 
 SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)  # Linux: a datagram's ancillary data counts the drops
+MAX_RATE_HZ = 7000.0  # the box's highest RDT rate
 LATE_EPOCH = 50  # this many late packets in a row: the box restarted its packet counter (a new epoch)
 
 
@@ -60,17 +62,17 @@ class RdtFTAdapter(FTAdapter):
     status_error_mask = STATUS_ERROR_MASK
 
     def __init__(self, name: str, bus: Bus, host: str, *, port: int = DEFAULT_PORT, http_port: int = 80,
-                 mode: str = "realtime", rate_hz: float = 7000.0, buffer: int | None = None,
+                 mode: str = "realtime", rate_hz: float | None = None, buffer: int | None = None,
                  counts_per_force: float | None = None, counts_per_torque: float | None = None,
                  read_calibration: bool = True, silence_s: float | None = 1.0, receive_buffer: int = 4 << 20,
                  **kwargs: Any) -> None:
         if mode not in ("realtime", "buffered"):
             raise DeviceError(f"mode {mode!r}: expected realtime or buffered")
-        kwargs.setdefault("stale_after", max(0.05, 5.0 * (buffer or 1) / rate_hz))
-        super().__init__(name, bus, seq_modulus=1 << 32, seq_period_ns=round(1e9 / rate_hz), **kwargs)
+        kwargs.setdefault("stale_after", max(0.05, 5.0 * (buffer or 1) / (rate_hz or MAX_RATE_HZ)))
+        super().__init__(name, bus, seq_modulus=1 << 32, seq_period_ns=round(1e9 / (rate_hz or MAX_RATE_HZ)), **kwargs)
         self.host, self.port, self.http_port = host, int(port), int(http_port)
         self.mode = mode
-        self.rate_hz = float(rate_hz)
+        self.rate_hz = None if rate_hz is None else float(rate_hz)  # None: the box's comrdtrate
         self.buffer = buffer
         self.overrides = (counts_per_force, counts_per_torque)
         self.read_calibration = read_calibration
@@ -88,7 +90,7 @@ class RdtFTAdapter(FTAdapter):
         cal = self.calibration
         units = f", {cal.counts_per_force:g} counts/{cal.force_unit}, {cal.counts_per_torque:g} counts/" \
                 f"{cal.torque_unit}" if cal is not None else ""
-        return f"{self.kind} at {self.host}:{self.port}, {self.mode} at {self.rate_hz:g} Hz{units}"
+        return f"{self.kind} at {self.host}:{self.port}, {self.mode} at {self.rate_hz or 0:g} Hz{units}"
 
     # -- connect ---------------------------------------------------------------------------------------
     def fetch_calibration(self) -> Calibration:
@@ -107,6 +109,11 @@ class RdtFTAdapter(FTAdapter):
         cal = reconcile(box, counts_per_force=self.overrides[0], counts_per_torque=self.overrides[1],
                         rate_hz=self.rate_hz, buffer_size=self.buffer if buffered else None)
         self.calibration = cal
+        if self.rate_hz is None:
+            if cal.rdt_rate_hz is None:
+                raise CalibrationError("comrdtrate", "not on the box's page: set the device's rate_hz")
+            self.rate_hz = cal.rdt_rate_hz
+        self.seq_period_ns = round(1e9 / self.rate_hz)  # the F/T sequence's clock
         self._scale = np.asarray(cal.scale)
         self._per_packet = (self.buffer or cal.buffer_size) if buffered else 1
         if self._per_packet is None:

@@ -125,7 +125,7 @@ def _rdt(device: DeviceSpec, bus: Bus, ep: Mapping[str, Any], kw: dict[str, Any]
     cpf, cpt, buffer = p.get("counts_per_force"), p.get("counts_per_torque"), p.get("buffer")
     return RdtFTAdapter(device.name, bus, host, port=int(ep.get("port", p.get("port", 49152))),
                         http_port=int(ep.get("http_port", p.get("http_port", 80))), mode=str(p.get("mode", "realtime")),
-                        rate_hz=float(p.get("rate_hz", ep.get("rate_hz", 7000.0))),
+                        rate_hz=None if "rate_hz" not in p else float(p["rate_hz"]),
                         buffer=None if buffer is None else int(buffer),
                         counts_per_force=None if cpf is None else float(cpf),
                         counts_per_torque=None if cpt is None else float(cpt),

@@ -140,8 +140,8 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
               0, 65535),
         Param("mode", "str", "realtime: one record per packet; buffered: several per packet", "realtime",
               choices=("realtime", "buffered")),
-        Param("rate_hz", "number", "the RDT output rate, Hz (the F/T sequence's clock); checked against the "
-              "box's comrdtrate", 7000.0, 0.0, 7000.0, above=True),
+        Param("rate_hz", "number", "the RDT output rate, Hz (the F/T sequence's clock); default the box's "
+              "comrdtrate, checked against it when given", lo=0.0, hi=7000.0, above=True),
         Param("buffer", "int", "records per packet in buffered mode; default the box's comrdtbsiz (the "
               "emulator's: 10), checked against it", lo=1, hi=40),
         Param("counts_per_force", "number", "counts per force unit, overriding the box's cfgcpf (which must "

@@ -154,12 +154,23 @@ def test_plain_socket_client_from_atis_description_reads_the_same_counts(ft_sim,
         assert adapter.wait_connected(5.0)
         frames = bus.subscribe(adapter.topic, maxsize=None)
         got = [frames.get(timeout=2.0) for _ in range(300)]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:  # the box keeps a bias: set it last
+        s.settimeout(2.0)
+        s.sendto(struct.pack("!HHI", 0x1234, 0x0042, 0), (host, port))  # set software bias, then 100 records
+        s.sendto(struct.pack("!HHI", 0x1234, 0x0002, 100), (host, port))
+        biased = {}
+        while len(biased) < 100:
+            _rdt_seq, ft_seq, status, *counts = struct.unpack("!3I6i", s.recv(1024))
+            biased[ft_seq] = np.array(counts)
     offset = _seqs_match_world(got, wrench_of)
     ours = {f.seq: np.asarray(f.wrench) / per_count for f in got}  # the counts the adapter decoded
     for ft_seq, counts in theirs.items():
         assert np.array_equal(counts, np.round(wrench_of(ft_seq + offset) / per_count).astype(int)), ft_seq
     for ft_seq, counts in ours.items():
         assert np.allclose(counts, np.round(wrench_of(ft_seq + offset) / per_count), atol=1e-6), ft_seq
+    # biased: every record less the same counts (the reading when the bias was set), of a sample before them
+    less = {tuple(np.round(wrench_of(k + offset) / per_count).astype(int) - c) for k, c in biased.items()}
+    assert len(less) == 1 and min(biased) > max(ours) > max(theirs)
 
 
 def test_bad_requests_are_counted_by_the_box_and_it_serves_the_next_good_one(ft_sim, wait_for):
@@ -232,6 +243,7 @@ def test_bad_datagrams_and_status_errors_never_crash_the_reader(wait_for):
     frames = bus.history("wrench/ft")
     assert [f.seq for f in frames] == [10, 14, 15]
     assert np.allclose(frames[0].wrench, [1.0, -2.0, 3.0, 1.0, 0.0, -1.0])
+    assert frames[0].t_device_ns == 10 * PERIOD_NS  # no rate_hz param: the box's comrdtrate
     assert [bool(f.flags & WrenchFlag.DEVICE_ERROR) for f in frames] == [False, True, False]
     assert frames[1].flags & WrenchFlag.SEQ_GAP
     c = adapter.counters
