@@ -270,3 +270,21 @@ def test_a_bad_or_disagreeing_calibration_page_is_named_and_nothing_is_published
     assert field in ev.message
     assert not bus.history(adapter.topic)
     assert ft_sim.read_stats(emu).get("records", 0) == 0
+
+
+def test_scene_counts_without_the_calibration_page(wait_for):
+    """read_calibration=false: the scene's counts per N and N m decode (the box's page, malformed here,
+    is never read)."""
+    box = _FakeBox(b"<netft><cfgcpf>")
+    bus = Bus()
+    params = {"read_calibration": False, "counts_per_force": 1000.0, "counts_per_torque": 2000.0, "rate_hz": 1000.0}
+    try:
+        with make_adapter(DeviceSpec("ft", "ft-rdt", "udp", None, params), bus, box.endpoint) as adapter:
+            _, client = box.udp.recvfrom(64)
+            box.udp.sendto(_record(1, 5), client)
+            assert wait_for(lambda: adapter.counters["frames"] == 1, 5.0)
+    finally:
+        box.close()
+    (frame,) = bus.history("wrench/ft")
+    assert np.allclose(frame.wrench, [100.0, -200.0, 300.0, 500.0, 0.0, -500.0])
+    assert frame.t_device_ns == 5 * 1_000_000
