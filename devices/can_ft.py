@@ -24,7 +24,7 @@ from ftc_hw.codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTAssembler, 
 
 from . import serial_urls
 from .base import DeviceError, DeviceIOError
-from .ft_base import FTAdapter
+from .ft_base import FTAdapter, Silence
 
 
 class CanFTAdapter(FTAdapter):
@@ -45,12 +45,10 @@ class CanFTAdapter(FTAdapter):
         self.mode = mode
         self.poll_period = 1.0 / poll_hz
         self.serial_baudrate = serial_baudrate
-        self.silence_s = silence_s
+        self.silence = Silence(self.stale_after, silence_s)
         self.can_kwargs = dict(can_kwargs or {})
         self.read_ahead = read_ahead  # serial interface: the port read through a buffer (serial_urls)
         self.can: can.BusABC | None = None
-        self._last_frame = 0.0
-        self._silent = False
         self._next_poll = 0.0
 
     def describe(self) -> str:
@@ -81,8 +79,7 @@ class CanFTAdapter(FTAdapter):
         self.assembler.reset()
         if self.mode == "stream":
             self._send(OP_START)
-        self._last_frame = time.monotonic()
-        self._silent = False
+        self.silence.heard(time.monotonic())
         self._next_poll = time.monotonic()
 
     def _read_once(self) -> None:
@@ -107,7 +104,7 @@ class CanFTAdapter(FTAdapter):
         t_host = time.monotonic_ns()
         now = time.monotonic()
         if msg is None:
-            self._check_silence(now)
+            self.silence.check(now, self.counters)
             return
         if msg.is_error_frame:
             c["checksum_errors"] += 1
@@ -116,24 +113,15 @@ class CanFTAdapter(FTAdapter):
         for k, v in self.assembler.counters().items():
             c[k] = v
         if sample is None:
-            self._check_silence(now)
+            self.silence.check(now, self.counters)
             return
-        self._last_frame = now
-        self._silent = False
+        self.silence.heard(now)
         self.publish_sample(sample.wrench, t_host_ns=t_host, seq=sample.seq, status=sample.status)
 
     def _recv_timeout(self) -> float:
         if self.mode == "poll":  # wake up in time for the next request
             return max(0.001, min(self.poll_timeout, self._next_poll - time.monotonic(), self.poll_period / 4))
         return self.poll_timeout
-
-    def _check_silence(self, now: float) -> None:
-        quiet = now - self._last_frame
-        if not self._silent and quiet > self.stale_after:
-            self._silent = True
-            self.counters["timeouts"] += 1
-        if self.silence_s is not None and quiet > self.silence_s:
-            raise DeviceIOError(f"no sample for {quiet:.2f} s")
 
     def _disconnect(self) -> None:
         bus, self.can = self.can, None

@@ -14,7 +14,8 @@ unwrapped (offset after a device reset so that it keeps increasing), or the adap
 """
 from __future__ import annotations
 
-from collections import deque
+import time
+from collections import Counter, deque
 from collections.abc import Sequence
 from typing import Any
 
@@ -22,9 +23,10 @@ import numpy as np
 
 from ftc_hw.bus import Bus, ClockAligner, Watchdog, WrenchFlag, WrenchFrame, wrench_topic
 
-from .base import Adapter
+from .base import Adapter, DeviceIOError
 
 STATUS_SATURATION_MASK = 0x3F
+STATUS_ERROR_MASK = 0x80 | 1 << 31  # the status bits of a device error (the stream formats' and CAN's)
 
 
 class Unwrapper:
@@ -55,6 +57,28 @@ class Unwrapper:
         return self.value, step
 
 
+class Silence:
+    """How long a stream has said nothing valid: counted once in ``timeouts`` past ``stale_after`` s, and a
+    broken link (DeviceIOError, the reader reconnects) past ``silence_s`` s (None: never)."""
+
+    def __init__(self, stale_after: float, silence_s: float | None) -> None:
+        self.stale_after, self.silence_s = stale_after, silence_s
+        self.last = time.monotonic()
+        self.silent = False
+
+    def heard(self, now: float) -> None:
+        self.last = now
+        self.silent = False
+
+    def check(self, now: float, counters: Counter[str]) -> None:
+        quiet = now - self.last
+        if not self.silent and quiet > self.stale_after:
+            self.silent = True
+            counters["timeouts"] += 1
+        if self.silence_s is not None and quiet > self.silence_s:
+            raise DeviceIOError(f"no sample for {quiet:.2f} s")
+
+
 class FTAdapter(Adapter):
     """Base of the F/T adapters. ``range``: the device's full scale (SI, 6 values) for saturation when
     it sends no status bits; ``seq_modulus`` / ``t_device_modulus_ns``: wrap periods of the device's
@@ -63,6 +87,7 @@ class FTAdapter(Adapter):
 
     kind = "ft"
     role = "ft"
+    status_error_mask = STATUS_ERROR_MASK  # a kind whose status word says more sets its own
 
     def __init__(self, name: str, bus: Bus, *, range: Sequence[float] | None = None, stale_after: float = 0.05,
                  seq_modulus: int | None = None, t_device_modulus_ns: int | None = None,
@@ -80,6 +105,7 @@ class FTAdapter(Adapter):
         self._seq_offset = 0
         self._bus_seq = -1
         self._clock_resets = 0
+        self._status_error = 0  # the error bits of the last status word (0: none)
         self.watchdog: Watchdog | None = None
         self.identity: dict[str, str] = {}
 
@@ -138,8 +164,7 @@ class FTAdapter(Adapter):
             bus_seq = self._bus_seq + 1
         if status is not None:
             sat = status & STATUS_SATURATION_MASK
-            if status & 0x80 or status >> 31:
-                c["device_errors"] += 1
+            flags |= self._check_status(status & self.status_error_mask)
         elif self.range is not None:
             sat = int(np.any(np.abs(np.asarray(wrench, dtype=float)) >= self.range * (1 - 1e-9)))
         else:
@@ -159,3 +184,18 @@ class FTAdapter(Adapter):
         self.bus.publish(self.topic, frame)
         c["frames"] += 1
         return frame
+
+    def _check_status(self, errors: int) -> WrenchFlag:
+        """Counts a sample whose status word reports an error and flags it; an event when the device starts
+        and stops reporting errors (or reports other bits)."""
+        if errors != self._status_error:
+            if errors:
+                self.event("error", f"status word error bits {errors:#010x}: frames flagged DEVICE_ERROR "
+                           "while they are set")
+            else:
+                self.event("recovered", f"status word error bits clear (were {self._status_error:#010x})")
+            self._status_error = errors
+        if not errors:
+            return WrenchFlag.NONE
+        self.counters["device_errors"] += 1
+        return WrenchFlag.DEVICE_ERROR

@@ -1,7 +1,8 @@
 """What answers where (``ftc devices probe``), through the same client libraries as the adapters:
 an FT 300 on a serial port (Modbus RTU, its identity registers), DYNAMIXEL servos on a serial port
 (broadcast ping at each baud rate: ids and models), a Net F/T on a CAN channel (one sample request
-on its base id), a UR controller at an IP address (RTDE version request, dashboard identity).
+on its base id) or at an IP address (its calibration page, then one RDT record), a UR controller at an
+IP address (RTDE version request, dashboard identity).
 
 Every probe is bounded: ``timeout`` per request (an FT 300 gets 3 tries of its identity read), and a
 DYNAMIXEL broadcast ping waits its fixed ~0.8 s per baud rate. Each returns a :class:`Finding` or
@@ -9,6 +10,7 @@ None, and a line saying what was tried and what came back.
 """
 from __future__ import annotations
 
+import socket
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,9 +24,11 @@ from ftc_hw.bus import Bus
 from ftc_hw.codecs.dxl_table import MODELS
 from ftc_hw.codecs.errors import CodecError
 from ftc_hw.codecs.netft_can import OP_READ, NetFTCodec
+from ftc_hw.codecs.netft_rdt import CMD_START_REALTIME, DEFAULT_PORT, decode_packet, encode_request
 
 from .base import DeviceError, DeviceIOError
 from .ft300 import FT300Adapter
+from .netft_rdt import RdtFTAdapter
 from .ur import DashboardLink, probe_rtde
 
 DXL_BAUDS = (57600, 1_000_000)  # the X series' factory setting, and OpenMANIPULATOR-X's
@@ -129,6 +133,27 @@ def _status_answer(bus: can.BusABC, codec: NetFTCodec, timeout: float) -> tuple[
         if part is not None and part.role == "status":
             return part.value[0], part.value[1]
     return None
+
+
+def probe_netft_rdt(address: str, *, port: int = DEFAULT_PORT, http_port: int = 80, timeout: float = 0.3) -> Probe:
+    """The box's calibration page (HTTP), then one real-time record (RDT: start, count 1)."""
+    tried = f"Net F/T (RDT) at {address}:{port}, calibration on port {http_port}"
+    adapter = RdtFTAdapter("probe", Bus(), address, port=port, http_port=http_port)
+    try:
+        cal = adapter.fetch_calibration()
+    except (DeviceError, CodecError) as exc:
+        return None, f"{tried}: {exc}"
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.settimeout(timeout)
+        try:
+            s.sendto(encode_request(CMD_START_REALTIME, 1), (address, port))
+            records = decode_packet(s.recv(2048), 1)
+        except (OSError, CodecError) as exc:
+            return None, f"{tried}: calibration read, no RDT record ({exc or 'timed out'})"
+    identity = {"port": port, "counts_per_force": f"{cal.counts_per_force:g}/{cal.force_unit}",
+                "counts_per_torque": f"{cal.counts_per_torque:g}/{cal.torque_unit}", "rdt_rate_hz": cal.rdt_rate_hz,
+                "status": f"0x{records[0].status:08x}", "ft_sequence": records[0].ft_sequence}
+    return Finding("Net F/T (RDT)", address, identity), f"{tried}: answered"
 
 
 def probe_ur(address: str, *, timeout: float = 0.3, dashboard_port: int = 29999) -> Probe:

@@ -7,7 +7,9 @@ F/T device params read here (all optional): ``stale_after_s``, ``range`` (else t
 the scene sensor's), and per kind: ``ft300``: ``mode`` (stream | poll), ``device_id``, ``baudrate``,
 ``poll_hz``; ``modbus-ft``: ``map``, ``device_id``, ``baudrate``, ``poll_hz``, ``port``;
 ``ft-serial-stream``: ``format``, ``baudrate``; ``ft-can``: ``channel`` (else the address), ``dbc``,
-``base_id``, ``mode``, ``poll_hz``, ``interface``. Arm adapters read theirs in their ``from_spec``.
+``base_id``, ``mode``, ``poll_hz``, ``interface``; ``ft-rdt``: ``port``, ``http_port``, ``mode``,
+``rate_hz``, ``buffer``, ``counts_per_force``, ``counts_per_torque``, ``read_calibration``. Arm adapters
+read theirs in their ``from_spec``.
 Every kind's params, with types, ranges and defaults: :data:`ftc_hw.scene.device_params.KINDS`
 (the scene loader checks them).
 """
@@ -26,6 +28,7 @@ from .dynamixel import DynamixelArm
 from .ft300 import FT300Adapter
 from .ft_base import FTAdapter
 from .modbus_ft import ModbusFTAdapter
+from .netft_rdt import RdtFTAdapter
 from .serial_stream import SerialStreamFTAdapter
 from .ur import URArm
 
@@ -112,6 +115,23 @@ def _can(device: DeviceSpec, bus: Bus, ep: Mapping[str, Any], kw: dict[str, Any]
                         mode=str(p.get("mode", "stream")), poll_hz=float(p.get("poll_hz", 100.0)), **kw)
 
 
+def _rdt(device: DeviceSpec, bus: Bus, ep: Mapping[str, Any], kw: dict[str, Any]) -> FTAdapter:
+    p = device.params
+    kw.pop("scene_range", None)  # saturation comes in the status word
+    kw.pop("range", None)
+    host = str(ep.get("host") or device.address or "")
+    if not host:
+        raise DeviceError(f"device {device.name!r}: no endpoint and no address (the Net F/T box's IP address)")
+    cpf, cpt, buffer = p.get("counts_per_force"), p.get("counts_per_torque"), p.get("buffer")
+    return RdtFTAdapter(device.name, bus, host, port=int(ep.get("port", p.get("port", 49152))),
+                        http_port=int(ep.get("http_port", p.get("http_port", 80))), mode=str(p.get("mode", "realtime")),
+                        rate_hz=None if "rate_hz" not in p else float(p["rate_hz"]),
+                        buffer=None if buffer is None else int(buffer),
+                        counts_per_force=None if cpf is None else float(cpf),
+                        counts_per_torque=None if cpt is None else float(cpt),
+                        read_calibration=bool(p.get("read_calibration", True)), **kw)
+
+
 Role = Literal["ft", "arm"]
 Build = Callable[[DeviceSpec, Bus, Any, "Scene | None", dict[str, Any]], Adapter]
 
@@ -142,6 +162,7 @@ ADAPTERS: dict[str, AdapterKind] = {
     "modbus-ft": _ft(_modbus_ft),
     "ft-serial-stream": _ft(_serial_stream),
     "ft-can": _ft(_can),
+    "ft-rdt": _ft(_rdt),
     "dynamixel": _arm(DynamixelArm),
     "ur-rtde": _arm(URArm),
 }

@@ -1,6 +1,7 @@
 """Where emulators listen, by device name (``ftc sim --address DEVICE=ADDR``): the emulator options
 that put a UR controller on a loopback IP address (``arm=127.0.0.3``: ur_rtde's ports are fixed, so
-the address is what tells two controllers apart), a Modbus TCP device on ``host[:port]``, and a
+the address is what tells two controllers apart), a Modbus TCP device or a Net F/T box (RDT over UDP)
+on ``host[:port]``, and a
 serial or CAN device's pty symlink at a path. Servers bind loopback addresses only."""
 from __future__ import annotations
 
@@ -34,7 +35,7 @@ def emulator_address(kind: str, transport: str, where: str) -> dict[str, Any]:
     """The emulator options that make a device of ``kind`` over ``transport`` listen at ``where``."""
     if kind == "ur-rtde":
         return {"address": check_loopback(where)}
-    if transport == "modbus-tcp":
+    if transport in ("modbus-tcp", "udp"):
         host, _, port = where.rpartition(":") if where.count(":") == 1 else (where, "", "")
         if port and not port.isdigit():
             raise ValueError(f"port {port!r} is not a number")

@@ -164,7 +164,7 @@ def _raise_exit(signum: int, frame: object) -> None:
 class Emulator:
     """Base of the F/T emulators: ``bind()`` returns the endpoint dict, ``loop()`` serves forever."""
 
-    SUPPORTED_FAULTS: frozenset[str] = ALL_FAULTS
+    SUPPORTED_FAULTS: frozenset[str] = ALL_FAULTS - {"reorder"}  # a byte stream keeps its order
 
     def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
         self.device = device

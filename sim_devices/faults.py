@@ -2,7 +2,7 @@
 
 Options (``options["faults"]``, ``options["seed"]``), every key optional::
 
-    drop, corrupt, truncate, duplicate, garbage, delay   probability per frame (sum <= 1)
+    drop, corrupt, truncate, duplicate, garbage, delay, reorder   probability per frame (sum <= 1)
     delay_ms          how long a delayed frame waits (default 20 ms)
     stall_s           [[start, duration], ...] s after the emulator is ready: nothing is sent
     disconnect_at_s   a time or list of times: the link goes away (pty removed, sockets closed) ...
@@ -13,7 +13,8 @@ Options (``options["faults"]``, ``options["seed"]``), every key optional::
 One random draw is made per frame whatever happens, so the n-th frame meets the same fault for the
 same seed. What each fault does on the wire depends on the transport (see each emulator); on a byte
 link: ``corrupt`` flips one bit after the header, ``truncate`` sends the frame cut short (header
-kept), ``garbage`` sends 1-16 random bytes before the frame, ``duplicate`` sends it twice.
+kept), ``garbage`` sends 1-16 random bytes before the frame, ``duplicate`` sends it twice; ``reorder``
+(datagram transports only) sends the frame after the next one.
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-PROBABILISTIC = ("drop", "corrupt", "truncate", "duplicate", "garbage", "delay")
+PROBABILISTIC = ("drop", "corrupt", "truncate", "duplicate", "garbage", "delay", "reorder")
 ALL_FAULTS = frozenset((*PROBABILISTIC, "stall_s", "disconnect_at_s"))
 _KEYS = frozenset((*ALL_FAULTS, "delay_ms", "reconnect_after_s", "spacing"))
 
@@ -37,6 +38,7 @@ class FaultConfig:
     duplicate: float = 0.0
     garbage: float = 0.0
     delay: float = 0.0
+    reorder: float = 0.0
     delay_ms: float = 20.0
     stall_s: tuple[tuple[float, float], ...] = ()
     disconnect_at_s: tuple[float, ...] = ()
@@ -123,9 +125,9 @@ class FaultInjector:
 
     def apply(self, fault: str | None, frame: bytes, protect: int = 0) -> list[bytes]:
         """The chunks to write for ``frame`` under ``fault`` (``protect``: leading bytes never touched).
-        ``delay`` is not applied here: callers wait ``delay_s`` first."""
+        ``delay`` and ``reorder`` are not applied here: callers wait ``delay_s`` first, or hold the frame."""
         rng = self.rng
-        if fault is None or fault == "delay":
+        if fault is None or fault in ("delay", "reorder"):
             return [frame]
         if fault == "drop":
             return []

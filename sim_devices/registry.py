@@ -13,6 +13,7 @@ EMULATORS: dict[str, str] = {
     "ft300": "ftc_hw.sim_devices.ft300:serve",
     "ft-serial-stream": "ftc_hw.sim_devices.serial_stream:serve",
     "ft-can": "ftc_hw.sim_devices.can_ft:serve",
+    "ft-rdt": "ftc_hw.sim_devices.netft_rdt:serve",
     "modbus-ft": "ftc_hw.sim_devices.modbus_ft:serve",
     "dynamixel": "ftc_hw.sim_devices.dynamixel:serve",
     "ur-rtde": "ftc_hw.sim_devices.ur:serve",

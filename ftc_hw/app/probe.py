@@ -11,14 +11,23 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from ftc_hw.devices.probe import DXL_BAUDS, Finding, probe_dynamixel, probe_ft300, probe_netft, probe_ur, serial_ports
+from ftc_hw.devices.probe import (
+    DXL_BAUDS,
+    Finding,
+    probe_dynamixel,
+    probe_ft300,
+    probe_netft,
+    probe_netft_rdt,
+    probe_ur,
+    serial_ports,
+)
 from ftc_hw.scene import Scene
 from ftc_hw.scene.device_params import located, locator_key
 
 
 @dataclass(frozen=True)
 class Candidate:
-    """One thing to try: ``kind`` ft300 | dynamixel | can | ur at ``where``, with its probe's options."""
+    """One thing to try: ``kind`` ft300 | dynamixel | can | rdt | ur at ``where``, with its probe's options."""
 
     kind: str
     where: str
@@ -39,8 +48,8 @@ class ProbePlan:
 def plan_probe(scene: Scene | None = None, *, ports: Sequence[str] = (), can: Sequence[str] = (),
                addresses: Sequence[str] = (), bauds: Sequence[int] = ()) -> ProbePlan:
     """The candidates: a scene's located devices, then every port (an FT 300 and DYNAMIXEL servos
-    each), CAN channel (``[interface:]channel``) and address given; the system's serial ports when
-    nothing else is."""
+    each), CAN channel (``[interface:]channel``) and address (a UR controller and a Net F/T box) given;
+    the system's serial ports when nothing else is."""
     plan = ProbePlan()
     bauds = tuple(bauds) or DXL_BAUDS
     if scene is not None:
@@ -59,6 +68,7 @@ def plan_probe(scene: Scene | None = None, *, ports: Sequence[str] = (), can: Se
             plan.add("can", text)
     for address in addresses:
         plan.add("ur", address)
+        plan.add("rdt", address)
     return plan
 
 
@@ -75,6 +85,8 @@ def _plan_scene(plan: ProbePlan, scene: Scene, bauds: tuple[int, ...]) -> None:
         elif d.kind == "ft-can":
             plan.add("can", p.get("channel") or d.address, interface=p.get("interface", "serial"),
                      base_id=p.get("base_id", 8), dbc=p.get("dbc", "ati_netft_can.dbc"))
+        elif d.kind == "ft-rdt":
+            plan.add("rdt", d.address, port=p.get("port", 49152), http_port=p.get("http_port", 80))
         elif d.kind == "ur-rtde":
             plan.add("ur", d.address, dashboard_port=p.get("dashboard_port", 29999))
         else:
@@ -96,6 +108,8 @@ def probe(plan: ProbePlan, timeout: float = 0.3) -> tuple[list[Finding], list[st
             finding, note = probe_ft300(c.where, timeout=timeout, **opts)
         elif c.kind == "can":
             finding, note = probe_netft(c.where, timeout=timeout, **opts)
+        elif c.kind == "rdt":
+            finding, note = probe_netft_rdt(c.where, timeout=timeout, **opts)
         else:
             finding, note = probe_ur(c.where, timeout=timeout, **opts)
         tried.append(note)

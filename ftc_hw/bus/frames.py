@@ -56,6 +56,7 @@ class WrenchFlag(enum.IntFlag):
     CLOCK_SUSPECT = 8  # device timestamp inconsistent (reset, jump, alignment not ready)
     INTERPOLATED = 16  # made by Bus.sample_at between two stored frames
     HELD = 32  # made by Bus.sample_at by holding the newest frame (zero-order hold)
+    DEVICE_ERROR = 64  # the device's status word reports an error: the reading may be wrong
 
 
 class JointFlag(enum.IntFlag):

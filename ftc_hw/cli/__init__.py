@@ -513,15 +513,15 @@ def devices_probe(
                                                            "ports); repeatable.")] = None,
     can: Annotated[Optional[list[str]], typer.Option(metavar="[INTERFACE:]CHANNEL", help="A CAN channel to ask "  # noqa: UP045
                                                      "for a Net F/T (interface default serial); repeatable.")] = None,
-    address: Annotated[Optional[list[str]], typer.Option(help="An IP address to ask for a UR controller; "  # noqa: UP045
-                                                              "repeatable.")] = None,
+    address: Annotated[Optional[list[str]], typer.Option(help="An IP address to ask for a UR controller and a "  # noqa: UP045
+                                                              "Net F/T box (RDT); repeatable.")] = None,
     baud: Annotated[Optional[list[int]], typer.Option(help="A DYNAMIXEL baud rate to try (default: 57600 and "  # noqa: UP045
                                                            "1000000, and the scene's); repeatable.")] = None,
     timeout: Annotated[float, typer.Option(min=0.05, max=5.0, help="Seconds to wait for each answer.")] = 0.3,
     device: DeviceOption = None,
     rig: RigOption = None,
 ) -> None:
-    """List what answers: FT 300s and DYNAMIXEL servos on serial ports, Net F/Ts on CAN, UR controllers."""
+    """List what answers: FT 300s and DYNAMIXEL servos on serial ports, Net F/Ts on CAN or Ethernet, UR controllers."""
     from ftc_hw.cli.devices import run_probe_command  # lazy: CLI start-up
 
     raise typer.Exit(run_probe_command(scene, tuple(device or ()), rig, ports=port or [], can=can or [],

@@ -4,12 +4,12 @@ from __future__ import annotations
 import typer
 
 from ftc_hw.app.vendor_meshes import VendorFetchError, fetch_vendor_shell
-from ftc_hw.scene import builtin_names, load_scene
+from ftc_hw.scene import builtin_names, load_scene, variant_names
 from ftc_hw.scene.vendor import shell_fetched, shell_model
 
 
 def list_scenes() -> None:
-    for name in builtin_names():
+    for name in builtin_names() + variant_names():
         s = load_scene(name)
         kinds = ", ".join(f"{d.kind}/{d.transport}" for d in s.devices) or "no devices"
         typer.echo(f"{name:10s} {s.n_joints} joints, sensor {s.sensor.rate_hz:g} Hz ({s.sensor.reports}), "

@@ -1,6 +1,6 @@
 """Scenes: TOML files that say what a setup is. Built-ins ship in ``ftc_hw/scene/builtin``."""
 from .errors import SceneError
-from .loader import builtin_names, load_scene, resolve
+from .loader import builtin_names, load_scene, resolve, variant_names
 from .overrides import load_rig_scene
 from .schema import (
     COMPENSATION_LEVELS,
@@ -17,5 +17,5 @@ from .schema import (
 __all__ = [
     "COMPENSATION_LEVELS", "CompensationLevel", "Coupling", "DeviceSpec", "RobotSpec", "Scene", "SceneError",
     "SensorSpec", "SignConvention", "TouchableLink", "builtin_names", "load_rig_scene", "load_scene",
-    "resolve",
+    "resolve", "variant_names",
 ]

@@ -134,6 +134,24 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
               7000.0, above=True),
         _STALE_S,
     ), locators=("channel",)),
+    DeviceKind("ft-rdt", ("udp",), "the Net F/T box's IP address", "192.168.1.1", (
+        Param("port", "int", "RDT's UDP port (also the emulator's, where 0 takes a free one)", 49152, 0, 65535),
+        Param("http_port", "int", "the box's web server, which serves its calibration (/netftapi2.xml)", 80,
+              0, 65535),
+        Param("mode", "str", "realtime: one record per packet; buffered: several per packet", "realtime",
+              choices=("realtime", "buffered")),
+        Param("rate_hz", "number", "the RDT output rate, Hz (the F/T sequence's clock); default the box's "
+              "comrdtrate, checked against it when given", lo=0.0, hi=7000.0, above=True),
+        Param("buffer", "int", "records per packet in buffered mode; default the box's comrdtbsiz (the "
+              "emulator's: 10), checked against it", lo=1, hi=40),
+        Param("counts_per_force", "number", "counts per force unit, overriding the box's cfgcpf (which must "
+              "agree when it is read)", lo=0.0, above=True),
+        Param("counts_per_torque", "number", "counts per torque unit, overriding the box's cfgcpt", lo=0.0,
+              above=True),
+        Param("read_calibration", "bool", "read the box's calibration over HTTP (false: counts_per_force and "
+              "counts_per_torque, in N and N m, are required)", True),
+        _STALE_S,
+    )),
     DeviceKind("dynamixel", ("serial",), "the serial port of the U2D2 / USB adapter", "/dev/ttyUSB0", (
         Param("ids", "ints", "servo ids, one per scene joint in order", lo=0, hi=252, required=True),
         Param("protocol", "number", "DYNAMIXEL protocol version", 2.0, choices=(2.0,)),

@@ -33,35 +33,73 @@ def builtin_dir() -> Path:
 
 
 def builtin_names() -> list[str]:
+    """The built-in scenes, each its own arm and sensor (what the benches and tests run by default)."""
     return sorted(p.stem for p in builtin_dir().glob("*.toml"))
 
 
+def variant_names() -> list[str]:
+    """Built-in variants: scenes that extend a built-in one (``ur5e-netft``: ur5e on another F/T
+    interface), in ``builtin/variants``; loaded by name like the others."""
+    return sorted(p.stem for p in (builtin_dir() / "variants").glob("*.toml"))
+
+
 def resolve(name_or_path: str | Path) -> Path:
-    """A built-in scene name (``ur5e``) or a path to a TOML file."""
+    """A built-in scene name (``ur5e``), a variant's (``ur5e-netft``), or a path to a TOML file."""
     text = str(name_or_path)
     if text in builtin_names():
         return builtin_dir() / f"{text}.toml"
+    if text in variant_names():
+        return builtin_dir() / "variants" / f"{text}.toml"
     path = Path(text)
     if path.suffix == ".toml" or path.exists() or "/" in text:
         return path
-    raise SceneError(text, "", f"no built-in scene of that name (built-ins: {', '.join(builtin_names())}) "
-                     "and no such file")
+    names = ", ".join(builtin_names() + variant_names())
+    raise SceneError(text, "", f"no built-in scene of that name (built-ins: {names}) and no such file")
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
     """Load a built-in scene by name or a user scene from a path."""
     path = resolve(name_or_path)
+    return _Parser(path).scene(_read_extended(path, ()))
+
+
+def _read_toml(path: Path) -> dict:
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise SceneError(path, "", f"cannot read the scene file ({exc.strerror or exc})") from exc
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        return tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise SceneError(path, "", f"not UTF-8 text ({exc})") from exc
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(path, "", f"invalid TOML: {exc}") from exc
-    return _Parser(path).scene(data)
+
+
+def _read_extended(path: Path, seen: tuple[Path, ...]) -> dict:
+    """The file's tables, over those of the scene it ``extends`` (a path relative to it, or a built-in
+    name): tables merge key by key, anything else (values, arrays, ``[[devices]]``) is replaced whole.
+    Paths in the merged tables (``robot.model``) are relative to the extending file."""
+    data = _read_toml(path)
+    base = data.pop("extends", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise SceneError(path, "extends", f"expected a scene name or path, got {type(base).__name__}")
+    base_path = builtin_dir() / f"{base}.toml" if base in builtin_names() else (path.parent / base).resolve()
+    if base_path.resolve() in seen or base_path.resolve() == path.resolve():
+        raise SceneError(path, "extends", f"{base!r} extends this scene again (a cycle)")
+    if not base_path.is_file():
+        raise SceneError(path, "extends", f"no built-in scene {base!r} and no file {base_path}")
+    return _merged(_read_extended(base_path, (*seen, path.resolve())), data)
+
+
+def _merged(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for key, value in over.items():
+        old = out.get(key)
+        out[key] = _merged(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
+    return out
 
 
 class _Parser:

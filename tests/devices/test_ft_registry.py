@@ -17,6 +17,7 @@ from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.can_ft import CanFTAdapter
 from ftc_hw.devices.ft300 import FT300Adapter
 from ftc_hw.devices.modbus_ft import ModbusFTAdapter
+from ftc_hw.devices.netft_rdt import RdtFTAdapter
 from ftc_hw.devices.registry import ADAPTERS, kinds, make_adapter
 from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 from ftc_hw.scene import DeviceSpec, load_scene
@@ -28,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_every_kind_has_an_adapter_and_an_emulator():
-    assert set(kinds("ft")) == {"ft300", "modbus-ft", "ft-serial-stream", "ft-can"}
+    assert set(kinds("ft")) == {"ft300", "modbus-ft", "ft-serial-stream", "ft-can", "ft-rdt"}
     assert set(kinds("arm")) == {"dynamixel", "ur-rtde"}
     assert set(ADAPTERS) == set(EMULATORS)
 
@@ -43,6 +44,9 @@ def test_builtin_scene_devices_build_the_right_adapters():
                 built[name] = make_adapter(d, bus, {"endpoint": "/tmp/x.tty", "transport": d.transport}, scene=scene)
     assert isinstance(built["leng2016"], SerialStreamFTAdapter) and built["leng2016"].fmt.name == "ftc-1k"
     assert isinstance(built["ur5e"], CanFTAdapter) and built["ur5e"].codec.base_id == 8
+    rdt = make_adapter(DeviceSpec("ft", "ft-rdt", "udp", "192.168.1.1", {"mode": "buffered", "buffer": 20}), bus)
+    assert isinstance(rdt, RdtFTAdapter) and (rdt.host, rdt.port, rdt.http_port, rdt.buffer) == ("192.168.1.1", 49152,
+                                                                                               80, 20)
     ft = built["dxl-arm"]
     assert isinstance(ft, FT300Adapter) and ft.mode == "stream" and ft.device_id == 9 and ft.baudrate == 19200
     assert list(ft.range) == [300, 300, 300, 30, 30, 30]

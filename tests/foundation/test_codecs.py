@@ -1,6 +1,7 @@
 """F/T codecs, fuzzed: only typed errors escape, frames survive any split, no corrupted frame decodes."""
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 
@@ -16,6 +17,7 @@ from ftc_hw.codecs import (
     FTC_1K,
     ChecksumError,
     CodecError,
+    FrameFormatError,
     RegisterMap,
     StreamFormat,
     StreamParser,
@@ -24,6 +26,7 @@ from ftc_hw.codecs import (
     register_map,
     stream_format,
 )
+from ftc_hw.codecs import netft_rdt as rdt
 from ftc_hw.codecs import serial_can as scan
 from ftc_hw.codecs.modbus_frames import mbap_decode, mbap_encode, rtu_decode_request, rtu_encode
 from ftc_hw.codecs.netft_can import NetFTAssembler, NetFTCodec
@@ -304,3 +307,94 @@ def test_netft_assembler_never_emits_a_mixed_or_partial_sample(ops, data):
     # an intact sample whose predecessor's status frame arrived is always delivered
     status_ok = {i // 4 for i, op in enumerate(ops) if i % 4 == 3 and op not in ("drop", "short")}
     assert {k for k in range(1, 10) if k not in damaged and k - 1 in status_ok} <= {s.seq for s in samples}
+
+
+# -- Net F/T RDT (UDP) -----------------------------------------------------------------------------
+def _rdt_records(n: int, first: int = 1) -> list[rdt.RdtRecord]:
+    return [rdt.RdtRecord(first + i, 1000 + i, i % 64, tuple((i * 97 + 13 * a) % 4001 - 2000 for a in range(6)))
+            for i in range(n)]
+
+
+def test_rdt_layout_is_atis_network_byte_order():
+    assert rdt.encode_request(rdt.CMD_START_BUFFERED, 10) == bytes.fromhex("12340003") + (10).to_bytes(4, "big")
+    rec = rdt.RdtRecord(1, 2, 0x80000001, (1, -1, 2, -2, 3, -3))
+    data = rdt.encode_records([rec])
+    assert len(data) == 36 and struct.unpack("!3I6i", data) == (1, 2, 0x80000001, 1, -1, 2, -2, 3, -3)
+    assert rdt.decode_packet(data) == [rec] and rdt.status_errors(rec.status) == 0x80000000
+    assert rdt.decode_request(rdt.encode_request(rdt.CMD_SET_BIAS)) == rdt.RdtRequest(rdt.CMD_SET_BIAS, 0)
+
+
+@FUZZ
+@given(n=st.integers(1, 40), cut=st.integers(-36, 36))
+def test_rdt_packets_of_whole_records_decode_and_any_other_length_is_a_typed_error(n, cut):
+    recs = _rdt_records(n)
+    data = rdt.encode_records(recs)
+    bad = data[:len(data) + cut] if cut < 0 else data + bytes(cut)
+    if cut % 36 == 0 and len(bad) > 0:
+        assert len(rdt.decode_packet(bad)) == n + cut // 36
+    else:
+        with pytest.raises(FrameFormatError):
+            rdt.decode_packet(bad)
+    assert rdt.decode_packet(data, records=n) == recs
+    with pytest.raises(FrameFormatError):
+        rdt.decode_packet(data, records=n + 1)  # long: more records than the mode sends
+
+
+@FUZZ
+@given(data=st.binary(max_size=400))
+def test_rdt_random_datagrams_raise_only_typed_errors(data):
+    for decode in (rdt.decode_packet, rdt.decode_request, rdt.parse_calibration):
+        with contextlib.suppress(CodecError):  # CalibrationError is one
+            decode(data)
+
+
+@FUZZ
+@given(header=st.integers(0, 0xFFFF), command=st.integers(0, 0xFFFF), count=st.integers(0, 2**32 - 1))
+def test_rdt_request_with_a_wrong_header_or_command_is_a_typed_error(header, command, count):
+    data = struct.pack("!HHI", header, command, count)
+    if header == rdt.HEADER and command in rdt.COMMANDS:
+        assert rdt.decode_request(data) == rdt.RdtRequest(command, count)
+    else:
+        with pytest.raises(FrameFormatError):
+            rdt.decode_request(data)
+
+
+@FUZZ
+@given(cpf=st.sampled_from([1e6, 1e5, 1000.0, 16.0]), cpt=st.sampled_from([1e6, 1e4, 32.0]),
+       fu=st.sampled_from(sorted(rdt.FORCE_UNITS)), tu=st.sampled_from(sorted(rdt.TORQUE_UNITS)),
+       counts=st.lists(st.integers(-(2**31), 2**31 - 1), min_size=6, max_size=6))
+def test_rdt_calibration_page_roundtrip_and_counts_to_si(cpf, cpt, fu, tu, counts):
+    cal = rdt.Calibration(cpf, cpt, fu, tu, 7000.0, 10)
+    assert rdt.parse_calibration(rdt.encode_calibration(cal)) == cal
+    si = cal.to_si(counts)
+    assert si[0] == pytest.approx(counts[0] / cpf * rdt.FORCE_UNITS[fu])
+    assert si[5] == pytest.approx(counts[5] / cpt * rdt.TORQUE_UNITS[tu])
+    assert cal.to_counts(si) == tuple(counts)
+
+
+@pytest.mark.parametrize(("page", "field"), [
+    (b"<netft><cfgcpf>1000000</cfgcpf>", "/netftapi2.xml"),  # not well-formed
+    (b"<netft><cfgcpt>1000000</cfgcpt></netft>", "cfgcpf"),  # missing
+    (b"<netft><cfgcpf>lots</cfgcpf><cfgcpt>1</cfgcpt></netft>", "cfgcpf"),
+    (b"<netft><cfgcpf>1</cfgcpf><cfgcpt>-5</cfgcpt></netft>", "cfgcpt"),
+    (b"<netft><cfgcpf>1</cfgcpf><cfgcpt>1</cfgcpt><scfgfu>furlong</scfgfu></netft>", "scfgfu"),
+    (b"<netft><cfgcpf>1</cfgcpf><cfgcpt>1</cfgcpt><comrdtrate>nan</comrdtrate></netft>", "comrdtrate"),
+])
+def test_rdt_malformed_calibration_page_names_the_field(page, field):
+    with pytest.raises(rdt.CalibrationError) as err:
+        rdt.parse_calibration(page)
+    assert err.value.field == field and field in str(err.value)
+
+
+def test_rdt_calibration_that_disagrees_with_the_scene_names_both_values():
+    box = rdt.Calibration(1e6, 1e6, rdt_rate_hz=7000.0, buffer_size=10)
+    assert rdt.reconcile(box, counts_per_force=1e6, rate_hz=7000.0) is box
+    with pytest.raises(rdt.CalibrationError, match=r"cfgcpt: the box says 1000000, the scene 100000"):
+        rdt.reconcile(box, counts_per_torque=1e5)
+    with pytest.raises(rdt.CalibrationError, match="comrdtrate"):
+        rdt.reconcile(box, rate_hz=1000.0)
+    with pytest.raises(rdt.CalibrationError, match="comrdtbsiz"):
+        rdt.reconcile(box, buffer_size=40)
+    assert rdt.reconcile(None, counts_per_force=10.0, counts_per_torque=20.0).scale == (0.1,) * 3 + (0.05,) * 3
+    with pytest.raises(rdt.CalibrationError, match="not read"):
+        rdt.reconcile(None, counts_per_force=10.0)

@@ -4,10 +4,11 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ftc_hw.model import ArmModel
-from ftc_hw.scene import SceneError, builtin_names, load_scene
+from ftc_hw.scene import SceneError, builtin_names, load_scene, variant_names
 from ftc_hw.scene.device_params import KINDS
 from ftc_hw.scene.loader import builtin_dir
 
@@ -187,3 +188,27 @@ def test_a_scene_error_crosses_a_process_boundary_whole():
     err = pickle.loads(pickle.dumps(SceneError("/x/ur5e.toml", "world.model", "no joint 'elbow'")))
     assert (err.path, err.key, err.problem) == ("/x/ur5e.toml", "world.model", "no joint 'elbow'")
     assert str(err) == "/x/ur5e.toml: world.model: no joint 'elbow'"
+
+
+def test_variants_extend_a_builtin_and_load_by_name():
+    assert "ur5e-netft" in variant_names() and "ur5e-netft" not in builtin_names()
+    base, netft = load_scene("ur5e"), load_scene("ur5e-netft")
+    assert netft.name == "ur5e-netft" and netft.sensor.rate_hz == 7000.0
+    assert np.array_equal(netft.sensor.range, base.sensor.range) and netft.robot.joints == base.robot.joints
+    assert [d.kind for d in netft.devices] == ["ft-rdt", "ur-rtde"]  # arrays of tables replace, not merge
+    model = ArmModel(netft)
+    assert model.n_joints == 6 and abs(1.0 / 7000.0 - float(model.model.opt.timestep)) < 1e-12
+
+
+def test_extends_errors_name_the_file_and_key(tmp_path):
+    (tmp_path / "a.toml").write_text('extends = "b.toml"\n')
+    (tmp_path / "b.toml").write_text('extends = "a.toml"\n')
+    with pytest.raises(SceneError, match="extends.*cycle"):
+        load_scene(tmp_path / "a.toml")
+    (tmp_path / "c.toml").write_text('extends = "nowhere.toml"\n')
+    with pytest.raises(SceneError, match="extends.*no built-in scene 'nowhere.toml'"):
+        load_scene(tmp_path / "c.toml")
+    (tmp_path / "d.toml").write_text(LENG.replace('schema = 1', 'extends = "leng2016"\nschema = 1')
+                                     .replace('name = "leng2016"', 'name = "mine"'))
+    (tmp_path / "leng2016.xml").write_text((builtin_dir() / "leng2016.xml").read_text())
+    assert load_scene(tmp_path / "d.toml").name == "mine"

@@ -1,0 +1,291 @@
+"""Emulator of the ATI Net F/T box over Ethernet (scene kind ``ft-rdt``): RDT over UDP, and its
+calibration page over HTTP.
+
+UDP on ``options["host"]`` (default 127.0.0.1; loopback only) and ``options["port"]`` (default the
+device's ``port`` param, 49152, or a free port when that one is taken: the endpoint says which; an
+explicit option is bound or fails; 0 takes a free one). HTTP on the same host, ``options["http_port"]``
+(default 0: a free port, in the endpoint), serving ``/netftapi2.xml``: counts per unit from the
+device's ``counts_per_force`` / ``counts_per_torque`` params (default 100000 per N and 1000000 per
+N m), N and N-m, ``comrdtrate`` the world's sensor rate, ``comrdtbsiz`` the ``buffer`` param (10).
+``options["calibration_fields"]`` replaces elements of that page and ``options["calibration_xml"]``
+replaces the whole page (tests of bad pages).
+
+Requests: start real-time (one record per packet) or buffered (``comrdtbsiz`` records per packet)
+streams every world sample from then on to the requester's address, ``count`` records or until stop;
+set software bias subtracts the newest reading's counts from what follows. ft_sequence is the world
+sample index since the box booted; rdt_sequence counts the packets of the current stream from 1.
+``options["status_error_records"]``: ``[[first, count], ...]``: the records sent (from 0, over the
+emulator's life) that carry status bit 31 (the box reports an error).
+
+Faults act on datagrams: ``drop``, ``duplicate``, ``reorder`` (sent after the next one),
+``truncate`` (cut short), ``delay``, ``stall_s`` (nothing sent; the box's counter runs on) and
+``disconnect_at_s``: the box reboots (silent for ``reconnect_after_s``, then idle with its sequences
+restarted at 0 and no bias, until a client starts a stream again).
+"""
+from __future__ import annotations
+
+import contextlib
+import select
+import socket
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+from ftc_hw.codecs.errors import CodecError
+from ftc_hw.codecs.netft_rdt import (
+    CALIBRATION_PATH,
+    CMD_SET_BIAS,
+    CMD_START_BUFFERED,
+    CMD_START_REALTIME,
+    CMD_STOP,
+    DEFAULT_PORT,
+    STATUS_ERROR,
+    Calibration,
+    RdtRecord,
+    decode_request,
+    encode_calibration,
+    encode_records,
+)
+from ftc_hw.scene import DeviceSpec, Scene
+
+from .emulator import Emulator, Pacer, serve_with
+from .link import LinkInfo
+from .loopback import check_loopback
+
+UDP_FAULTS = frozenset(("drop", "duplicate", "reorder", "truncate", "delay", "stall_s", "disconnect_at_s"))
+
+
+class RdtEmulator(Emulator):
+    SUPPORTED_FAULTS = UDP_FAULTS
+
+    def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
+        super().__init__(device, scene, link, options)
+        p = device.params
+        self.host = check_loopback(str(self.options.get("host", "127.0.0.1")))
+        port = self.options.get("port")
+        self.port: int | None = None if port is None else int(port)
+        self.default_port = int(p.get("port", DEFAULT_PORT))
+        self.http_port = int(self.options.get("http_port", 0))
+        self.calibration = Calibration(float(p.get("counts_per_force", 100_000)),
+                                       float(p.get("counts_per_torque", 1_000_000)), "N", "N-m",
+                                       self.rate_hz, int(p.get("buffer", 10)))
+        page = self.options.get("calibration_xml")
+        self.page = (str(page).encode() if page is not None
+                     else encode_calibration(self.calibration, self.options.get("calibration_fields")))
+        self.error_records = tuple((int(a), int(b)) for a, b in self.options.get("status_error_records") or ())
+        self.sock: socket.socket | None = None
+        self.http: ThreadingHTTPServer | None = None
+        self.client: tuple[str, int] | None = None
+        self.per_packet = 1
+        self.remaining = 0  # records still to send; 0: until stopped
+        self.rdt_seq = 0
+        self.boot_n: int | None = None  # world sample index at boot: ft_sequence counts from it
+        self.bias = (0,) * 6
+        self.last_counts = (0,) * 6
+        self.pending: list[tuple[int, RdtRecord]] = []  # (world sample, record) of the packet being filled
+        self.held: tuple[bytes, list[int]] | None = None  # a packet held back by a reorder fault
+        self.extra_stats.update(requests=0, bad_requests=0, packets=0, records=0, send_errors=0, reboots=0)
+
+    # -- endpoint ------------------------------------------------------------------------------------
+    def bind(self) -> dict[str, Any]:
+        self.sock = self._bind_udp()
+        self.http = ThreadingHTTPServer((self.host, self.http_port), _page_handler(self.page))
+        self.http.daemon_threads = True
+        threading.Thread(target=self.http.serve_forever, name="netft-http", daemon=True).start()
+        port, http_port = self.sock.getsockname()[1], self.http.server_address[1]
+        return {**self.endpoint_base("udp", f"{self.host}:{port}"), "host": self.host, "port": port,
+                "http_port": http_port, "rate_hz": self.rate_hz, "buffer": self.calibration.buffer_size}
+
+    def _bind_udp(self) -> socket.socket:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
+        if self.port is not None:
+            sock.bind((self.host, self.port))
+            return sock
+        try:
+            sock.bind((self.host, self.default_port))
+        except OSError:  # taken (another run): a free port, which the endpoint reports
+            sock.bind((self.host, 0))
+        return sock
+
+    def close(self) -> None:
+        if self.http is not None:
+            with contextlib.suppress(Exception):
+                self.http.shutdown()
+                self.http.server_close()
+        if self.sock is not None:
+            self.sock.close()
+
+    # -- the box's loop ------------------------------------------------------------------------------
+    def loop(self) -> None:
+        pacer = Pacer(1.0 / self.rate_hz)
+        assert self.sock is not None
+        while True:
+            if select.select([self.sock], [], [], max(0.0, pacer.remaining()))[0]:
+                self.receive()
+            if not pacer.due():
+                continue
+            pacer.tick()
+            if self.faults.disconnect_due():
+                self.reboot()
+            for rec in self.new_samples():
+                self.on_sample(rec)
+            self.heartbeat()
+
+    def receive(self) -> None:
+        assert self.sock is not None
+        try:
+            data, addr = self.sock.recvfrom(2048)
+        except OSError:
+            return
+        try:
+            req = decode_request(data)
+        except CodecError:
+            self.extra_stats["bad_requests"] += 1
+            return
+        self.extra_stats["requests"] += 1
+        if req.command in (CMD_START_REALTIME, CMD_START_BUFFERED):
+            self.client = addr
+            self.per_packet = 1 if req.command == CMD_START_REALTIME else int(self.calibration.buffer_size or 1)
+            self.remaining = req.count
+            self.rdt_seq = 0
+            self.pending = []
+            self._last_n = None  # samples outside a stream are not missing
+        elif req.command == CMD_STOP:
+            self._stop_stream()
+        elif req.command == CMD_SET_BIAS:
+            self.bias = self.last_counts
+
+    def _stop_stream(self) -> None:
+        self._flush_held(overtaken=False)
+        self.client = None
+        self.pending = []
+
+    def on_sample(self, rec) -> None:
+        n = self.sample_number(float(rec[0]))
+        if self.boot_n is None:
+            self.boot_n = self.extra_stats["boot_sample"] = n  # ft_sequence 0
+        counts = self.calibration.to_counts(rec[1:7])
+        self.last_counts = counts
+        if self.client is None:
+            return
+        if not self.count_sample():
+            self._flush_held(overtaken=False)  # max_frames sent: a packet held back still goes out
+            return
+        self.check_continuity(n)
+        status = self.saturation_bits(rec) | (STATUS_ERROR if self._reports_error(self.samples - 1) else 0)
+        biased = tuple(c - b for c, b in zip(counts, self.bias, strict=True))
+        self.pending.append((n, RdtRecord(0, n - self.boot_n, status, biased)))  # type: ignore[arg-type]
+        if len(self.pending) >= self.per_packet:
+            self.send_packet()
+        if self.remaining:
+            self.remaining -= 1
+            if self.remaining == 0:
+                self._stop_stream()
+
+    def _reports_error(self, record: int) -> bool:
+        return any(a <= record < a + n for a, n in self.error_records)
+
+    # -- the wire, with its faults -------------------------------------------------------------------
+    def send_packet(self) -> None:
+        self.rdt_seq = (self.rdt_seq + 1) & 0xFFFFFFFF
+        ns = [n for n, _ in self.pending]
+        data = encode_records([RdtRecord(self.rdt_seq, r.ft_sequence, r.status, r.counts) for _, r in self.pending])
+        self.pending = []
+        faults = self.faults
+        if faults.stalled():
+            faults.counts["stalled"] += 1
+            faults.damaged.extend(ns)
+            return
+        fault = faults.next_fault(sample=ns[0])
+        if fault == "drop":
+            faults.damaged.extend(ns)
+        elif fault == "truncate":
+            self._send(data[:faults.rng.randrange(1, len(data))], ns, whole=False)
+        elif fault == "reorder" and self.held is None:
+            self.held = (data, ns)
+            return
+        else:
+            if fault == "delay":
+                time.sleep(faults.delay_s)
+            self._send(data, ns)
+            if fault == "duplicate":
+                self._send(data, ns, count=False)
+        self._flush_held()
+
+    def _flush_held(self, overtaken: bool = True) -> None:
+        """Send the packet a reorder held back: after the one that overtook it, or (``overtaken`` False:
+        the stream ended first) in order after all, which the fault counts then do not count."""
+        held, self.held = self.held, None
+        if held is None:
+            return
+        if not overtaken:
+            self.faults.counts["reorder"] -= 1
+            self.faults.at["reorder"].remove(held[1][0])
+        self._send(*held)
+
+    def _send(self, data: bytes, ns: list[int], whole: bool = True, count: bool = True) -> None:
+        assert self.sock is not None
+        try:
+            if self.client is None:
+                raise OSError("no client")
+            self.sock.sendto(data, self.client)
+        except OSError:
+            self.extra_stats["send_errors"] += 1
+            if count:
+                self.faults.damaged.extend(ns)
+            return
+        self.extra_stats["packets"] += 1
+        if not count:
+            return
+        if whole:
+            self.extra_stats["records"] += len(ns)
+        else:
+            self.faults.damaged.extend(ns)
+
+    def reboot(self) -> None:
+        """A power cycle: silent for ``reconnect_after_s`` (requests unanswered, samples not sent), then
+        idle, sequences from 0, no bias."""
+        streaming = self.client is not None
+        self._stop_stream()
+        self.extra_stats["reboots"] += 1
+        end = time.monotonic() + self.faults.config.reconnect_after_s
+        while time.monotonic() < end:
+            if self.sock is not None and select.select([self.sock], [], [], 0.01)[0]:
+                with contextlib.suppress(OSError):
+                    self.sock.recvfrom(2048)
+            for rec in self.new_samples():
+                if streaming:
+                    n = self.sample_number(float(rec[0]))
+                    self.check_continuity(n)
+                    self.faults.counts["rebooting"] += 1
+                    self.faults.damaged.append(n)
+            self.heartbeat()
+        self.boot_n = None
+        self.rdt_seq = 0
+        self.bias = (0,) * 6
+        self._last_n = None
+
+
+def _page_handler(page: bytes) -> type[BaseHTTPRequestHandler]:
+    class Page(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:  # noqa: N802 - http.server's name
+            if self.path.split("?")[0] != CALIBRATION_PATH:
+                self.send_error(404)
+                return
+            self.send_response(200)
+            self.send_header("Content-Type", "text/xml")
+            self.send_header("Content-Length", str(len(page)))
+            self.end_headers()
+            self.wfile.write(page)
+
+        def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - http.server's signature
+            pass
+
+    return Page
+
+
+def serve(device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:
+    serve_with(RdtEmulator, device, scene, link, ready, options)
