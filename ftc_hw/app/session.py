@@ -224,6 +224,9 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                           "refine[/]")
         console.print("loading the pipeline (its compiled kernels) ...")
         monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
+        console.print(f"contact points on the scene's {monitor.pipeline.surface_source}"
+                      + (" (its vendor meshes are not fetched: ftc scenes --fetch-meshes)"
+                         if scene.robot.vendor_shell and monitor.pipeline.surface_source == "primitives" else ""))
         recorder = None
         if cfg.record:
             recorder = _start_recorder(cfg, scene, bus, {
