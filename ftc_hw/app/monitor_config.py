@@ -28,7 +28,8 @@ class MonitorConfig:
     events: Path | None = None
     truth: Path | None = None
     noise: bool = True
-    view: bool = True
+    view: bool = True  # the live view in the terminal
+    web: Any = None  # a WebOptions (ftc_hw.app.web_feed): the live page in the browser (--view web)
     level: str | None = "dynamics"  # compensation level; None: the scene's
     title: str = "ftc monitor"
     connect_timeout_s: float = 20.0
@@ -58,3 +59,4 @@ class MonitorOutcome:
     vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
     degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
     remote: dict[str, Any] = field(default_factory=dict)  # with remote: frames taken, dropped, events sent
+    web: dict[str, Any] = field(default_factory=dict)  # with the page: its URL, ticks sent, dropped
