@@ -37,18 +37,6 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "$want" > "$stamp"
   rm -f "$venv/.ftc-warmed"  # numba itself may have changed
 fi
-# The live page's test drives a real browser: the distribution's chromium and its driver (not a downloaded build).
-if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then
-  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
-    echo "[bootstrap] installing Debian's chromium and chromium-driver (the web view's test)" >&2
-    apt-get update -qq >&2 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >&2
-  else
-    echo "[bootstrap] error: /usr/bin/chromium or /usr/bin/chromedriver is missing and apt-get cannot run here" \
-         "(not root, or not Debian): install the distribution's chromium and chromium-driver packages" \
-         "(tests/app/test_web_view.py drives them)" >&2
-    exit 1
-  fi
-fi
 # The vendor meshes the built-in scenes name (the simulated world's true shell): fetched once, ~30 MB.
 if ! "$venv/bin/ftc" scenes --fetch-meshes >/dev/null; then
   echo "[bootstrap] warning: vendor meshes not fetched; simulated worlds use primitive shells (ftc scenes --fetch-meshes)" >&2
