@@ -126,3 +126,39 @@ def test_impossibly_early_sample_resets_but_late_spike_does_not():
     assert al.resets == 0 and al.offset_ns == 10**9
     al.update(11_000, 11_000 + 10**8)  # 0.9 s earlier than possible: the device clock jumped
     assert al.resets == 1 and al.offset_ns == 10**8
+
+
+def numpy_hull_slope(x, y, span, buckets, max_skew):
+    """The skew fit's slope as first written in numpy (a sort by bucket, then by delay): the kernel's oracle."""
+    bucket = (x - x[0]) * buckets // (span + 1)
+    order = np.lexsort((y, bucket))
+    _, first = np.unique(bucket[order], return_index=True)
+    hull = []
+    for p in zip(x[order][first].astype(float).tolist(), y[order][first].astype(float).tolist(), strict=True):
+        while len(hull) >= 2:
+            (x1, y1), (x2, y2) = hull[-2], hull[-1]
+            if (x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1) > 0:
+                break
+            hull.pop()
+        hull.append(p)
+    if len(hull) < 2:
+        return 0.0
+    x_mean = float(x.mean())
+    i = next((k for k in range(1, len(hull)) if hull[k][0] >= x_mean), len(hull) - 1)
+    (x1, y1), (x2, y2) = hull[i - 1], hull[i]
+    return max(-max_skew, min(max_skew, (y2 - y1) / (x2 - x1)))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 3_000_000), st.integers(-50_000, 50_000)), min_size=2, max_size=300),
+       st.integers(2, 20), st.floats(1e-5, 1e-1))
+def test_compiled_skew_fit_matches_the_numpy_form_to_the_bit(steps, buckets, max_skew):
+    """Repeated device times, ties in delay and empty buckets included."""
+    from ftc_hw.bus.clock_kernels import hull_slope, lowest_intercept
+
+    x = np.cumsum([s for s, _ in steps]).astype(np.int64)
+    y = np.array([d for _, d in steps], dtype=np.int64)
+    span = int(x[-1] - x[0])
+    b = hull_slope(x, y, span, buckets, float(x.mean()), max_skew)
+    assert b == numpy_hull_slope(x, y, span, buckets, max_skew)
+    assert lowest_intercept(x, y, b) == float(np.min(y - b * x))
