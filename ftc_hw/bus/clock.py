@@ -35,9 +35,26 @@ from collections import deque
 
 import numpy as np
 
-from .clock_kernels import hull_slope, lowest_intercept
-
 __all__ = ["ClockAligner", "ClockNotReadyError"]
+
+
+_KERNELS: tuple | None = None
+
+
+def _kernels() -> tuple:
+    """The compiled fit (:mod:`.clock_kernels`), imported and called once on the first aligner made: numba
+    loads a kernel from its cache on its first call, tens of milliseconds (more on a loaded host) that
+    a reader would otherwise stall for in the middle of its stream, at the first skew fit (a test of
+    the 7 kHz RDT stream lost its tail so). Lazy: ``import ftc_hw.bus`` stays free of numba."""
+    global _KERNELS
+    if _KERNELS is None:
+        from .clock_kernels import hull_slope, lowest_intercept
+
+        x = np.arange(4, dtype=np.int64)
+        hull_slope(x, x, 3, 2, 1.5, 1e-3)
+        lowest_intercept(x, x, 0.5)
+        _KERNELS = (hull_slope, lowest_intercept)
+    return _KERNELS
 
 
 class ClockNotReadyError(RuntimeError):
@@ -79,6 +96,7 @@ class ClockAligner:
         self.jump_ns = jump_ns
         self.resets = 0
         self.capped = 0
+        self._hull_slope, self._lowest_intercept = _kernels()
         self._reset()
 
     def _reset(self) -> None:
@@ -166,9 +184,9 @@ class ClockAligner:
         if span >= self.min_skew_span_ns and x.shape[0] >= 2 * self.buckets:
             # the slope comes from the lower convex hull of per-bucket minima, on the edge spanning the
             # mean time: it minimises the mean distance of the samples above the line
-            b = hull_slope(x, y, span, self.buckets, float(x.mean()), self.max_skew)
+            b = self._hull_slope(x, y, span, self.buckets, float(x.mean()), self.max_skew)
         self._b = b
-        self._a = lowest_intercept(x, y, b) if b else float(self._mins[0][1])
+        self._a = self._lowest_intercept(x, y, b) if b else float(self._mins[0][1])
 
     # -- estimates --------------------------------------------------------------------------------
     @property
