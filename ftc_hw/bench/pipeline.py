@@ -283,7 +283,7 @@ def _summary_table(results: dict) -> Table:
                         "--sim with the stop reflex)")
     for c in ("scene@Hz", "capacity Hz", "core share", "detected", "false alarms", "detect ms (med)",
               "rt load", "rt sent", "rt received", "rt lost", "rt judged", "rt not judged", "rt detected",
-              "rt onset ms", "rt stop ms (med/max)", "rt CPU share"):
+              "rt onset ms", "rt stop ms (med/max)", "rt CPU share", "rt arm missed"):
         table.add_column(c, justify="left" if c == "scene@Hz" else "right")
     for k, r in results.items():
         if k == "meta":
@@ -293,15 +293,15 @@ def _summary_table(results: dict) -> Table:
                  f"{d['false_alarms']}", f"{d['detect_ms_median']:.2f}"]
         rt = r.get("realtime")
         if rt is None:
-            cells += ["-"] * 10
+            cells += ["-"] * 11
         else:
             lost = (rt["sent"] - rt["received"]) if rt["sent"] is not None else rt["seq_lost"]
             cells += [f"{rt['load_1min']:.1f}", f"{rt['sent'] if rt['sent'] is not None else '-'}",
                       f"{rt['received']}", f"{lost}", f"{rt['judged']}",
                       f"{rt['not_judged']} ({100 * rt['not_judged_share']:.0f} %)",
-                      f"{rt['detected']}/{rt['contacts']} ({rt['false_alarms']} false)",
+                      f"{rt['detected']}/{rt['contacts']} ({rt['false_alarms']} false)" if rt["evaluated"] else "-",
                       f"{rt['onset_delay_ms_median']:.2f}",
                       f"{rt['stop_after_onset_ms_median']:.2f} / {rt['stop_after_onset_ms_max']:.2f}",
-                      f"{rt['cpu_share']:.2f}"]
+                      f"{rt['cpu_share']:.2f}", f"{rt['arm_missed']}"]
         table.add_row(*cells)
     return table
