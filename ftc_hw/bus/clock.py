@@ -11,9 +11,10 @@ where ``h`` maps device time to host time (offset plus a small rate error, the s
   applied to bucket minima so that a bucket hit only by spikes is ignored), and the intercept puts the
   line under every sample of the window.
 
-Cost: a sample is a few deque and ring writes; every ``refit_every`` samples the fit is one compiled
-pass over the window (:mod:`.clock_kernels`), ~2-3 us a sample on average at 7 kHz (it was ~20 us
-with the fit sorting the window in numpy).
+Cost: a sample is a few deque and ring writes; every ``refit_every`` samples the fit is one pass over
+the window (no sort: the window's device times never decrease, so a bucket is a run of samples),
+compiled where numba is loaded (:func:`_fit_functions`): ~2-3 us a sample on average at 7 kHz
+compiled, ~4-5 in numpy (it was ~20 us with the fit sorting the window).
 
 :meth:`ClockAligner.to_host` therefore returns the host time at which a minimum-delay packet stamped
 ``t_device_ns`` would have arrived: true host time of the device event plus the delay floor, which
@@ -31,6 +32,7 @@ another moment); capped, late frames keep their true time (``capped`` counts the
 
 from __future__ import annotations
 
+import sys
 from collections import deque
 
 import numpy as np
@@ -41,12 +43,17 @@ __all__ = ["ClockAligner", "ClockNotReadyError"]
 _KERNELS: tuple | None = None
 
 
-def _kernels() -> tuple:
-    """The compiled fit (:mod:`.clock_kernels`), imported and called once on the first aligner made: numba
-    loads a kernel from its cache on its first call, tens of milliseconds (more on a loaded host) that
-    a reader would otherwise stall for in the middle of its stream, at the first skew fit (a test of
-    the 7 kHz RDT stream lost its tail so). Lazy: ``import ftc_hw.bus`` stays free of numba."""
+def _fit_functions() -> tuple:
+    """The skew fit's two steps. Where numba is loaded already (the monitor's process: the pipeline's
+    kernels) its compiled form (:mod:`.clock_kernels`), imported and called once on the first aligner
+    made: numba loads a kernel from its cache on its first call, tens of milliseconds (more on a loaded
+    host) that a reader would otherwise stall for mid-stream, at the first skew fit (a test of the 7 kHz
+    RDT stream lost its tail so). Elsewhere (a reader's own process) the same steps in numpy, without
+    numba's import and cache loads at its start (a restarted reader streams again sooner). Both give
+    the numbers of the sorted form they replace, to the bit (tests/foundation/test_bus_clock.py)."""
     global _KERNELS
+    if "numba" not in sys.modules:
+        return _hull_slope_numpy, _lowest_intercept_numpy
     if _KERNELS is None:
         from .clock_kernels import hull_slope, lowest_intercept
 
@@ -55,6 +62,34 @@ def _kernels() -> tuple:
         lowest_intercept(x, x, 0.5)
         _KERNELS = (hull_slope, lowest_intercept)
     return _KERNELS
+
+
+def _hull_slope_numpy(x: np.ndarray, y: np.ndarray, span: int, buckets: int, x_mean: float,
+                      max_skew: float) -> float:
+    """:func:`.clock_kernels.hull_slope` in numpy: x never decreases, so each bucket is a run of samples."""
+    bucket = (x - x[0]) * buckets // (span + 1)
+    starts = np.flatnonzero(np.concatenate(([True], bucket[1:] != bucket[:-1])))
+    lows = np.minimum.reduceat(y, starts)
+    run = np.repeat(np.arange(starts.shape[0]), np.diff(np.append(starts, y.shape[0])))
+    hits = np.flatnonzero(y == lows[run])  # every sample at its bucket's minimum; the first of each is kept
+    first = hits[np.concatenate(([True], run[hits][1:] != run[hits][:-1]))]
+    hull: list[tuple[float, float]] = []  # lower convex hull, monotone chain (x is increasing)
+    for p in zip(x[first].astype(np.float64).tolist(), y[first].astype(np.float64).tolist(), strict=True):
+        while len(hull) >= 2:
+            (x1, y1), (x2, y2) = hull[-2], hull[-1]
+            if (x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1) > 0:
+                break
+            hull.pop()
+        hull.append(p)
+    if len(hull) < 2:
+        return 0.0
+    i = next((k for k in range(1, len(hull)) if hull[k][0] >= x_mean), len(hull) - 1)
+    (x1, y1), (x2, y2) = hull[i - 1], hull[i]
+    return max(-max_skew, min(max_skew, (y2 - y1) / (x2 - x1)))
+
+
+def _lowest_intercept_numpy(x: np.ndarray, y: np.ndarray, b: float) -> float:
+    return float(np.min(y - b * x))
 
 
 class ClockNotReadyError(RuntimeError):
@@ -96,7 +131,7 @@ class ClockAligner:
         self.jump_ns = jump_ns
         self.resets = 0
         self.capped = 0
-        self._hull_slope, self._lowest_intercept = _kernels()
+        self._hull_slope, self._lowest_intercept = _fit_functions()
         self._reset()
 
     def _reset(self) -> None:
