@@ -73,8 +73,14 @@ def _hull_slope_numpy(x: np.ndarray, y: np.ndarray, span: int, buckets: int, x_m
     run = np.repeat(np.arange(starts.shape[0]), np.diff(np.append(starts, y.shape[0])))
     hits = np.flatnonzero(y == lows[run])  # every sample at its bucket's minimum; the first of each is kept
     first = hits[np.concatenate(([True], run[hits][1:] != run[hits][:-1]))]
-    hull: list[tuple[float, float]] = []  # lower convex hull, monotone chain (x is increasing)
-    for p in zip(x[first].astype(np.float64).tolist(), y[first].astype(np.float64).tolist(), strict=True):
+    return lower_hull_slope(x[first].astype(np.float64), y[first].astype(np.float64), x_mean, max_skew)
+
+
+def lower_hull_slope(px: np.ndarray, py: np.ndarray, x_mean: float, max_skew: float) -> float:
+    """Slope of the lower convex hull of points (px increasing) on its edge spanning ``x_mean``, clipped
+    to +-max_skew; 0.0 for one point."""
+    hull: list[tuple[float, float]] = []  # monotone chain
+    for p in zip(px.tolist(), py.tolist(), strict=True):
         while len(hull) >= 2:
             (x1, y1), (x2, y2) = hull[-2], hull[-1]
             if (x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1) > 0:

@@ -129,24 +129,14 @@ def test_impossibly_early_sample_resets_but_late_spike_does_not():
 
 
 def numpy_hull_slope(x, y, span, buckets, max_skew):
-    """The skew fit's slope as first written in numpy (a sort by bucket, then by delay): the kernel's oracle."""
+    """The skew fit's slope as first written in numpy (bucket minima by a sort by bucket, then by delay):
+    the oracle of both faster forms' bucket minima (the hull over them is ``lower_hull_slope``)."""
+    from ftc_hw.bus.clock import lower_hull_slope
+
     bucket = (x - x[0]) * buckets // (span + 1)
     order = np.lexsort((y, bucket))
     _, first = np.unique(bucket[order], return_index=True)
-    hull = []
-    for p in zip(x[order][first].astype(float).tolist(), y[order][first].astype(float).tolist(), strict=True):
-        while len(hull) >= 2:
-            (x1, y1), (x2, y2) = hull[-2], hull[-1]
-            if (x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1) > 0:
-                break
-            hull.pop()
-        hull.append(p)
-    if len(hull) < 2:
-        return 0.0
-    x_mean = float(x.mean())
-    i = next((k for k in range(1, len(hull)) if hull[k][0] >= x_mean), len(hull) - 1)
-    (x1, y1), (x2, y2) = hull[i - 1], hull[i]
-    return max(-max_skew, min(max_skew, (y2 - y1) / (x2 - x1)))
+    return lower_hull_slope(x[order][first].astype(float), y[order][first].astype(float), float(x.mean()), max_skew)
 
 
 @settings(max_examples=300, deadline=None)
