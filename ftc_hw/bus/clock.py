@@ -14,7 +14,7 @@ where ``h`` maps device time to host time (offset plus a small rate error, the s
 Cost: a sample is a few deque and ring writes; every ``refit_every`` samples the fit is one pass over
 the window (no sort: the window's device times never decrease, so a bucket is a run of samples),
 compiled where numba is loaded (:func:`_fit_functions`): ~2-3 us a sample on average at 7 kHz
-compiled, ~4-5 in numpy (it was ~20 us with the fit sorting the window).
+compiled, ~3.5 in numpy (it was ~20 us with the fit sorting the window).
 
 :meth:`ClockAligner.to_host` therefore returns the host time at which a minimum-delay packet stamped
 ``t_device_ns`` would have arrived: true host time of the device event plus the delay floor, which
