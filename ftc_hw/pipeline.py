@@ -332,8 +332,9 @@ class ContactPipeline:
         along, taken where it passes closest to the event's point: the solver's point lies on the
         primitives, and where the real shell stands out of them the true line misses them, so the
         solver's point is off it. Without a wrench: the line through the event's point along its force.
-        The uncertainty stays the event's: the scene's ``surface_tolerance_m`` is kept for the real
-        shell's distance from the surface answered on."""
+        In the point's uncertainty the real shell's distance from the meshes (the vendor's tolerance,
+        or the scene's ``surface_tolerance_m`` for its own meshes) takes the place of its distance from
+        the primitives (``surface_tolerance_m`` and a mesh fit's RMS; :meth:`_systematic`)."""
         shell = shell or self.mesh_shell
         if shell is None or "no_estimate" in ev.flags:
             return ev
@@ -346,7 +347,11 @@ class ContactPipeline:
             u = force / np.linalg.norm(force)
             point = on_line + float((point - on_line) @ u) * u
         entry = shell.entry(ev.link, q, point, force)
-        return ev if entry is None else replace(ev, point=entry)
+        if entry is None:
+            return ev
+        var = np.asarray(ev.point_std, dtype=float) ** 2 - self._surface(ev.link) ** 2
+        std = np.sqrt(np.maximum(var, 0.0) + shell.tolerance.get(ev.link, self._surface(ev.link)) ** 2)
+        return replace(ev, point=entry, point_std=std)
 
     def restart_motion(self) -> None:
         """The joint stream was lost and is back: what was estimated from its past (the acceleration,

@@ -28,7 +28,8 @@ class MonitorConfig:
     events: Path | None = None
     truth: Path | None = None
     noise: bool = True
-    view: bool = True
+    view: bool = True  # the live view in the terminal
+    web: Any = None  # a WebOptions (ftc_hw.app.web_feed): the live page in the browser (--view web)
     level: str | None = "dynamics"  # compensation level; None: the scene's
     title: str = "ftc monitor"
     connect_timeout_s: float = 20.0
@@ -59,3 +60,4 @@ class MonitorOutcome:
     degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
     remote: dict[str, Any] = field(default_factory=dict)  # with remote: frames taken, dropped, events sent
     device_counters: dict[str, dict[str, int]] = field(default_factory=dict)  # per device: its adapter's counters
+    web: dict[str, Any] = field(default_factory=dict)  # with the page: its URL, ticks sent, dropped

@@ -65,6 +65,8 @@ def print_summary(console: Console, cfg: MonitorConfig, served: bool, bus: Bus, 
         console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
     if served:
         console.print(f"from {cfg.remote or 'reader processes'} (Zenoh): {out.remote}")
+    if out.web:
+        console.print(web_line(out.web), highlight=False)
     if out.faults:
         console.print("faults played: " + ", ".join(f"{f} (done at t = {t:.2f} s)" for f, t in out.faults))
     for line, n in out.vendor_lines.items():
@@ -91,3 +93,18 @@ def print_summary(console: Console, cfg: MonitorConfig, served: bool, bus: Bus, 
         console.print(f"[yellow]{p}[/]")
     if out.degraded:
         console.print(f"[bold red]DEGRADED run[/] (exit code {DEGRADED_EXIT}): " + "; ".join(out.degraded))
+
+
+def web_line(web: dict) -> str:
+    """The live page's figures: ticks sent and dropped, how late the page drew them (ms from a tick's
+    making, and from an onset's sample, to the page's sending it to the browsers)."""
+    tick = web.get("tick_ms") or {}
+    onsets = web.get("onset_ms") or []
+    return (f"live page {web['url']}: {web['ticks']} ticks sent, {web['dropped']} dropped (page behind)"
+            + (f", {web['errors']} feed errors" if web.get("errors") else "")
+            + (f"; drawn {tick['p50']:.1f} ms (p50), {tick['p99']:.1f} (p99), {tick['max']:.1f} (max) after the tick"
+               if tick else "")
+            + (f"; onsets sent to the browsers {', '.join(f'{x:.0f}' for x in onsets)} ms after their sample"
+               if 0 < len(onsets) <= 8 else "")
+            + (f"; {len(onsets)} onsets sent to the browsers {sorted(onsets)[len(onsets) // 2]:.0f} ms (median), "
+               f"{max(onsets):.0f} (max) after their sample" if len(onsets) > 8 else ""))

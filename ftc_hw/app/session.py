@@ -49,6 +49,7 @@ from .rig import Rig, RigError, build_rig, check_located, pick_device, require_d
 from .serve import ServedReaders
 from .sim_joints import SimJointSource
 from .vendor_output import vendor_stderr
+from .web_feed import WebFeed, WebViewError
 
 SETTLE_S = 0.5
 
@@ -206,6 +207,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
          faults: list[Fault]) -> MonitorOutcome:
     with contextlib.ExitStack() as stack:
         _stop_on_sigterm(stack)
+        web = _serve_page(cfg, console, scene, stack) if cfg.web is not None else None
         world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.truth)
         bus = Bus()
         try:
@@ -224,6 +226,9 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                           "refine[/]")
         console.print("loading the pipeline (its compiled kernels) ...")
         monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
+        console.print(f"contact points on the scene's {monitor.pipeline.surface_source}"
+                      + (" (its vendor meshes are not fetched: ftc scenes --fetch-meshes)"
+                         if scene.robot.vendor_shell and monitor.pipeline.surface_source == "primitives" else ""))
         recorder = None
         if cfg.record:
             recorder = _start_recorder(cfg, scene, bus, {
@@ -276,6 +281,8 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                 _tare_then_go(cfg, monitor, world)
                 if plan is not None:
                     plan.start()
+            if web is not None:
+                web.feed(bus, monitor, topics, ft_topic=topics[0], truth_path=truth_path if cfg.sim else None)
             stack.enter_context(frozen_heap())  # set up: no collector pause may stall the readers now
             view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
                            + (f", scenario {cfg.scenario} (emulated devices)" if cfg.sim else ""))
@@ -291,6 +298,10 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
             rig.close()
             if reflex is not None:
                 reflex.close()
+            if web is not None:
+                web.close()
+                out.web = {"url": web.url, "ticks": web.ticks, "dropped": web.drops, "errors": web.errors,
+                           **web.page.stats}
         pump()
         _finish(cfg, scene, monitor, reflex, world, truth_path, recorder, out)
         if monitor.pipeline.refiner is not None:
@@ -304,6 +315,18 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         out.device_counters = {a.name: dict(a.counters) for a in rig.adapters}
         print_summary(console, cfg, _served(cfg), bus, topics, out, rig.adapters, recorder)
     return out
+
+
+def _serve_page(cfg: MonitorConfig, console: Console, scene: Scene, stack: contextlib.ExitStack) -> WebFeed:
+    """The page, served before the world starts (it loads meanwhile); its URL printed."""
+    web = WebFeed(scene, cfg.title, cfg.web)
+    try:
+        url = web.serve()
+    except WebViewError as exc:
+        raise MonitorSetupError(f"--view web: {exc}") from None
+    stack.callback(web.close)
+    console.print(f"the live page: [bold cyan]{url}[/] (open it in a browser)", highlight=False)
+    return web
 
 
 def _make_rig(cfg: MonitorConfig, scene: Scene, bus: Bus, devices: list[DeviceSpec], topics: list[str],

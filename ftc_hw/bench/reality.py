@@ -123,7 +123,7 @@ def _run(scene: Scene, rec: Recording, kwargs: dict[str, Any], shell: MeshShell 
             if e.kind in ("onset", "update") and rec.contact[i] and "no_estimate" not in e.flags:
                 shipped = pipe.on_meshes(e, rec.q[i], shell, pipe.recent_external()) if shell is not None else e
                 err = np.asarray(shipped.point) - rec.point[i]
-                std = np.maximum(np.asarray(e.point_std), 1e-9)
+                std = np.maximum(np.asarray(shipped.point_std), 1e-9)
                 prim_err = (None if shell is None else
                             float(np.linalg.norm(np.asarray(e.point) - rec.point[i])) * 1e3)
                 points.append((float(np.linalg.norm(err)) * 1e3, float(np.sum((err / std) ** 2)) <= CHI2_3_95,

@@ -55,6 +55,14 @@ class RealityChoice(StrEnum):
     harsh = "harsh"
 
 
+class View(StrEnum):
+    """Where the live view goes: the terminal's table, a page in the browser (docs/monitor.md), none."""
+
+    terminal = "terminal"
+    web = "web"
+    none = "none"
+
+
 class BusTransport(StrEnum):
     inproc = "inproc"
     zenoh = "zenoh"
@@ -83,6 +91,15 @@ ZenohConfigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
          "(docs/bus.md).")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
+# monitor, demo, replay: the live page
+ViewOption = Annotated[View, typer.Option(
+    help="The live view: terminal (a table), web (a 3-D page in the browser, served on --host:--port; "
+         "docs/monitor.md) or none.")]
+NoViewOption = Annotated[bool, typer.Option("--no-view", help="The same as --view none.")]
+HostOption = Annotated[str, typer.Option(help="With --view web: the address the page listens on (another "
+                                         "than loopback makes it reachable from the network).")]
+PortOption = Annotated[int, typer.Option(min=1, max=65535, help="With --view web: the page's port (when taken: the "
+                                         "next free one; the printed URL says which).")]
 # calibrate, identify
 PLOT_HELP = "Draw the fit (residuals, parameters with error bars) to a PNG beside the calibration file."
 
@@ -182,6 +199,9 @@ def demo(
     identify_seconds: Annotated[float, typer.Option(
         min=0.0, help="In a typical or harsh world: seconds of planned excitation the drawn arm is identified from "
                       "first (ftc identify --sim --plan); 0 monitors it with the nominal model.")] = 30.0,
+    view: ViewOption = View.terminal,
+    host: HostOption = "127.0.0.1",
+    port: PortOption = 8080,
 ) -> None:
     """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
     if 0 < identify_seconds < 5:
@@ -189,7 +209,8 @@ def demo(
     typer.echo(LOADING, err=True)
     from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
 
-    raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value, identify_seconds))
+    raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value, identify_seconds,
+                              view=view.value, web_address=(host, port)))
 
 
 @app.command()
@@ -208,7 +229,10 @@ def monitor(
     events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
     truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
     noise: Annotated[bool, typer.Option("--noise/--no-noise", help="With --sim: sensor noise.")] = True,
-    view: Annotated[bool, typer.Option("--view/--no-view", help="The live view.")] = True,
+    view: ViewOption = View.terminal,
+    no_view: NoViewOption = False,
+    host: HostOption = "127.0.0.1",
+    port: PortOption = 8080,
     level: Annotated[Level, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
                                          "scene (the level the scene file declares).")] = Level.dynamics,
     fault: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
@@ -236,12 +260,14 @@ def monitor(
     typer.echo(LOADING, err=True)
     from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
 
+    view = View.none if no_view else view
     raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
-                                         reflex.value if reflex else None, events, truth, noise, view, level.value,
+                                         reflex.value if reflex else None, events, truth, noise,
+                                         view.value, level.value,
                                          tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
                                          reality=reality.value, refine=refine, remote=remote,
                                          remote_name=remote_name, zenoh_config=zenoh_config,
-                                         readers=readers.value))
+                                         readers=readers.value, web_address=(host, port)))
 
 
 @app.command()
@@ -251,12 +277,18 @@ def replay(
     events: Annotated[Optional[Path], typer.Option(help="Write the replayed events, one JSON line each.")] = None,  # noqa: UP045
     calibration: Annotated[Optional[Path], typer.Option(help="Replay with this calibration instead.")] = None,  # noqa: UP045
     check: Annotated[bool, typer.Option("--check", help="Exit 1 when the events differ from the recorded.")] = False,
-    view: Annotated[bool, typer.Option("--view/--no-view", help="The live view (with --speed > 0).")] = True,
+    view: Annotated[View, typer.Option(
+        help="terminal: the live table while it replays (with --speed > 0); web: the replay then a 3-D page over it "
+             "with play/pause and a time slider, served until Ctrl-C (docs/monitor.md); none.")] = View.terminal,
+    no_view: NoViewOption = False,
+    host: HostOption = "127.0.0.1",
+    port: PortOption = 8080,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
     from ftc_hw.cli.replay import run_replay  # lazy: CLI start-up
 
-    raise typer.Exit(run_replay(path, speed, events, calibration, check, view))
+    view = View.none if no_view else view
+    raise typer.Exit(run_replay(path, speed, events, calibration, check, view.value, web_address=(host, port)))
 
 
 @bench_app.command("solver")

@@ -18,11 +18,12 @@ from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome
 from ftc_hw.app.view import make_console
 from ftc_hw.scene import SceneError, load_scene
 
-from .monitor import run_guarded
+from .monitor import run_guarded, web_options
 
 
 def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record: Path | None = None,
-             reality: str = "typical", identify_s: float = 30.0) -> int:
+             reality: str = "typical", identify_s: float = 30.0, *, view: str = "terminal",
+             web_address: tuple[str, int] = ("127.0.0.1", 8080)) -> int:
     console = make_console()
     identified = reality != "ideal" and identify_s > 0
     console.print(f"[bold]ftc demo[/]: scene [cyan]{scene_name}[/], scenario [cyan]{scenario}[/], reality "
@@ -43,7 +44,8 @@ def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record:
             console.print("[yellow]monitoring the drawn arm with the scene's nominal model: expect the false alarms "
                           "an unidentified arm raises (docs/reality.md)[/]")
         cfg = MonitorConfig(scene_name, sim=True, scenario=scenario, seed=seed, duration=duration, record=record,
-                            title="ftc demo", reality=reality, calibration=calibration)
+                            title="ftc demo", reality=reality, calibration=calibration, view=view == "terminal",
+                            web=web_options(view, web_address))
         out = run_guarded(cfg, console)
     if isinstance(out, int):
         return out

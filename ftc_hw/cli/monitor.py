@@ -8,16 +8,18 @@ import typer
 from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome, MonitorSetupError
 from ftc_hw.app.session import run_monitor
 from ftc_hw.app.view import make_console
+from ftc_hw.app.web_feed import WebOptions
 from ftc_hw.sim_devices.world import SCENARIOS
 
 
 def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duration: float | None,
                         calibration: Path | None, record: Path | None, reflex: str | None, events: Path | None,
-                        truth: Path | None, noise: bool, view: bool, level: str = "dynamics",
+                        truth: Path | None, noise: bool, view: str | bool, level: str = "dynamics",
                         faults: tuple[str, ...] = (), *, device_overrides: tuple[str, ...] = (),
                         rig: Path | None = None, reality: str = "ideal", refine: bool = False,
                         remote: str | None = None, remote_name: str | None = None,
-                        zenoh_config: Path | None = None, readers: str = "auto") -> int:
+                        zenoh_config: Path | None = None, readers: str = "auto",
+                        web_address: tuple[str, int] = ("127.0.0.1", 8080)) -> int:
     if truth is not None and not sim:
         typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
         return 2
@@ -31,12 +33,17 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
         typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
         return 2
     cfg = MonitorConfig(scene, sim=sim, scenario=scenario, seed=seed, duration=duration, calibration=calibration,
-                        record=record, reflex=reflex, events=events, truth=truth, noise=noise, view=view,
+                        record=record, reflex=reflex, events=events, truth=truth, noise=noise,
+                        view=view in (True, "terminal"), web=web_options(view, web_address),
                         level=None if level == "scene" else level, faults=faults,
                         device_overrides=device_overrides, rig=rig, reality=reality, refine=refine,
                         remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config, readers=readers)
     out = run_guarded(cfg, make_console())
     return out if isinstance(out, int) else out.exit_code
+
+
+def web_options(view: str | bool, address: tuple[str, int]) -> WebOptions | None:
+    return WebOptions(*address) if view == "web" else None
 
 
 def run_guarded(cfg: MonitorConfig, console) -> MonitorOutcome | int:

@@ -9,6 +9,8 @@ from rich.live import Live
 from ftc_hw.app.monitor_config import MonitorSetupError
 from ftc_hw.app.session import load_pipeline_calibration
 from ftc_hw.app.view import LiveView, make_console
+from ftc_hw.app.web_feed import WebOptions
+from ftc_hw.app.web_replay import ReplayTimeline, serve_until_interrupted
 from ftc_hw.bus import Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import event_line
@@ -17,7 +19,7 @@ from ftc_hw.record.replay import ReplayError, recorded_scene, replay
 
 
 def run_replay(path: Path, speed: float, events_path: Path | None, calibration: Path | None, check: bool,
-               view: bool) -> int:
+               view: str, web_address: tuple[str, int] = ("127.0.0.1", 8080)) -> int:
     console = make_console()
     try:
         rec = read_recording(path)
@@ -33,11 +35,15 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
     meta = rec.metadata.get("monitor", {})
     bus = Bus()
     topics = [wrench_topic(meta.get("ft_source", "ft")), joints_topic(meta.get("arm_source", "arm")), MONITOR_INPUT]
-    show = view and speed > 0
+    show = view == "terminal" and speed > 0
+    timeline = ReplayTimeline(bus, scene, topics, t0_ns=rec.messages[0].log_time) if view == "web" and rec.messages \
+        else None
     state: dict = {}
     last_ns = [rec.messages[0].log_time if rec.messages else 0]
 
     def ready(monitor) -> None:
+        if timeline is not None:
+            timeline.ready(monitor)
         state["view"] = LiveView(bus, monitor, topics, ft_topic=topics[0], title=f"ftc replay {path.name}",
                                  now_ns=lambda: last_ns[0])
         state["view"].t0_ns = last_ns[0]
@@ -47,6 +53,8 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
     step = {"n": 0}
 
     def on_message(monitor) -> None:
+        if timeline is not None:
+            timeline.on_message(monitor)
         step["n"] += 1
         if live is None or step["n"] % 200:
             return
@@ -59,7 +67,8 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
     try:
         if live is not None:
             live.start()
-        result = replay(rec, scene=scene, pipeline_kwargs=kwargs, speed=speed, bus=bus, on_message=on_message,
+        result = replay(rec, scene=scene, pipeline_kwargs=kwargs, speed=0.0 if timeline else speed, bus=bus,
+                        on_message=on_message,
                         monitor_ready=ready)
     except ReplayError as exc:
         typer.echo(f"error: {exc}", err=True)
@@ -79,8 +88,13 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
                   + (f" -> {events_path}" if events_path else ""))
     if result.identical:
         console.print(f"[green]identical[/] to the {len(result.recorded)} recorded events")
-        return 0
-    diff = result.first_difference()
-    console.print(f"[yellow]differs[/] from the {len(result.recorded)} recorded events; first difference at #{diff[0]}:"
-                  f"\n  replayed: {diff[1]}\n  recorded: {diff[2]}")
-    return 1 if check else 0
+        rc = 0
+    else:
+        diff = result.first_difference()
+        console.print(f"[yellow]differs[/] from the {len(result.recorded)} recorded events; first difference at "
+                      f"#{diff[0]}:\n  replayed: {diff[1]}\n  recorded: {diff[2]}")
+        rc = 1 if check else 0
+    if timeline is not None:
+        timeline.finish()
+        serve_until_interrupted(timeline.page(f"ftc replay {path.name}", WebOptions(*web_address)), console)
+    return rc

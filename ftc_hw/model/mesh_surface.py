@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 
 from ..scene import Scene
-from ..scene.vendor import shell_fetched
+from ..scene.vendor import VENDOR_SHELLS, shell_fetched
 from .build import load_spec
 from .joint_map import JointMap
 from .mesh_fit import SURFACE_GROUP
@@ -23,8 +23,10 @@ _REACH_M = 0.3  # the line is followed from this far before the estimate
 class MeshShell:
     """The touchable mesh geoms of a compiled model; one per thread (it poses its own MjData)."""
 
-    def __init__(self, model: mujoco.MjModel, scene: Scene) -> None:
+    def __init__(self, model: mujoco.MjModel, scene: Scene, tolerance: dict[str, float] | None = None) -> None:
+        """``tolerance``: per link, 1 sigma (m) of the real shell's distance from its meshes."""
         self.model = model
+        self.tolerance = dict(tolerance or {})
         self.data = mujoco.MjData(model)
         self.joints = JointMap(model, scene)
         self.meshes: dict[str, list[int]] = {}
@@ -56,7 +58,13 @@ def pipeline_mesh_shell(scene: Scene) -> MeshShell | None:
     if key not in _MODELS:
         _MODELS[key] = _mesh_model(scene, vendor)
     model = _MODELS[key]
-    return None if model is None else MeshShell(model, scene)
+    if model is None:
+        return None
+    shell = MeshShell(model, scene)
+    covered = VENDOR_SHELLS[vendor].bodies if vendor is not None else {}
+    shell.tolerance = {link: VENDOR_SHELLS[vendor].tolerance_m if link in covered else scene.robot.surface_tolerance
+                       for link in shell.meshes}
+    return shell
 
 
 _MODELS: dict[tuple[str, str, str | None], mujoco.MjModel | None] = {}  # compiled once per process

@@ -40,7 +40,7 @@ def true_arm_spec(scene: Scene, shell: str = "collide") -> mujoco.MjSpec:
     vendor = world_vendor_shell(scene)
     if vendor is not None and shell != "none":
         attach_vendor_shell(spec, scene, vendor, collide=shell == "collide", shifts=world.vendor_shell_shift)
-    elif world.vendor_shell_shift:
+    elif vendor is None and world.vendor_shell_shift:
         raise SceneError(scene.path, "world.vendor_shell_shift_m", "a shift of the vendor shell, but no vendor_shell")
     for body in world.inertials:
         if spec.body(body) is None:

@@ -85,7 +85,8 @@ class FoxgloveView:
         home = np.asarray(scene.robot.home, dtype=float)
         links = arm.kinematics(home)
         link_T_sensor = _inverse(links[self.sensor_link]) @ arm.base_T_sensor(home)
-        self._sensor_tf = (link_T_sensor[:3, 3].copy(), quat_of(link_T_sensor[:3, :3]))
+        # the sensor in its link's frame: (position m, Foxglove's quaternion)
+        self.sensor_tf = (link_T_sensor[:3, 3].copy(), quat_of(link_T_sensor[:3, :3]))
         self.reach = max(float(np.linalg.norm(links[k][:3, 3])) + r for k, r in link_reach(arm).items())
         self.marker_m = max(0.005, 0.02 * self.reach)
         self.contact_m_per_n = 0.25 * self.reach / 20.0  # a 20 N push: a quarter of the arm's reach
@@ -162,7 +163,7 @@ class FoxgloveView:
         xpos, xquat = self.arm.body_poses(q)
         tfs = [transform(t_ns, ROOT_FRAME, name, xpos[i + 1], quat_wxyz(xquat[i + 1]))
                for i, name in enumerate(self.arm.link_names)]
-        tfs.append(transform(t_ns, self.sensor_link, self.sensor_frame, *self._sensor_tf))
+        tfs.append(transform(t_ns, self.sensor_link, self.sensor_frame, *self.sensor_tf))
         return self._message(TF_TOPIC, FRAME_TRANSFORMS, t_ns, {"transforms": tfs})
 
     def _q_at(self, t_ns: int) -> np.ndarray | None:

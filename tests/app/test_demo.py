@@ -54,6 +54,7 @@ def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary(clean_or_load
     # through typer's runner only for this)
     said = " ".join(plain.split())
     assert "reality typical" in said and "step 1/2: identifying the drawn arm" in said, said[:3000]
+    assert "contact points on the scene's meshes" in said, said[:3000]  # UR's, fetched by the bootstrap
     assert "summary: a typical draw of another arm" in said, said[-3000:]
     # identified, then monitored with it; only a host that fell behind while recording the excitation
     # (that run says DEGRADED) may leave too little joint state to identify from: the demo then says so

@@ -46,6 +46,7 @@ def test_a_users_urdf_with_mesh_links_calibrates_monitors_and_identifies(tmp_pat
     lines = read_events(events)
     ev = evaluate(lines, read_truth(truth), 1.0 / scene.sensor.rate_hz)
     report = proc.stdout[-3000:]
+    assert "contact points on the scene's meshes" in " ".join(proc.stdout.split()), report  # the URDF's
     # what tests/app/test_monitor_sim.py asks of the built-in scenes, on the meshes' world; the onsets'
     # 3 ms only when the monitor kept up (a run its host left behind says so: exit 3, its load reasons)
     assert len(ev.contacts) == 3 and (ev.all_in_time or loaded), report

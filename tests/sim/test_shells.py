@@ -131,6 +131,7 @@ def test_a_drawn_shift_moves_the_vendor_shell_and_a_bad_one_is_named(tmp_path):
     n = p.normal_link / np.linalg.norm(p.normal_link)
     assert np.linalg.norm(q.point_link - p.point_link) > 0.2 * abs(shifts[p.link] @ n)
     assert np.linalg.norm(q.point_link - p.point_link) > 0.0
+    assert World(scene, build_scenario("sweep", scene, arm, seed=1, duration=1.0)).model.nmesh == 0  # untouched
     toml = (builtin_dir() / "ur5e.toml").read_text().replace("[gravity]", "[world.vendor_shell_shift_m]\nelbow = "
                                                               "[0.0, 0.0, 0.001]\n\n[gravity]")
     (tmp_path / "ur5e.xml").write_text((builtin_dir() / "ur5e.xml").read_text())
