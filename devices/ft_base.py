@@ -164,7 +164,9 @@ class FTAdapter(Adapter):
             bus_seq = self._bus_seq + 1
         if status is not None:
             sat = status & STATUS_SATURATION_MASK
-            flags |= self._check_status(status & self.status_error_mask)
+            errors = status & self.status_error_mask
+            if errors or self._status_error:
+                flags |= self._check_status(errors)
         elif self.range is not None:
             sat = int(np.any(np.abs(np.asarray(wrench, dtype=float)) >= self.range * (1 - 1e-9)))
         else:

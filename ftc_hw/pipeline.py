@@ -11,6 +11,7 @@ import numpy as np
 
 from .bus import ContactEvent
 from .compensation import Compensator, JointResiduals, ModelError, OnlineRefiner, QddEstimator, RecentPeak
+from .compensation.kernels import lag_rows, qdd_step
 from .detection import ContactDetector, Detection
 from .detection.kernels import mahalanobis2, quad_sum, window_change
 from .model import ArmModel, Payload
@@ -125,6 +126,7 @@ class ContactPipeline:
         self._qdd_next = 0
         self._qdd_change = np.zeros(scene.n_joints)
         self._g_cache: np.ndarray | None = None
+        self._g_rows = np.zeros((scene.n_joints, 6))  # _g_cache transposed, C-ordered
         self._g_time = 0
         self._lag_window_ns = int(2 * qdd_tau * 1e9)
         # The acceleration estimate lags by about a sample at a slow sensor's rate: the detector's window
@@ -175,6 +177,8 @@ class ContactPipeline:
         mahalanobis2(np.zeros(6), self.detector.cov, row)
         quad_sum(row, self.detector.inv)
         window_change(self._qdd_ring, self._qdd_ring_t, 0, self._lag_window_ns, np.zeros(n), self._qdd_change)
+        qdd_step(np.zeros(n), np.zeros(n), np.zeros(n), 0.5, 1e-3, np.zeros(n))
+        lag_rows(self._g_rows, np.zeros(n), 1.0)
         if self.residuals is not None:
             self.residuals.external_torques(np.zeros(n), np.zeros(n), np.zeros(n))
         self.solver.solve(np.array([0.0, 0.0, 10.0, 0.0, 0.0, 0.0]), np.asarray(self.scene.robot.home, dtype=float),
@@ -465,10 +469,10 @@ class ContactPipeline:
         at 1 rad/s.)"""
         if self._g_cache is None or t_clock - self._g_time >= G_REFRESH_NS:
             self._g_cache = self.compensator.model.wrench_qdd_jacobian()
+            # rows contiguous: the kernels compiled (and warmed) for C-ordered rows take them as they are
+            self._g_rows = np.ascontiguousarray(self._g_cache.T)
             self._g_time = t_clock
-        # rows contiguous: the kernels compiled (and warmed) for C-ordered rows take it as it is
-        rows = (self._g_cache * np.where(np.abs(lag_error) >= self.lag_floor, lag_error, 0.0)).T
-        return np.ascontiguousarray(rows)
+        return lag_rows(self._g_rows, lag_error, self.lag_floor)
 
     def _gap_held(self, t_clock: int, lag_error: np.ndarray | None, joint_gap_ns: int) -> np.ndarray | None:
         """The lag error the detector judges an onset with over missed joint samples (None: the

@@ -59,4 +59,5 @@ class MonitorOutcome:
     vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
     degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
     remote: dict[str, Any] = field(default_factory=dict)  # with remote: frames taken, dropped, events sent
+    device_counters: dict[str, dict[str, int]] = field(default_factory=dict)  # per device: its adapter's counters
     web: dict[str, Any] = field(default_factory=dict)  # with the page: its URL, ticks sent, dropped

@@ -312,6 +312,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
             if rig.readers is not None and rig.readers.restarts:
                 out.degraded.append(f"reader processes restarted {rig.readers.restarts}x (crashed or killed)")
         judge_degraded(monitor, rig.adapters, out, cfg.sim)
+        out.device_counters = {a.name: dict(a.counters) for a in rig.adapters}
         print_summary(console, cfg, _served(cfg), bus, topics, out, rig.adapters, recorder)
     return out
 

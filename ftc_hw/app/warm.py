@@ -17,6 +17,7 @@ from typing import TextIO
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 
+from ftc_hw.bus import ClockAligner
 from ftc_hw.detection.kernels import mahalanobis2, quad_sum
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.pipeline import ContactPipeline
@@ -47,6 +48,7 @@ def _pipeline(scene: Scene) -> None:
     a transposed array (Fortran order: another signature, ContactPipeline._model_error), and the
     solver's tree kinematics, which a contact's track asks for at a q the last solve was not at."""
     pipe = ContactPipeline(scene, level="dynamics")
+    ClockAligner()  # the monitor's and the readers' clock alignment: its fit's kernels load with the first one
     rows = np.zeros((6, 2)).T
     mahalanobis2(np.zeros(6), pipe.detector.cov, rows)
     quad_sum(rows, pipe.detector.inv)

@@ -11,6 +11,11 @@ where ``h`` maps device time to host time (offset plus a small rate error, the s
   applied to bucket minima so that a bucket hit only by spikes is ignored), and the intercept puts the
   line under every sample of the window.
 
+Cost: a sample is a few deque and ring writes; every ``refit_every`` samples the fit is one pass over
+the window (no sort: the window's device times never decrease, so a bucket is a run of samples),
+compiled where numba is loaded (:func:`_fit_functions`): ~2-3 us a sample on average at 7 kHz
+compiled, ~3.5 in numpy (it was ~20 us with the fit sorting the window).
+
 :meth:`ClockAligner.to_host` therefore returns the host time at which a minimum-delay packet stamped
 ``t_device_ns`` would have arrived: true host time of the device event plus the delay floor, which
 timestamps alone cannot observe (subtract it if known).
@@ -27,11 +32,70 @@ another moment); capped, late frames keep their true time (``capped`` counts the
 
 from __future__ import annotations
 
+import sys
 from collections import deque
 
 import numpy as np
 
 __all__ = ["ClockAligner", "ClockNotReadyError"]
+
+
+_KERNELS: tuple | None = None
+
+
+def _fit_functions() -> tuple:
+    """The skew fit's two steps. Where numba is loaded already (the monitor's process: the pipeline's
+    kernels) its compiled form (:mod:`.clock_kernels`), imported and called once on the first aligner
+    made: numba loads a kernel from its cache on its first call, tens of milliseconds (more on a loaded
+    host) that a reader would otherwise stall for mid-stream, at the first skew fit (a test of the 7 kHz
+    RDT stream lost its tail so). Elsewhere (a reader's own process) the same steps in numpy, without
+    numba's import and cache loads at its start (a restarted reader streams again sooner). Both give
+    the numbers of the sorted form they replace, to the bit (tests/foundation/test_bus_clock.py)."""
+    global _KERNELS
+    if "numba" not in sys.modules:
+        return _hull_slope_numpy, _lowest_intercept_numpy
+    if _KERNELS is None:
+        from .clock_kernels import hull_slope, lowest_intercept
+
+        x = np.arange(4, dtype=np.int64)
+        hull_slope(x, x, 3, 2, 1.5, 1e-3)
+        lowest_intercept(x, x, 0.5)
+        _KERNELS = (hull_slope, lowest_intercept)
+    return _KERNELS
+
+
+def _hull_slope_numpy(x: np.ndarray, y: np.ndarray, span: int, buckets: int, x_mean: float,
+                      max_skew: float) -> float:
+    """:func:`.clock_kernels.hull_slope` in numpy: x never decreases, so each bucket is a run of samples."""
+    bucket = (x - x[0]) * buckets // (span + 1)
+    starts = np.flatnonzero(np.concatenate(([True], bucket[1:] != bucket[:-1])))
+    lows = np.minimum.reduceat(y, starts)
+    run = np.repeat(np.arange(starts.shape[0]), np.diff(np.append(starts, y.shape[0])))
+    hits = np.flatnonzero(y == lows[run])  # every sample at its bucket's minimum; the first of each is kept
+    first = hits[np.concatenate(([True], run[hits][1:] != run[hits][:-1]))]
+    return lower_hull_slope(x[first].astype(np.float64), y[first].astype(np.float64), x_mean, max_skew)
+
+
+def lower_hull_slope(px: np.ndarray, py: np.ndarray, x_mean: float, max_skew: float) -> float:
+    """Slope of the lower convex hull of points (px increasing) on its edge spanning ``x_mean``, clipped
+    to +-max_skew; 0.0 for one point."""
+    hull: list[tuple[float, float]] = []  # monotone chain
+    for p in zip(px.tolist(), py.tolist(), strict=True):
+        while len(hull) >= 2:
+            (x1, y1), (x2, y2) = hull[-2], hull[-1]
+            if (x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1) > 0:
+                break
+            hull.pop()
+        hull.append(p)
+    if len(hull) < 2:
+        return 0.0
+    i = next((k for k in range(1, len(hull)) if hull[k][0] >= x_mean), len(hull) - 1)
+    (x1, y1), (x2, y2) = hull[i - 1], hull[i]
+    return max(-max_skew, min(max_skew, (y2 - y1) / (x2 - x1)))
+
+
+def _lowest_intercept_numpy(x: np.ndarray, y: np.ndarray, b: float) -> float:
+    return float(np.min(y - b * x))
 
 
 class ClockNotReadyError(RuntimeError):
@@ -73,20 +137,27 @@ class ClockAligner:
         self.jump_ns = jump_ns
         self.resets = 0
         self.capped = 0
+        self._hull_slope, self._lowest_intercept = _fit_functions()
         self._reset()
 
     def _reset(self) -> None:
         self._t0: int | None = None  # reference device time
         self._d0 = 0  # reference offset (t_host - t_device of the first sample)
         self._xs: deque[int] = deque()  # device time - t0
-        self._ys: deque[int] = deque()  # (t_host - t_device) - d0
+        # the window's (x, y = (t_host - t_device) - d0) for the fit: a ring written twice (at i and
+        # i + cap), so that the newest n samples are always one contiguous slice
+        cap = self.max_samples + 1
+        self._ring_x = np.zeros(2 * cap, dtype=np.int64)
+        self._ring_y = np.zeros(2 * cap, dtype=np.int64)
+        self._cap = cap
+        self._pos = -1  # ring index of the newest sample
         self._mins: deque[tuple[int, int]] = deque()  # monotone deque of (x, y): sliding minimum
         self._last_x = 0
         self._a = 0.0  # offset line y = a + b x, relative to (t0, d0)
         self._b = 0.0
         self._since_fit = 0
         self._fitted = False
-        self._cap: tuple[int, float] | None = None  # (x, line value there) of the last estimate
+        self._capped_at: tuple[int, float] | None = None  # (x, line value there) of the last estimate
 
     # -- feeding --------------------------------------------------------------------------------
     def update(self, t_device_ns: int, t_host_ns: int) -> None:
@@ -102,16 +173,17 @@ class ClockAligner:
         x = t_device_ns - self._t0
         y = (t_host_ns - t_device_ns) - self._d0
         self._last_x = x
-        xs, ys, mins = self._xs, self._ys, self._mins
+        xs, mins = self._xs, self._mins
         xs.append(x)
-        ys.append(y)
+        pos = self._pos = (self._pos + 1) % self._cap
+        self._ring_x[pos] = self._ring_x[pos + self._cap] = x
+        self._ring_y[pos] = self._ring_y[pos + self._cap] = y
         while mins and mins[-1][1] >= y:
             mins.pop()
         mins.append((x, y))
         lo = x - self.window_ns
         while xs[0] < lo or len(xs) > self.max_samples:
             xs.popleft()
-            ys.popleft()
         while mins[0][0] < xs[0]:
             mins.popleft()
         if not self.estimate_skew:
@@ -129,50 +201,33 @@ class ClockAligner:
     def _limit_rise(self, x: int) -> None:
         """Hold the line at x to at most the last estimate plus max_skew times the time since."""
         line = self._a + self._b * x
-        if self._cap is not None:
-            cx, cy = self._cap
+        if self._capped_at is not None:
+            cx, cy = self._capped_at
             limit = cy + self.max_skew * (x - cx)
             if line > limit + 1.0:  # 1 ns: rounding
                 self._a = limit - self._b * x
                 line = limit
                 self.capped += 1
-        self._cap = (x, line)
+        self._capped_at = (x, line)
+
+    def _window(self) -> tuple[np.ndarray, np.ndarray]:
+        """The window's x and y, oldest first (views of the ring)."""
+        end = self._pos + 1 + self._cap
+        start = end - len(self._xs)
+        return self._ring_x[start:end], self._ring_y[start:end]
 
     def _fit(self) -> None:
         self._since_fit = 0
         self._fitted = True
-        x = np.fromiter(self._xs, dtype=np.int64, count=len(self._xs))
-        y = np.fromiter(self._ys, dtype=np.int64, count=len(self._ys))
+        x, y = self._window()
         span = int(x[-1] - x[0])
         b = 0.0
         if span >= self.min_skew_span_ns and x.shape[0] >= 2 * self.buckets:
-            b = self._hull_slope(x, y, span)
+            # the slope comes from the lower convex hull of per-bucket minima, on the edge spanning the
+            # mean time: it minimises the mean distance of the samples above the line
+            b = self._hull_slope(x, y, span, self.buckets, float(x.mean()), self.max_skew)
         self._b = b
-        self._a = float(np.min(y - b * x)) if b else float(self._mins[0][1])
-
-    def _hull_slope(self, x: np.ndarray, y: np.ndarray, span: int) -> float:
-        bucket = (x - x[0]) * self.buckets // (span + 1)
-        order = np.lexsort((y, bucket))  # by bucket, then by y: the first of each bucket is its minimum
-        _, first = np.unique(bucket[order], return_index=True)
-        px = x[order][first].astype(np.float64)
-        py = y[order][first].astype(np.float64)
-        hull: list[tuple[float, float]] = []  # lower convex hull, monotone chain (px is increasing)
-        for p in zip(px.tolist(), py.tolist(), strict=True):
-            while len(hull) >= 2:
-                (x1, y1), (x2, y2) = hull[-2], hull[-1]
-                if (x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1) <= 0:
-                    hull.pop()
-                else:
-                    break
-            hull.append(p)
-        if len(hull) < 2:
-            return 0.0
-        # The edge spanning the mean time minimises the mean distance of the samples above the line.
-        x_mean = float(x.mean())
-        i = next((k for k in range(1, len(hull)) if hull[k][0] >= x_mean), len(hull) - 1)
-        (x1, y1), (x2, y2) = hull[i - 1], hull[i]
-        b = (y2 - y1) / (x2 - x1)
-        return max(-self.max_skew, min(self.max_skew, b))
+        self._a = self._lowest_intercept(x, y, b) if b else float(self._mins[0][1])
 
     # -- estimates --------------------------------------------------------------------------------
     @property

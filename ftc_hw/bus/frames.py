@@ -93,8 +93,8 @@ def _vector(name: str, value: npt.ArrayLike, n: int | None = None) -> FloatArray
     if a.ndim != 1 or (n is not None and a.shape[0] != n):
         want = f"({n},)" if n is not None else "(n,)"
         raise FrameError(f"{name}: expected shape {want}, got {a.shape}")
-    finite = np.isfinite(a)
-    if not finite.all():
+    # a finite sum has no NaN or Inf in it (they propagate); only a non-finite one is looked into
+    if not math.isfinite(np.add.reduce(a)) and not (finite := np.isfinite(a)).all():
         bad = np.flatnonzero(~finite).tolist()
         raise FrameError(f"{name}: non-finite value(s) at index {bad}: {a.tolist()}")
     a.flags.writeable = False
@@ -143,7 +143,8 @@ class WrenchFrame:
     ) -> WrenchFrame:
         """Validate and build; raises :class:`FrameError` on bad shape or NaN/Inf."""
         t_host, t_dev, s, src = _header(t_host_ns, t_device_ns, seq, source)
-        return cls(t_host, t_dev, s, src, _vector("wrench", wrench, 6), WrenchFlag(flags))
+        return cls(t_host, t_dev, s, src, _vector("wrench", wrench, 6),
+                   flags if type(flags) is WrenchFlag else WrenchFlag(flags))
 
     @property
     def force(self) -> FloatArray:

@@ -341,6 +341,21 @@ def bench_compensation(
     run(json_path=json_path, plot_path=plot, minutes=minutes, seed=seed, scenes=scene, reality=reality.value)
 
 
+@bench_app.command("pipeline")
+def bench_pipeline(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: ur5e, ur5e-netft).")] = None,  # noqa: UP045
+    rate: Annotated[Optional[float], typer.Option(min=1.0, help="Sensor rate, Hz (default: each scene's).")] = None,  # noqa: UP045
+    seconds: Annotated[float, typer.Option(min=1.0, help="Simulated seconds of the collision sweep, offline.")] = 20.0,
+    realtime: Annotated[float, typer.Option(min=0.0, help="Seconds of ftc monitor --sim per scene (0: none).")] = 10.0,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """The pipeline's cost per frame by stage at a sensor rate, and whether it keeps up in real time."""
+    from ftc_hw.bench.pipeline import run  # lazy: CLI start-up
+
+    run(json_path=json_path, scenes=scene, rate_hz=rate, seconds=seconds, realtime_s=realtime, seed=seed)
+
+
 @bench_app.command("reality")
 def bench_reality(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045

@@ -17,6 +17,8 @@ import math
 
 import numpy as np
 
+from .kernels import qdd_step
+
 
 class QddEstimator:
     def __init__(self, n_joints: int, tau: float = 0.004) -> None:
@@ -39,11 +41,10 @@ class QddEstimator:
             self._qd = qd.copy()
             return self._a.copy()
         dt = t - self._t
-        alpha = math.exp(-dt / self.tau)
-        self._a = alpha * self._a + (1.0 - alpha) * (qd - self._qd) / dt
+        out = np.empty_like(self._a)
+        qdd_step(self._a, self._qd, qd, math.exp(-dt / self.tau), dt, out)  # the state too
         self._t = t
-        self._qd = qd.copy()
-        return self._a.copy()
+        return out
 
     @staticmethod
     def noise_gain(dt: float, tau: float) -> float:

@@ -18,6 +18,8 @@ from .inertials import body_params, set_body_params
 from .joint_map import JointMap
 from .mesh_fit import SURFACE_GROUP
 
+GRAVITY_OFF = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
+
 GEOM_KINDS = {
     mujoco.mjtGeom.mjGEOM_PLANE: "plane",
     mujoco.mjtGeom.mjGEOM_SPHERE: "sphere",
@@ -97,6 +99,8 @@ class ArmModel:
             mujoco.mj_setConst(m, self.data)
         self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
         self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
+        # the sensor's wrench in sensordata: one gather per frame instead of two slices
+        self._wrench_adr = np.r_[self._force_adr:self._force_adr + 3, self._torque_adr:self._torque_adr + 3]
         self.site_id = m.site(scene.sensor.site).id
         self.sensor_body = int(m.site_bodyid[self.site_id])
 
@@ -168,7 +172,7 @@ class ArmModel:
         if q.shape != (self.n_joints,):
             raise ValueError(f"q must have {self.n_joints} entries (joints {', '.join(self.joint_names)}), "
                              f"got shape {q.shape}")
-        if not math.isfinite(q.sum()):  # NaN or Inf anywhere
+        if not math.isfinite(np.add.reduce(q)):  # NaN or Inf anywhere (add.reduce: sum without its wrapper)
             raise ValueError("q holds NaN or Inf")
         d = self.data
         jm = self.joints
@@ -290,11 +294,8 @@ class ArmModel:
             return np.zeros(6), (np.zeros(self.n_joints) if joint_torques else None)
         if level == "dynamics":
             self._inverse(q, qd, qdd, "dynamics", ())
-            out = np.empty(6)
-            out[:3] = d.sensordata[self._force_adr:self._force_adr + 3]
-            out[3:] = d.sensordata[self._torque_adr:self._torque_adr + 3]
             tau = self.joints.from_dofs(d.qfrc_inverse) if joint_torques else None
-            return self.sign * out, tau
+            return self.sign * d.sensordata[self._wrench_adr], tau
         if level != "gravity":
             raise ValueError(f"level must be bias, gravity or dynamics, got {level!r}")
         self._set(q)
@@ -347,12 +348,12 @@ class ArmModel:
             self._set(q, qd, qdd)
         else:
             self._set(q)
-        gravity_off = int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)
-        if level == "bias":
-            m.opt.disableflags |= gravity_off
-        else:
-            m.opt.disableflags &= ~gravity_off
-        contacts = list(contacts)
+        opt = m.opt
+        flags = opt.disableflags
+        want = flags | GRAVITY_OFF if level == "bias" else flags & ~GRAVITY_OFF
+        if want != flags:
+            opt.disableflags = want
+        contacts = contacts if isinstance(contacts, tuple) else tuple(contacts)
         if contacts:
             mujoco.mj_kinematics(m, d)
             mujoco.mj_comPos(m, d)

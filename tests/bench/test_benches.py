@@ -19,3 +19,22 @@ def test_bench_writes_json_with_all_figures(tmp_path, capsys):
     assert 0 < result["sample_at_us"]["median"] <= result["sample_at_us"]["p99"]
     assert result["python"] and result["machine"]
     assert "sample_at" in capsys.readouterr().out
+
+
+def test_pipeline_bench_times_every_stage_and_the_wrappers_change_nothing(tmp_path):
+    """The offline leg on the 7 kHz RDT scene: every record through a real UDP socket, every stage timed,
+    and the staged pass (its timing wrappers) judges exactly as the plain one."""
+    from ftc_hw.bench.compensation import record
+    from ftc_hw.bench.pipeline import ROWS, monitor_pass, offline, reader_costs, scene_at
+
+    scene = scene_at("ur5e-netft", None)
+    rec = record(scene, "sweep-with-collision", 0.5, 1.0, 0)
+    costs, what = reader_costs(scene, rec)
+    assert costs.shape == (len(rec.t),) and (costs > 0).all() and "UDP" in what
+    staged, plain = monitor_pass(scene, rec, staged=True), monitor_pass(scene, rec, staged=False)
+    assert staged["counters"] == plain["counters"] and staged["onsets"] == plain["onsets"]
+    assert (staged["index"] == plain["index"]).all() and plain["index"].size > 0.7 * len(rec.t)
+    assert (staged["stages"][:, 0] > 0).all()  # compensation on every judged frame
+    out = offline(scene, 0.5, 0, 1.0)
+    assert set(out["stages_us"]) == set(ROWS) and out["frames"] == len(rec.t)
+    assert out["stages_us"]["total"]["median"] > out["stages_us"]["pipeline"]["median"] > 0

@@ -92,6 +92,17 @@ def test_bench_bus_writes_json(tmp_path):
     assert figures["publish_deliver_fps"]["1_sub_callback"] > 0
 
 
+def test_bench_pipeline_prints_its_tables_and_writes_json(tmp_path):
+    out = tmp_path / "pipeline.json"
+    r = runner.invoke(app, ["bench", "pipeline", "--scene", "ur5e", "--seconds", "1", "--realtime", "0",
+                            "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "cost per F/T frame" in r.output and "localization" in r.output and "keeping up" in r.output
+    figures = json.loads(out.read_text())["ur5e@1000"]
+    assert "realtime" not in figures and figures["offline"]["frames"] == 1000
+    assert figures["offline"]["stages_us"]["reader"]["frames"] == 1000
+
+
 def test_bench_geometry_prints_a_table_and_writes_json(tmp_path):
     out = tmp_path / "geometry.json"
     r = runner.invoke(app, ["bench", "geometry", "--json", str(out), "--lines", "2000"])

@@ -246,3 +246,27 @@ def test_the_detector_s_lag_window_holds_three_samples_of_a_slow_sensor():
     assert out[5][1] is None  # the step has left the window: no lag left
     fast = ContactPipeline(load_scene("ur5e"), level="dynamics")  # 1 kHz: 2 tau holds three samples
     assert fast._judge_window_ns == fast._lag_window_ns
+
+
+def test_the_compiled_per_frame_steps_give_numpy_s_numbers_to_the_bit():
+    """The acceleration filter's step and the lag model's rows, against the numpy expressions they replaced
+    (a fused multiply-add or a reordering would show in the last bits; a row's sign of zero too)."""
+    import math
+
+    from ftc_hw.compensation.kernels import lag_rows, qdd_step
+
+    rng = np.random.default_rng(1)
+    for _ in range(2000):
+        a, qd_prev = rng.normal(0, 10, 6) * 10.0 ** rng.integers(-6, 4), rng.normal(0, 1, 6)
+        qd = qd_prev + rng.normal(0, 1e-3, 6)
+        dt = float(rng.uniform(1e-5, 1e-2))
+        alpha = math.exp(-dt / 0.002)
+        want = alpha * a + (1.0 - alpha) * (qd - qd_prev) / dt
+        state, prev, out = a.copy(), qd_prev.copy(), np.empty(6)
+        qdd_step(state, prev, qd, alpha, dt, out)
+        assert np.array_equal(want.view(np.int64), out.view(np.int64))
+        assert np.array_equal(state, out) and np.array_equal(prev, qd)
+        g, lag = rng.normal(0, 1, (6, 6)), rng.normal(0, 0.05, 6)
+        rows = np.ascontiguousarray((g * np.where(np.abs(lag) >= 0.02, lag, 0.0)).T)
+        got = lag_rows(np.ascontiguousarray(g.T), lag, 0.02)
+        assert got.flags.c_contiguous and np.array_equal(rows.view(np.int64), got.view(np.int64))

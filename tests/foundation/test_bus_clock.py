@@ -126,3 +126,32 @@ def test_impossibly_early_sample_resets_but_late_spike_does_not():
     assert al.resets == 0 and al.offset_ns == 10**9
     al.update(11_000, 11_000 + 10**8)  # 0.9 s earlier than possible: the device clock jumped
     assert al.resets == 1 and al.offset_ns == 10**8
+
+
+def numpy_hull_slope(x, y, span, buckets, max_skew):
+    """The skew fit's slope as first written in numpy (bucket minima by a sort by bucket, then by delay):
+    the oracle of both faster forms' bucket minima (the hull over them is ``lower_hull_slope``)."""
+    from ftc_hw.bus.clock import lower_hull_slope
+
+    bucket = (x - x[0]) * buckets // (span + 1)
+    order = np.lexsort((y, bucket))
+    _, first = np.unique(bucket[order], return_index=True)
+    return lower_hull_slope(x[order][first].astype(float), y[order][first].astype(float), float(x.mean()), max_skew)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 3_000_000), st.integers(-50_000, 50_000)), min_size=2, max_size=300),
+       st.integers(2, 20), st.floats(1e-5, 1e-1))
+def test_both_forms_of_the_skew_fit_match_the_sorted_one_to_the_bit(steps, buckets, max_skew):
+    """The compiled fit and the numpy one without a sort; repeated device times, ties in delay and empty
+    buckets included."""
+    from ftc_hw.bus.clock import _hull_slope_numpy, _lowest_intercept_numpy
+    from ftc_hw.bus.clock_kernels import hull_slope, lowest_intercept
+
+    x = np.cumsum([s for s, _ in steps]).astype(np.int64)
+    y = np.array([d // 1000 * 1000 for _, d in steps], dtype=np.int64)  # coarse: ties within buckets
+    span = int(x[-1] - x[0])
+    want = numpy_hull_slope(x, y, span, buckets, max_skew)
+    b = hull_slope(x, y, span, buckets, float(x.mean()), max_skew)
+    assert b == want == _hull_slope_numpy(x, y, span, buckets, float(x.mean()), max_skew)
+    assert lowest_intercept(x, y, b) == float(np.min(y - b * x)) == _lowest_intercept_numpy(x, y, b)
