@@ -151,7 +151,10 @@ class ContactPipeline:
         self.mesh_shell = pipeline_mesh_shell(scene) if surface == "meshes" else None
         self.surface_source = "meshes" if self.mesh_shell is not None else "primitives"
         # the contact's external wrench over the last update period: the line of action followed into the meshes
-        self._recent_external: deque[np.ndarray] = deque(maxlen=max(1, round(update_period_s * scene.sensor.rate_hz)))
+        # (a ring and its running sum: np.mean over a deque took 22 us an event, measured by ftc bench pipeline)
+        self._recent_ring = np.zeros((max(1, round(update_period_s * scene.sensor.rate_hz)), 6))
+        self._recent_sum = np.zeros(6)
+        self._recent_count = 0
         self._gain_std = gain_std_of(scene)
         self._sensor_pose = model.base_T_sensor
         self.lag_floor = 0.02  # rad/s^2: below, the lag's wrench error is a fraction of the sensor noise
@@ -280,8 +283,9 @@ class ContactPipeline:
             onset = det.onset_t_ns or t_ns
             self._contact = _ContactRun(self._contact.contact_id + 1, onset, onset)
             self._contact.add(t_ns, external)
-            self._recent_external.clear()
-            self._recent_external.append(np.array(external, dtype=float))
+            self._recent_count = 0
+            self._recent_sum[:] = 0.0
+            self._add_recent(external)
             self._last_update_ns = t_ns
             ev = self.on_meshes(self._systematic(
                 self._event(onset, "onset", estimate, det.probability, track, self._link_reach), external, q), q,
@@ -291,7 +295,7 @@ class ContactPipeline:
             return [self.close_contact(t_ns, det.probability)]
         else:
             self._contact.add(t_ns, external)
-            self._recent_external.append(np.array(external, dtype=float))
+            self._add_recent(external)
             if t_ns - self._last_update_ns < self.update_period_ns:
                 return []
             ev = self.on_meshes(self._systematic(
@@ -322,7 +326,16 @@ class ContactPipeline:
 
     def recent_external(self) -> np.ndarray | None:
         """The open contact's external wrench (sensor frame) averaged over the last update period."""
-        return np.mean(self._recent_external, axis=0) if self._recent_external else None
+        n = min(self._recent_count, len(self._recent_ring))
+        return self._recent_sum / n if n else None
+
+    def _add_recent(self, external: np.ndarray) -> None:
+        k = self._recent_count % len(self._recent_ring)
+        if self._recent_count >= len(self._recent_ring):
+            self._recent_sum -= self._recent_ring[k]
+        self._recent_ring[k] = external
+        self._recent_sum += self._recent_ring[k]
+        self._recent_count += 1
 
     def on_meshes(self, ev: ContactEvent, q: np.ndarray, shell: MeshShell | None = None,
                   wrench: np.ndarray | None = None) -> ContactEvent:

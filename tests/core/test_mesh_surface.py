@@ -72,3 +72,12 @@ def test_the_line_followed_is_the_wrenchs_not_the_solvers_point():
     ev = ContactEvent.make(0, "update", link, off, push, (0.002, 0.002, 0.002))
     assert np.linalg.norm(pipe.on_meshes(ev, HOME, wrench=wrench).point - on_mesh) < 1e-6
     assert np.linalg.norm(pipe.on_meshes(ev, HOME).point - on_mesh) > 3e-3  # its own line: 4 mm off
+
+
+def test_the_recent_wrench_is_the_mean_of_the_last_update_period():
+    pipe = ContactPipeline(UR5E, level="bias")
+    window = round(pipe.update_period_ns * 1e-9 * UR5E.sensor.rate_hz)
+    xs = np.random.default_rng(0).normal(size=(3 * window + 7, 6))
+    for i, x in enumerate(xs):
+        pipe._add_recent(x)
+        np.testing.assert_allclose(pipe.recent_external(), xs[max(0, i + 1 - window):i + 1].mean(axis=0), atol=1e-12)
