@@ -55,7 +55,7 @@ def _fit_functions() -> tuple:
     if "numba" not in sys.modules:
         return _hull_slope_numpy, _lowest_intercept_numpy
     if _KERNELS is None:
-        from .clock_kernels import hull_slope, lowest_intercept
+        from .clock_kernels import hull_slope, lowest_intercept  # lazy: numba only where it is loaded already
 
         x = np.arange(4, dtype=np.int64)
         hull_slope(x, x, 3, 2, 1.5, 1e-3)
