@@ -7,6 +7,8 @@ them (``[robot] vendor_shell``, or a user's model with mesh collision geoms): :f
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import mujoco
 import numpy as np
 
@@ -23,16 +25,18 @@ _REACH_M = 0.3  # the line is followed from this far before the estimate
 class MeshShell:
     """The touchable mesh geoms of a compiled model; one per thread (it poses its own MjData)."""
 
-    def __init__(self, model: mujoco.MjModel, scene: Scene, tolerance: dict[str, float] | None = None) -> None:
-        """``tolerance``: per link, 1 sigma (m) of the real shell's distance from its meshes."""
+    def __init__(self, model: mujoco.MjModel, scene: Scene, tolerance: Mapping[str, float] | None = None) -> None:
+        """``tolerance``: per link, 1 sigma (m) of the real shell's distance from its meshes (default: the
+        scene's ``surface_tolerance_m``)."""
         self.model = model
-        self.tolerance = dict(tolerance or {})
         self.data = mujoco.MjData(model)
         self.joints = JointMap(model, scene)
         self.meshes: dict[str, list[int]] = {}
         for g in range(model.ngeom):
             if model.geom_group[g] == SURFACE_GROUP and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
                 self.meshes.setdefault(model.body(int(model.geom_bodyid[g])).name, []).append(g)
+        given = tolerance or {}
+        self.tolerance = {link: given.get(link, scene.robot.surface_tolerance) for link in self.meshes}
 
     def entry(self, link: str, q: np.ndarray, point: np.ndarray, force: np.ndarray) -> np.ndarray | None:
         """Where the line ``point + s force`` (base frame), coming along the force, enters ``link``'s
@@ -60,21 +64,18 @@ def pipeline_mesh_shell(scene: Scene) -> MeshShell | None:
     model = _MODELS[key]
     if model is None:
         return None
-    shell = MeshShell(model, scene)
-    covered = VENDOR_SHELLS[vendor].bodies if vendor is not None else {}
-    shell.tolerance = {link: VENDOR_SHELLS[vendor].tolerance_m if link in covered else scene.robot.surface_tolerance
-                       for link in shell.meshes}
-    return shell
+    v = VENDOR_SHELLS.get(vendor or "")
+    return MeshShell(model, scene, {body: v.tolerance_m for body in v.bodies} if v else None)
 
 
 _MODELS: dict[tuple[str, str, str | None], mujoco.MjModel | None] = {}  # compiled once per process
 
 
 def _mesh_model(scene: Scene, vendor: str | None) -> mujoco.MjModel | None:
+    """The compiled model with its touchable meshes; None (nothing compiled) when it has none."""
     spec = load_spec(scene, fit_meshes=False)
     if vendor is not None:
         attach_vendor_shell(spec, scene, vendor, collide=False)
-    model = spec.compile()
-    has_mesh = any(model.geom_group[g] == SURFACE_GROUP and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
-                   for g in range(model.ngeom))
-    return model if has_mesh else None
+    if not any(g.group == SURFACE_GROUP and g.type == mujoco.mjtGeom.mjGEOM_MESH for g in spec.geoms):
+        return None
+    return spec.compile()

@@ -56,7 +56,7 @@ def attach_vendor_shell(spec: mujoco.MjSpec, scene: Scene, name: str, *, collide
                 g.group = _OFF_GROUP
                 if collide:
                     g.contype = g.conaffinity = 0
-        shift = np.zeros(3) if shifts is None else np.asarray(shifts.get(ours, np.zeros(3)), dtype=float)
+        shift = np.asarray((shifts or {}).get(ours, np.zeros(3)), dtype=float)
         for k, (_, mesh, geom_pose) in enumerate(v for v in visuals if v[0] == theirs):
             mesh_name = f"vendor_{ours}_{k}"
             spec.add_mesh(name=mesh_name, file=str(files[mesh]))
