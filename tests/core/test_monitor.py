@@ -22,7 +22,7 @@ def test_monitor_detects_the_collision_and_nothing_else(world_feeder):
     def on_state(state):
         if world.steps % world.steps_per_sample == 0:
             truth.append((int(round(state.t * 1e9)), bool(state.contacts),
-                          state.contacts[0].point.copy() if state.contacts else None))
+                          (state.contacts[0].link, state.contacts[0].point.copy()) if state.contacts else None))
 
     feeder = world_feeder(world, bus, duration=4.0, on_state=on_state)
     with LiveMonitor(bus, scene, keep_frames=True) as monitor, feeder:
@@ -37,9 +37,13 @@ def test_monitor_detects_the_collision_and_nothing_else(world_feeder):
     frames = {f.t_device_ns: f for f in monitor.frames}
     onset_frame = next(f for f in monitor.frames if any(e.kind == "onset" for e in f.result.events))
     assert 0 <= onset_frame.t_device_ns - first_touch <= 2e6  # within 2 samples at 1 kHz
-    # the events' points (what the monitor answers: on UR's meshes, where the world's obstacle meets them)
+    # the events (what the monitor answers: on UR's meshes, where the world's obstacle meets wrist 3's
+    # flange). Its line of action also crosses wrist 2, so events alternate between the two links, about
+    # half and half: those on the right link are localized; those on the other one say so (ambiguous)
     at = {t: p for t, c, p in truth if c}
-    errs = [np.linalg.norm(e.point - at[t]) for t, f in frames.items() if t in at
-            for e in f.result.events if e.kind in ("onset", "update") and "no_estimate" not in e.flags]
+    events = [(e, *at[t]) for t, f in frames.items() if t in at
+              for e in f.result.events if e.kind in ("onset", "update") and "no_estimate" not in e.flags]
+    errs = [np.linalg.norm(e.point - point) for e, link, point in events if e.link == link]
     assert errs and np.median(errs) < 0.03
+    assert all("ambiguous" in e.flags for e, link, _ in events if e.link != link)
     assert monitor.counters["errors"] == 0
