@@ -49,12 +49,15 @@ class Identification:
     # the posterior covariance of [10 per body of ``inertials`` (in its order), 36 of the gain (if fitted)]
     covariance: np.ndarray | None = None
     gain_fitted: bool = True
+    # what the pipeline undoes on a contact's wrench: the gain in the directions the data told
+    # (FreeMotionFit.told_gain); None in files written before it was kept
+    contact_gain: np.ndarray | None = None
 
     def told_gain(self) -> np.ndarray:
-        """What the pipeline undoes on a contact's wrench: the gain when the data told every one of its
-        terms, else nothing (the identity). A told term's estimate leans on the untold ones beside it:
-        measured on dxl-arm (typical world, 26 of 36 terms untold), undoing the told terms alone took
-        the localization's p95 from 12.4 to 15.4 mm, all of them to 16.9."""
+        """What the pipeline undoes on a contact's wrench: ``contact_gain``; for a file without it, the
+        gain when the data told every one of its terms, else nothing (the identity)."""
+        if self.contact_gain is not None:
+            return self.contact_gain.copy()
         if any(u.startswith("gain[") for u in self.untold):
             return np.eye(6)
         return self.gain.copy()
@@ -75,18 +78,16 @@ class Identification:
         if self.covariance is not None:
             out["covariance"] = [_floats(r) for r in self.covariance]
             out["gain_fitted"] = self.gain_fitted
+        if self.contact_gain is not None:
+            out["contact_gain"] = [_floats(r) for r in self.contact_gain]
         return out
 
     @staticmethod
     def from_dict(data: Any, where: str) -> Identification:
         if not isinstance(data, dict):
             raise CalibrationError(f"{where}: expected a table")
-        rows = _get(data, "load_gain", list, where)
-        if len(rows) != 6:
-            raise CalibrationError(f"{where}: load_gain: expected 6 rows of 6 numbers")
-        gain = np.array([_vec({"row": r}, "row", 6, f"{where}: load_gain") for r in rows])
-        if abs(np.linalg.det(gain)) < 1e-6:
-            raise CalibrationError(f"{where}: load_gain: singular")
+        gain = _gain_matrix(data, "load_gain", where)
+        contact_gain = _gain_matrix(data, "contact_gain", where) if "contact_gain" in data else None
         table = _get(data, "inertials", dict, where)
         inertials = {str(k): _vec(table, k, 10, f"{where}: inertials") for k in table}
         joints = {}
@@ -111,7 +112,17 @@ class Identification:
         return Identification(str(data.get("date", "")), str(data.get("source", "")), str(data.get("verdict", "")),
                               [str(r) for r in data.get("reasons", [])], gain, inertials,
                               [str(u) for u in data.get("untold", [])], dict(data.get("figures", {})), joints,
-                              cov, bool(data.get("gain_fitted", True)))
+                              cov, bool(data.get("gain_fitted", True)), contact_gain)
+
+
+def _gain_matrix(data: dict, key: str, where: str) -> np.ndarray:
+    rows = _get(data, key, list, where)
+    if len(rows) != 6:
+        raise CalibrationError(f"{where}: {key}: expected 6 rows of 6 numbers")
+    gain = np.array([_vec({"row": r}, "row", 6, f"{where}: {key}") for r in rows])
+    if abs(np.linalg.det(gain)) < 1e-6:
+        raise CalibrationError(f"{where}: {key}: singular")
+    return gain
 
 
 @dataclass

@@ -157,7 +157,7 @@ def identify(scene: Scene, segments: list[MotionData], base: Calibration | None,
                            {} if joints is None else {"torque_constant": joints.torque_constant,
                                                       "friction_viscous": joints.friction_viscous,
                                                       "friction_coulomb": joints.friction_coulomb},
-                           fit.cov[6:, 6:].copy(), gain)
+                           fit.cov[6:, 6:].copy(), gain, fit.told_gain())
     bias = fit.bias if frame is None else frame @ fit.bias
     if base is None:
         cal = Calibration(scene=scene.name, sensor_serial=None, date=now_iso(), bias=bias, payload=None,

@@ -67,10 +67,16 @@ def test_identification_round_trips_through_the_file_and_the_recording(tmp_path)
     restored = pipeline_kwargs_from_json(pipeline_kwargs_to_json(kwargs))
     pipe = ContactPipeline(scene, **restored)
     np.testing.assert_allclose(pipe.compensator.gain, gain)
-    # the contact's wrench: a wholly told gain undone; one with an untold term left as read (all of it)
+    # the contact's wrench: the file's contact_gain undone (the identified gain where the data told it);
+    # a file without one (written before): a wholly told gain undone, one with an untold term left as read
+    partly = np.eye(6)
+    partly[3, 3] = 1.003
+    kept = dataclasses.replace(ident, contact_gain=partly)
+    back_kept = load_calibration(save_calibration(dataclasses.replace(cal, identification=kept), tmp_path / "k.toml"))
+    np.testing.assert_allclose(back_kept.identification.contact_gain, partly)
     told = dataclasses.replace(ident, untold=["gain[3,4]"])
     contact = np.array([5.0, -8.0, 12.0, 0.4, 2.0, -0.3])
-    for ident_i, undone in ((ident, gain), (told, np.eye(6))):
+    for ident_i, undone in ((ident, gain), (told, np.eye(6)), (back_kept.identification, partly)):
         kw = dataclasses.replace(cal, identification=ident_i).pipeline_kwargs(scene)
         comp = ContactPipeline(scene, **kw).compensator
         np.testing.assert_allclose(comp.gain, gain)  # the arm's loads: the whole estimate either way
@@ -79,3 +85,6 @@ def test_identification_round_trips_through_the_file_and_the_recording(tmp_path)
     bad = dataclasses.replace(cal, identification=dataclasses.replace(ident, gain=np.zeros((6, 6))))
     with pytest.raises(CalibrationError, match="load_gain"):
         load_calibration(save_calibration(bad, tmp_path / "bad.toml"))
+    bad = dataclasses.replace(cal, identification=dataclasses.replace(ident, contact_gain=np.zeros((6, 6))))
+    with pytest.raises(CalibrationError, match="contact_gain"):
+        load_calibration(save_calibration(bad, tmp_path / "bad2.toml"))

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from ftc_hw.calibration.free_motion import FreeMotionIdentifier, MotionData, smooth
+from ftc_hw.calibration.free_motion import FreeMotionFit, FreeMotionIdentifier, MotionData, smooth
 from ftc_hw.compensation import Compensator
 from ftc_hw.model import ArmModel
 from ftc_hw.model.inertials import InertialsError, body_params, set_body_params
@@ -122,3 +122,30 @@ def test_identity_gain_is_the_plain_compensator():
     b = Compensator(arm, "dynamics", bias=np.full(6, 0.3), gain=np.eye(6)).external(raw, q, z, z)
     np.testing.assert_allclose(a, b, atol=1e-12)
     assert mujoco.__version__
+
+
+def _gain_fit(told_terms: list[int], gain: np.ndarray) -> FreeMotionFit:
+    """A fit with no bodies whose posterior tells exactly ``told_terms`` of the 36 gain terms."""
+    labels = [f"bias[{i}]" for i in range(6)] + [f"gain[{i},{j}]" for i in range(6) for j in range(6)]
+    prior = np.full(42, 0.01)
+    var = np.full(42, 0.01**2)
+    var[[6 + k for k in told_terms]] = (0.1 * 0.01) ** 2
+    z = np.zeros(6)
+    return FreeMotionFit([], z, np.zeros((0, 10)), gain, np.diag(var), labels, prior, z, z, 0,
+                         np.zeros(0), np.zeros((0, 6)), np.zeros((0, 6)))
+
+
+def test_the_contact_gain_is_the_estimate_where_the_data_told_it():
+    rng = np.random.default_rng(3)
+    gain = np.eye(6) + rng.normal(0.0, 0.01, (6, 6))
+    diagonal = [7 * i for i in range(6)]
+    told = [k for k in range(36) if k % 2 == 0] + diagonal
+    fit = _gain_fit(told, gain)
+    undone = fit.told_gain(min_directions=len(set(told)))
+    flat_gain, flat_undone = gain.reshape(-1), undone.reshape(-1)
+    for k in range(36):
+        expected = flat_gain[k] if k in told else (1.0 if k in diagonal else 0.0)
+        assert flat_undone[k] == pytest.approx(expected, abs=1e-12), k
+    # too few directions told: nothing undone
+    np.testing.assert_array_equal(fit.told_gain(min_directions=len(set(told)) + 1), np.eye(6))
+    np.testing.assert_array_equal(_gain_fit(diagonal, gain).told_gain(), np.eye(6))
