@@ -4,7 +4,8 @@ link highlighted, point, 95 % ellipsoid, force arrow, label with its flags) for 
 after its last event, with ``--sim`` the world's true contact in green; beside it the current contact,
 the last events, rolling plots of the external wrench and the detection statistic against its
 threshold, and the streams. It draws what :mod:`ftc_hw.app.web_state` sends (ticks); the scene is
-redrawn only when a tick changed it (the browser renders on demand).
+redrawn only when a tick changed it (the browser renders on demand), the panel beside it once a second
+(an onset or offset at once), all of a tick in one message.
 
 Scene names the tests read back (``window.__viserMutable.nodeRefFromName``): ``/contacts/<id>/sphere0``
 is a contact's point (base frame: the root's children are in the base frame), ``/truth/sphere0`` the true one.

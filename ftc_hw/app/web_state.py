@@ -1,7 +1,7 @@
 """What the web page (``ftc monitor --view web``) is sent, built in the monitor's process: the arm's
 surfaces once (:func:`page_setup`), then a tick at most ``rate_hz`` a second (:class:`WebSampler`):
 the link poses when they changed, the wrenches and the detection statistic, the new events, the
-world's true contact (with ``--sim``, :class:`TruthTail`) and, twice a second, the streams.
+world's true contact (with ``--sim``, :class:`TruthTail`) and, once a second, the streams.
 
 Everything is plain data (lists, floats, strings): it crosses to the page's process by pickling. The
 contacts and the wrench arrow are Foxglove's well-known primitives (the recordings' own,
