@@ -130,6 +130,7 @@ class LiveMonitor:
         self._joint_count = 0
         self._why_none = ""  # why the last _joints_at gave None: before, old, late, gap
         self._lags: deque[int] = deque(maxlen=20_000)  # ns from a frame's arrival to its judgement
+        self.lag_ns = 0  # the newest judged frame's (how far behind its input the monitor is now)
         self._waiting: deque = deque()  # the worker's F/T frames waiting for the joint stream
         self.lost_after_ns = {"sensor": int(ft_lost_s * 1e9), "arm": int(arm_lost_s * 1e9)}
         self._rx_ns: dict[str, int | None] = {"sensor": None, "arm": None}  # host time of the newest frame
@@ -202,6 +203,7 @@ class LiveMonitor:
                 pending.popleft()
                 lag = time.monotonic_ns() - frame.t_host_ns
                 self._lags.append(lag)
+                self.lag_ns = lag
                 if lag > BACKLOG_NS:  # we fell behind our own reader
                     self.counters["ft_frames_backlog"] += 1
                 try:

@@ -100,8 +100,12 @@ def web_line(web: dict) -> str:
     making, and from an onset's sample, to the page's sending it to the browsers)."""
     tick = web.get("tick_ms") or {}
     onsets = web.get("onset_ms") or []
-    return (f"live page {web['url']}: {web['ticks']} ticks sent, {web['dropped']} dropped (page behind)"
+    return (f"live page {web['url']}: {web['ticks']} ticks sent"
+            + (f" ({web['view_hz']:g} Hz)" if "view_hz" in web else "")
+            + f", {web['dropped']} dropped (page behind)"
             + (f", {web['errors']} feed errors" if web.get("errors") else "")
+            + (f"; slowed down {web['slowdowns']}x, {web['slowed_s']:.1f} s in all, while the monitor fell behind"
+               if web.get("slowdowns") else "")
             + (f"; drawn {tick['p50']:.1f} ms (p50), {tick['p99']:.1f} (p99), {tick['max']:.1f} (max) after the tick"
                if tick else "")
             + (f"; onsets sent to the browsers {', '.join(f'{x:.0f}' for x in onsets)} ms after their sample"

@@ -300,8 +300,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
                 reflex.close()
             if web is not None:
                 web.close()
-                out.web = {"url": web.url, "ticks": web.ticks, "dropped": web.drops, "errors": web.errors,
-                           **web.page.stats}
+                out.web = web.summary
         pump()
         _finish(cfg, scene, monitor, reflex, world, truth_path, recorder, out)
         if monitor.pipeline.refiner is not None:

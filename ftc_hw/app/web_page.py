@@ -4,7 +4,8 @@ link highlighted, point, 95 % ellipsoid, force arrow, label with its flags) for 
 after its last event, with ``--sim`` the world's true contact in green; beside it the current contact,
 the last events, rolling plots of the external wrench and the detection statistic against its
 threshold, and the streams. It draws what :mod:`ftc_hw.app.web_state` sends (ticks); the scene is
-redrawn only when a tick changed it (the browser renders on demand).
+redrawn only when a tick changed it (the browser renders on demand), the panel beside it once a second
+(an onset or offset at once), all of a tick in one message.
 
 Scene names the tests read back (``window.__viserMutable.nodeRefFromName``): ``/contacts/<id>/sphere0``
 is a contact's point (base frame: the root's children are in the base frame), ``/truth/sphere0`` the true one.
@@ -31,7 +32,11 @@ from .web_scene import DrawnEntity
 CONTACT_KEEP_S = 3.0  # a contact stays drawn this long after its last event (Foxglove's lifetime too)
 EVENTS_KEEP_S = 5.0  # the events list: the last few seconds
 PLOT_S = 10.0  # the plots' window
-PLOT_PERIOD_S = 0.25  # the plots redrawn at most this often
+# The panel beside the scene (plots, contact text, streams) redrawn at most this often, an onset or
+# offset at once. Each change of the page's text or plots costs a browser that renders in software a
+# re-raster of the page (about a third of a core for every 2-4 changes a second, measured): the panel's
+# changes are few and made together, with the scene's, in one message.
+PANEL_PERIOD_S = 1.0
 D2_FLOOR = 0.1  # the statistic's plot is logarithmic
 HIGHLIGHT = (230, 40, 25)
 
@@ -113,9 +118,11 @@ class Page:
         self.events: deque[tuple[float, str]] = deque(maxlen=40)
         self.device_events: deque[tuple[float, str]] = deque(maxlen=6)
         self.series: deque[tuple[float, ...]] = deque(maxlen=int(PLOT_S * 60))
-        self._plot_t = -1e9
+        self._panel_t = -1e9
+        self._streams: dict[str, Any] | None = None  # the newest streams not drawn yet
         self._truth: dict[str, Any] | None = None
         self._t = 0.0
+        self.rate_note = ""  # the feed's rate when it slowed down (the monitor fell behind)
 
     def apply(self, tick: dict[str, Any]) -> None:
         t = self._t = float(tick["t"])
@@ -137,16 +144,22 @@ class Page:
                 self._truth = tick["truth"]
                 self.truth.draw(tick["truth_entity"])
             self._expire(t)
-        if "external" in tick:
-            self.series.append((t, *tick["external"], tick["d2"], tick["threshold"]))
-        news = any(ev.get("kind") != "update" for ev in tick.get("events", ()))
-        if news or t - self._plot_t >= PLOT_PERIOD_S or t < self._plot_t:
-            self._draw_text(tick)  # an onset or offset at once; the rest with the plots
-        if t - self._plot_t >= PLOT_PERIOD_S or t < self._plot_t:
-            self._plot_t = t
-            self._draw_plots()
-        if "streams" in tick:
-            self._draw_streams(tick)
+            if "external" in tick:
+                self.series.append((t, *tick["external"], tick["d2"], tick["threshold"]))
+            if "streams" in tick:
+                self._streams = tick
+            if "rate_hz" in tick:
+                self._rate(tick)
+            news = any(ev.get("kind") != "update" for ev in tick.get("events", ()))
+            if t - self._panel_t >= PANEL_PERIOD_S or t < self._panel_t:
+                self._panel_t = t
+                self._draw_text(tick)
+                self._draw_plots()
+                if self._streams is not None:
+                    self._draw_streams(self._streams)
+                    self._streams = None
+            elif news:
+                self._draw_text(tick)  # an onset or offset at once
 
     def _event(self, t: float, ev: dict[str, Any]) -> None:
         if "contact_id" not in ev:  # a stream lost or back (with the contacts), or a device's own (with the streams)
@@ -193,8 +206,13 @@ class Page:
         self.torque_plot.data = (x, a[:, 4], a[:, 5], a[:, 6])
         self.d2_plot.data = (x, np.maximum(a[:, 7], D2_FLOOR), a[:, 8])
 
+    def _rate(self, tick: dict[str, Any]) -> None:
+        hz, asked = tick["rate_hz"], tick.get("view_hz", tick["rate_hz"])
+        self.rate_note = "" if hz >= asked else (f"  \n**view slowed to {hz:.1f} Hz** (of {asked:g}): "
+                                                 "the monitor fell behind")
+
     def show_time(self, t: float) -> None:
-        self.status.content = f"**{self.setup['title']}**  t {t:.1f} s"
+        self.status.content = f"**{self.setup['title']}**  t {t:.1f} s{self.rate_note}"
 
     def _draw_text(self, tick: dict[str, Any]) -> None:
         self.show_time(self._t)

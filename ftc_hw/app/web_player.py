@@ -11,6 +11,7 @@ from collections.abc import Callable
 from typing import Any
 
 REPLAY_CONTEXT_S = 10.0  # a seek replays this much before the target (the plots' window)
+SLIDER_STEP_S = 1.0  # the time slider follows the play in steps (each move re-rasters a software browser's page)
 
 
 class Player:
@@ -93,6 +94,6 @@ class Player:
             while self.index < len(self.timeline) and self.times[self.index] <= t_rec:
                 self.page.apply(self.timeline[self.index])
                 self.index += 1
-            if abs(self._slider_set - t_rec) >= 0.1:
+            if abs(self._slider_set - t_rec) >= SLIDER_STEP_S:
                 self._slider_set = round(t_rec, 2)
                 self.slider.value = self._slider_set

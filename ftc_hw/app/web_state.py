@@ -1,7 +1,7 @@
 """What the web page (``ftc monitor --view web``) is sent, built in the monitor's process: the arm's
 surfaces once (:func:`page_setup`), then a tick at most ``rate_hz`` a second (:class:`WebSampler`):
 the link poses when they changed, the wrenches and the detection statistic, the new events, the
-world's true contact (with ``--sim``, :class:`TruthTail`) and, twice a second, the streams.
+world's true contact (with ``--sim``, :class:`TruthTail`) and, once a second, the streams.
 
 Everything is plain data (lists, floats, strings): it crosses to the page's process by pickling. The
 contacts and the wrench arrow are Foxglove's well-known primitives (the recordings' own,
@@ -21,7 +21,7 @@ from ftc_hw.record.events import event_record
 from ftc_hw.record.foxglove_messages import arrow, color, contact_entity, entity, pose, vec3, wrench_entity
 from ftc_hw.record.foxglove_view import ARM_TOPIC, FoxgloveView
 
-STREAMS_PERIOD_NS = 500_000_000  # the stream table's refresh
+STREAMS_PERIOD_NS = 1_000_000_000  # the stream table's refresh (the page draws it once a second)
 POSE_EPS_RAD = 1e-5  # joint angles closer than this to the last sent: no pose update (nothing to redraw)
 BASE = np.eye(4)
 TRUTH_RGBA = color(0.12, 0.75, 0.24)

@@ -95,11 +95,17 @@ RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
 ViewOption = Annotated[View, typer.Option(
     help="The live view: terminal (a table), web (a 3-D page in the browser, served on --host:--port; "
          "docs/monitor.md) or none.")]
-NoViewOption = Annotated[bool, typer.Option("--no-view", help="The same as --view none.")]
+# a flag takes no value: no type in the help's column (typer shows <bool> there otherwise)
+NoViewOption = Annotated[bool, typer.Option("--no-view", metavar="", help="The same as --view none.")]
 HostOption = Annotated[str, typer.Option(help="With --view web: the address the page listens on (another "
                                          "than loopback makes it reachable from the network).")]
 PortOption = Annotated[int, typer.Option(min=1, max=65535, help="With --view web: the page's port (when taken: the "
                                          "next free one; the printed URL says which).")]
+ViewHzOption = Annotated[float, typer.Option(min=0.5, max=60.0, help=(
+    "With --view web: the page's updates a second (the arm's pose; the plots and text once a second; an "
+    "onset at once). Each update makes a browser without a GPU render in software: keep it low when the "
+    "browser shares the monitor's host (docs/monitor.md); the page slows down by itself, down to 1 Hz, while "
+    "the monitor falls behind."))]
 # calibrate, identify
 PLOT_HELP = "Draw the fit (residuals, parameters with error bars) to a PNG beside the calibration file."
 
@@ -202,6 +208,7 @@ def demo(
     view: ViewOption = View.terminal,
     host: HostOption = "127.0.0.1",
     port: PortOption = 8080,
+    view_hz: ViewHzOption = 10.0,
 ) -> None:
     """Emulated devices, a collision scenario, the live monitor, then contacts against ground truth. Ends by itself."""
     if 0 < identify_seconds < 5:
@@ -210,14 +217,14 @@ def demo(
     from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
 
     raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value, identify_seconds,
-                              view=view.value, web_address=(host, port)))
+                              view=view.value, web_page=(host, port, view_hz)))
 
 
 @app.command()
 def monitor(
     scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
-    sim: Annotated[bool, typer.Option("--sim", help="Start the scene's emulated devices (what ftc sim starts) "
-                                      "and connect to them.")] = False,
+    sim: Annotated[bool, typer.Option("--sim", metavar="", help="Start the scene's emulated devices (what ftc sim "
+                                      "starts) and connect to them.")] = False,
     scenario: Annotated[str, typer.Option(help="With --sim: the scenario (ftc sim --list).")] = "sweep-with-collision",
     seed: Annotated[int, typer.Option(help="With --sim: random seed.")] = 0,
     duration: Annotated[Optional[float], typer.Option(min=0.1, help="Seconds to run (simulated seconds with --sim); "  # noqa: UP045
@@ -228,11 +235,12 @@ def monitor(
     reflex: Annotated[Optional[Reflex], typer.Option(help="stop: a contact onset commands the arm to stop.")] = None,  # noqa: UP045
     events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
     truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
-    noise: Annotated[bool, typer.Option("--noise/--no-noise", help="With --sim: sensor noise.")] = True,
+    noise: Annotated[bool, typer.Option("--noise/--no-noise", metavar="", help="With --sim: sensor noise.")] = True,
     view: ViewOption = View.terminal,
     no_view: NoViewOption = False,
     host: HostOption = "127.0.0.1",
     port: PortOption = 8080,
+    view_hz: ViewHzOption = 10.0,
     level: Annotated[Level, typer.Option(help="Compensation level: dynamics (the arm moves), gravity, bias, or "
                                          "scene (the level the scene file declares).")] = Level.dynamics,
     fault: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
@@ -241,9 +249,9 @@ def monitor(
     device: DeviceOption = None,
     rig: RigOption = None,
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
-    refine: Annotated[bool, typer.Option("--refine", help="Keep refining the calibration's identified model "
-                                         "(ftc identify) while the arm moves free, and say at the end how far it "
-                                         "drifted (docs/reality.md).")] = False,
+    refine: Annotated[bool, typer.Option("--refine", metavar="", help="Keep refining the calibration's identified "
+                                         "model (ftc identify) while the arm moves free, and say at the end how far "
+                                         "it drifted (docs/reality.md).")] = False,
     remote: Annotated[Optional[str], typer.Option(  # noqa: UP045
         metavar="ENDPOINT", help="Take the devices' frames from ftc serve at this Zenoh endpoint (e.g. "
         "tcp/127.0.0.1:7447) instead of opening them here; the contact events go back there (docs/bus.md).")] = None,
@@ -267,7 +275,7 @@ def monitor(
                                          tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
                                          reality=reality.value, refine=refine, remote=remote,
                                          remote_name=remote_name, zenoh_config=zenoh_config,
-                                         readers=readers.value, web_address=(host, port)))
+                                         readers=readers.value, web_page=(host, port, view_hz)))
 
 
 @app.command()
@@ -276,19 +284,23 @@ def replay(
     speed: Annotated[float, typer.Option(min=0.0, help="Pace: 1 = as recorded, 0 = as fast as possible.")] = 1.0,
     events: Annotated[Optional[Path], typer.Option(help="Write the replayed events, one JSON line each.")] = None,  # noqa: UP045
     calibration: Annotated[Optional[Path], typer.Option(help="Replay with this calibration instead.")] = None,  # noqa: UP045
-    check: Annotated[bool, typer.Option("--check", help="Exit 1 when the events differ from the recorded.")] = False,
+    check: Annotated[bool, typer.Option("--check", metavar="",
+                                        help="Exit 1 when the events differ from the recorded.")] = False,
     view: Annotated[View, typer.Option(
         help="terminal: the live table while it replays (with --speed > 0); web: the replay then a 3-D page over it "
              "with play/pause and a time slider, served until Ctrl-C (docs/monitor.md); none.")] = View.terminal,
     no_view: NoViewOption = False,
     host: HostOption = "127.0.0.1",
     port: PortOption = 8080,
+    view_hz: Annotated[float, typer.Option(min=0.5, max=60.0, help=(
+        "With --view web: the page's updates a second of the recording's time (the arm's pose; the plots and "
+        "text once a second)."))] = 10.0,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
     from ftc_hw.cli.replay import run_replay  # lazy: CLI start-up
 
     view = View.none if no_view else view
-    raise typer.Exit(run_replay(path, speed, events, calibration, check, view.value, web_address=(host, port)))
+    raise typer.Exit(run_replay(path, speed, events, calibration, check, view.value, web_page=(host, port, view_hz)))
 
 
 @bench_app.command("solver")

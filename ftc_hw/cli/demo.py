@@ -16,6 +16,7 @@ from ftc_hw.app.calibration_session import SessionError
 from ftc_hw.app.identify import IdentifyOptions, run_planned_identify
 from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome
 from ftc_hw.app.view import make_console
+from ftc_hw.app.web_feed import RATE_HZ
 from ftc_hw.scene import SceneError, load_scene
 
 from .monitor import run_guarded, web_options
@@ -23,7 +24,7 @@ from .monitor import run_guarded, web_options
 
 def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record: Path | None = None,
              reality: str = "typical", identify_s: float = 30.0, *, view: str = "terminal",
-             web_address: tuple[str, int] = ("127.0.0.1", 8080)) -> int:
+             web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ)) -> int:
     console = make_console()
     identified = reality != "ideal" and identify_s > 0
     console.print(f"[bold]ftc demo[/]: scene [cyan]{scene_name}[/], scenario [cyan]{scenario}[/], reality "
@@ -45,7 +46,7 @@ def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record:
                           "an unidentified arm raises (docs/reality.md)[/]")
         cfg = MonitorConfig(scene_name, sim=True, scenario=scenario, seed=seed, duration=duration, record=record,
                             title="ftc demo", reality=reality, calibration=calibration, view=view == "terminal",
-                            web=web_options(view, web_address))
+                            web=web_options(view, web_page))
         out = run_guarded(cfg, console)
     if isinstance(out, int):
         return out

@@ -8,7 +8,7 @@ import typer
 from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome, MonitorSetupError
 from ftc_hw.app.session import run_monitor
 from ftc_hw.app.view import make_console
-from ftc_hw.app.web_feed import WebOptions
+from ftc_hw.app.web_feed import RATE_HZ, WebOptions
 from ftc_hw.sim_devices.world import SCENARIOS
 
 
@@ -19,7 +19,7 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
                         rig: Path | None = None, reality: str = "ideal", refine: bool = False,
                         remote: str | None = None, remote_name: str | None = None,
                         zenoh_config: Path | None = None, readers: str = "auto",
-                        web_address: tuple[str, int] = ("127.0.0.1", 8080)) -> int:
+                        web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ)) -> int:
     if truth is not None and not sim:
         typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
         return 2
@@ -34,7 +34,7 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
         return 2
     cfg = MonitorConfig(scene, sim=sim, scenario=scenario, seed=seed, duration=duration, calibration=calibration,
                         record=record, reflex=reflex, events=events, truth=truth, noise=noise,
-                        view=view in (True, "terminal"), web=web_options(view, web_address),
+                        view=view in (True, "terminal"), web=web_options(view, web_page),
                         level=None if level == "scene" else level, faults=faults,
                         device_overrides=device_overrides, rig=rig, reality=reality, refine=refine,
                         remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config, readers=readers)
@@ -42,8 +42,9 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
     return out if isinstance(out, int) else out.exit_code
 
 
-def web_options(view: str | bool, address: tuple[str, int]) -> WebOptions | None:
-    return WebOptions(*address) if view == "web" else None
+def web_options(view: str | bool, page: tuple[str, int, float]) -> WebOptions | None:
+    """``page``: host, port, updates a second."""
+    return WebOptions(*page) if view == "web" else None
 
 
 def run_guarded(cfg: MonitorConfig, console) -> MonitorOutcome | int:

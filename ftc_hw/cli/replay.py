@@ -9,7 +9,7 @@ from rich.live import Live
 from ftc_hw.app.monitor_config import MonitorSetupError
 from ftc_hw.app.session import load_pipeline_calibration
 from ftc_hw.app.view import LiveView, make_console
-from ftc_hw.app.web_feed import WebOptions
+from ftc_hw.app.web_feed import RATE_HZ, WebOptions
 from ftc_hw.app.web_replay import ReplayTimeline, serve_until_interrupted
 from ftc_hw.bus import Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.monitor import MONITOR_INPUT
@@ -19,7 +19,7 @@ from ftc_hw.record.replay import ReplayError, recorded_scene, replay
 
 
 def run_replay(path: Path, speed: float, events_path: Path | None, calibration: Path | None, check: bool,
-               view: str, web_address: tuple[str, int] = ("127.0.0.1", 8080)) -> int:
+               view: str, web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ)) -> int:
     console = make_console()
     try:
         rec = read_recording(path)
@@ -36,8 +36,9 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
     bus = Bus()
     topics = [wrench_topic(meta.get("ft_source", "ft")), joints_topic(meta.get("arm_source", "arm")), MONITOR_INPUT]
     show = view == "terminal" and speed > 0
-    timeline = ReplayTimeline(bus, scene, topics, t0_ns=rec.messages[0].log_time) if view == "web" and rec.messages \
-        else None
+    options = WebOptions(*web_page)
+    timeline = ReplayTimeline(bus, scene, topics, t0_ns=rec.messages[0].log_time, rate_hz=options.rate_hz) \
+        if view == "web" and rec.messages else None
     state: dict = {}
     last_ns = [rec.messages[0].log_time if rec.messages else 0]
 
@@ -96,5 +97,5 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
         rc = 1 if check else 0
     if timeline is not None:
         timeline.finish()
-        serve_until_interrupted(timeline.page(f"ftc replay {path.name}", WebOptions(*web_address)), console)
+        serve_until_interrupted(timeline.page(f"ftc replay {path.name}", options), console)
     return rc
