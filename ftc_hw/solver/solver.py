@@ -171,6 +171,7 @@ class ContactSolver:
         self.prim_pulls = np.array([bool(touch.get(m.body(int(m.geom_bodyid[g])).name) and
                                          touch[m.body(int(m.geom_bodyid[g])).name].pulls) for g in geoms])
         self.links = tuple(m.body(b).name for b in range(m.nbody))
+        self._prim_names = tuple(self.links[b] for b in self.prim_link.tolist())  # each primitive's link
         self._kin_q: np.ndarray | None = None  # the q of the scratch's body poses (last solve)
         # joint j moves body b when j's body is b or an ancestor of b
         self.link_joint = np.zeros((m.nbody, m.njnt), dtype=np.bool_)
@@ -186,6 +187,8 @@ class ContactSolver:
         self.jnt_i[jm.jnt_ids, 0] = jm.joint
         self.jnt_ratio = np.zeros(m.njnt)
         self.jnt_ratio[jm.jnt_ids] = jm.ratio
+        self._a_pose: np.ndarray | None = None  # the sensor pose of _a, the last _sensor_to_base
+        self._a = np.eye(6)
         sensor_body = self.model.sensor_body
         self.sensor_moves = bool(self.link_joint[sensor_body].any())
         self.sigma_sensor = self.scene.sensor.noise_cov
@@ -237,12 +240,16 @@ class ContactSolver:
     def _sensor_to_base(self, q) -> np.ndarray:
         """A: maps a sensor-frame wrench about the sensor origin to the base frame about the base
         origin, at joint angles q."""
-        b_T_s = self.model.base_T_sensor(q)
+        b_T_s = self.model.base_T_sensor(q)  # the same array while q is (the model keeps the last)
+        if b_T_s is self._a_pose:
+            return self._a
         r, t = b_T_s[:3, :3], b_T_s[:3, 3]
         a = np.zeros((6, 6))
         a[:3, :3] = r
         a[3:, 3:] = r
         a[3:, :3] = _skew(t) @ r
+        a.flags.writeable = False
+        self._a, self._a_pose = a, b_T_s
         return a
 
     def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -274,14 +281,15 @@ class ContactSolver:
         self._kin_q = None  # the scratch's body poses are stale until the kernel has run
         w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
         q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
-        if not (math.isfinite(w.sum()) and math.isfinite(q.sum())):  # NaN or Inf anywhere
+        if not (math.isfinite(np.add.reduce(w)) and math.isfinite(np.add.reduce(q))):  # NaN or Inf anywhere
             return self._invalid(saturated)
         self.model.joints.set_qpos(q, self._qfull)
         if extra_cov is not None:
             extra = np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
             a = self._sensor_to_base(q) if self.sensor_moves else self._A0
             wmat = self._ws_extra
-            if not (math.isfinite(extra.sum()) and K.weight_stack(a, self.sigma_sensor + extra, wmat)):
+            if not (math.isfinite(np.add.reduce(extra, axis=None)) and
+                    K.weight_stack(a, self.sigma_sensor + extra, wmat)):
                 return self._invalid(saturated)
         elif self.sensor_moves:
             a, wmat = self._frame_transform(q)
@@ -292,7 +300,7 @@ class ContactSolver:
         tau_var = self.tau_var
         if use_tau:
             tau_arr = np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
-            if not math.isfinite(tau_arr.sum()):
+            if not math.isfinite(np.add.reduce(tau_arr)):
                 return self._invalid(saturated)
             self._tau[:] = tau_arr
             if tau_std is not None:
@@ -337,11 +345,11 @@ class ContactSolver:
             z = np.zeros(3)
             return ContactEstimate(False, None, z, z, z, sc[K.S_RESIDUAL], 0.0, np.zeros((6, 6)), math.inf,
                                    flag_names(bits), (), np.zeros((0, K.C_SIZE)))
-        links, prims = self.links, self.prim_link
-        cand_links = tuple([links[prims[g]] for g in self._cand_prim[:n].tolist()])
+        names = self._prim_names
+        cand_links = tuple([names[g] for g in self._cand_prim[:n].tolist()])
         out = out.copy()
         cov = out[K.O_COV:K.O_COV + 36].reshape(6, 6)
-        if not math.isfinite(cov.sum()):
+        if not math.isfinite(np.add.reduce(out[K.O_COV:K.O_COV + 36])):
             cov = _unbounded(cov)
         # below the noise floor the fit is reported but not called a contact
         return ContactEstimate(not bits & K.F_LOW_FORCE, cand_links[0], out[0:3], out[3:6], out[6:9],
