@@ -230,6 +230,8 @@ class ContactSolver:
         self._cand_f = np.zeros((self.max_candidates, K.C_SIZE))
         self._tau = np.zeros(self.model.n_joints)
         self._tau_var_frame = self.tau_var.copy()
+        self._no_extra = np.zeros((6, 6))  # frame_inputs' extra covariance when there is none
+        self._sigma = np.array(self.sigma_sensor, dtype=np.float64)  # its own: C-ordered, writable
         self._ws = np.zeros(K.workspace_size(self.max_candidates))
         self._raw_prim = np.zeros(self.max_candidates, dtype=np.int64)
         self._qfull = np.zeros(m.nq)
@@ -248,8 +250,7 @@ class ContactSolver:
         a[:3, :3] = r
         a[3:, 3:] = r
         a[3:, :3] = _skew(t) @ r
-        a.flags.writeable = False
-        self._a, self._a_pose = a, b_T_s
+        self._a, self._a_pose = a, b_T_s  # (the callers only read it)
         return a
 
     def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -279,38 +280,36 @@ class ContactSolver:
         to the sensor noise: it weights the fit and enters the reported covariance.
         """
         self._kin_q = None  # the scratch's body poses are stale until the kernel has run
-        w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
-        q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
-        if not (math.isfinite(np.add.reduce(w)) and math.isfinite(np.add.reduce(q))):  # NaN or Inf anywhere
-            return self._invalid(saturated)
-        self.model.joints.set_qpos(q, self._qfull)
-        if extra_cov is not None:
-            extra = np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
-            a = self._sensor_to_base(q) if self.sensor_moves else self._A0
-            wmat = self._ws_extra
-            if not (math.isfinite(np.add.reduce(extra, axis=None)) and
-                    K.weight_stack(a, self.sigma_sensor + extra, wmat)):
-                return self._invalid(saturated)
+        n_j = self.model.n_joints
+        # copies, C-ordered and writable: frame_inputs is compiled (and warmed) for those (a read-only
+        # frame's array would be another signature, compiled at the first contact)
+        w = np.array(wrench_sensor, dtype=np.float64).reshape(6)
+        q = np.array(q, dtype=np.float64).reshape(n_j)
+        if self.sensor_moves and not (math.isfinite(np.add.reduce(w)) and math.isfinite(np.add.reduce(q))):
+            return self._invalid(saturated)  # NaN or Inf anywhere (checked first: the pose needs a finite q)
+        use_extra, use_tau = extra_cov is not None, tau_ext is not None
+        use_std = use_tau and tau_std is not None
+        if use_extra:
+            a, wmat = (self._sensor_to_base(q) if self.sensor_moves else self._A0), self._ws_extra
         elif self.sensor_moves:
             a, wmat = self._frame_transform(q)
         else:
             a, wmat = self._A0, self._WS0
+        tau_var = self._tau_var_frame if use_std else self.tau_var
+        # the checks, the weight with the extra covariance and the joint torques' layout: one kernel
+        if not K.frame_inputs(w, q, a, self._sigma,
+                              np.array(extra_cov, dtype=np.float64).reshape(6, 6) if use_extra else self._no_extra,
+                              use_extra, np.array(tau_ext, dtype=np.float64).reshape(n_j) if use_tau else self._tau,
+                              use_tau, _per_joint(tau_std, n_j) if use_std else self._tau, use_std, wmat, self._tau,
+                              tau_var):
+            return self._invalid(saturated)
+        self.model.joints.set_qpos(q, self._qfull)
         ext = self.ext_sign * (a @ w)
-        use_tau = tau_ext is not None
-        tau_var = self.tau_var
-        if use_tau:
-            tau_arr = np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
-            if not math.isfinite(np.add.reduce(tau_arr)):
-                return self._invalid(saturated)
-            self._tau[:] = tau_arr
-            if tau_std is not None:
-                tau_var = self._tau_var_frame
-                tau_var[:] = np.square(np.asarray(tau_std, dtype=float))
         tr, sc = self._tree, self._scratch
         n = K.solve_frame_q(ext, self._qfull, wmat, self.prim_i, self.sizes, self.link_joint, self.jnt_i,
                             self.jnt_ratio, self._tau, tau_var, use_tau, self.cfg, tr.tree_i, tr.tree_f, tr.geom_i,
                             tr.geom_f, self._out, self._cand_prim, self._cand_f, self._ws, self._raw_prim, *sc)
-        self._kin_q = q.copy()
+        self._kin_q = q  # the solver's own copy
         return self._estimate(n, saturated)
 
     def solved_body_poses(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -454,6 +453,12 @@ def _bounding_radius(kind: int, size: np.ndarray) -> float:
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
+
+
+def _per_joint(x, n: int) -> np.ndarray:
+    """``x`` (one value or one per joint) as n contiguous floats."""
+    a = np.array(x, dtype=np.float64)  # a copy: C-ordered, writable (see solve)
+    return a if a.shape == (n,) else np.full(n, a)
 
 
 def _unbounded(cov: np.ndarray) -> np.ndarray:
