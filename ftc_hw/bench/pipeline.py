@@ -12,7 +12,9 @@ through what the live monitor runs for it:
 * the pipeline's stages (:mod:`.pipeline_stages`): ``compensation`` (acceleration estimate, lag model,
   loads, contact wrench), ``detection``, ``localization`` (joint torques and solves, frames in
   contact only), ``events`` (the contact's track, events, their point on the meshes);
-  ``pipeline`` is the whole ``process`` call, timed in a second pass without the stage wrappers.
+  ``pipeline`` is the whole ``process`` call, timed in a second pass without the stage wrappers;
+``pipeline cpu`` the same call's thread CPU time (what issue 24's per-frame target is about, less the
+time other processes held the core).
 
 Per stage: median, p99 and max over frames (wall time, us). ``total`` = reader + monitor + pipeline per
 frame; ``cpu`` the same pass's thread CPU time (less sensitive to other processes on the host: time a
@@ -146,18 +148,19 @@ def monitor_pass(scene: Scene, rec: Recording, staged: bool) -> dict[str, Any]:
     ft, joints = _frames(scene, rec)
     mon = LiveMonitor(Bus(), scene, tare_s=0.1)
     timer = instrument(mon) if staged else None
-    process_ns = [0]
+    process_ns = [0, 0]  # wall, thread CPU
     process = mon.pipeline.process
 
     def timed_process(*args, **kwargs):
-        t0 = time.perf_counter_ns()
+        c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
         try:
             return process(*args, **kwargs)
         finally:
             process_ns[0] = time.perf_counter_ns() - t0
+            process_ns[1] = time.thread_time_ns() - c0
     mon.pipeline.process = timed_process
     n = len(ft)
-    handle, proc, cpu = (np.zeros(n, dtype=np.int64) for _ in range(3))
+    handle, proc, proc_cpu, cpu = (np.zeros(n, dtype=np.int64) for _ in range(4))
     stages = np.zeros((n, len(STAGES)), dtype=np.int64)
     onsets: list[int] = []
     for i, frame in enumerate(ft):
@@ -165,17 +168,18 @@ def monitor_pass(scene: Scene, rec: Recording, staged: bool) -> dict[str, Any]:
             mon.on_joints(jf)
         if timer is not None:
             timer.start_frame()
-        process_ns[0] = 0
+        process_ns[0] = process_ns[1] = 0
         c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
         mf = mon.handle(frame)
         handle[i], cpu[i] = time.perf_counter_ns() - t0, time.thread_time_ns() - c0
-        proc[i] = process_ns[0]
+        proc[i], proc_cpu[i] = process_ns
         if timer is not None:
             stages[i] = timer.frame_times()
         if mf is not None and any(e.kind == "onset" for e in mf.result.events):
             onsets.append(i)
     judged = proc > 0
-    return {"handle": handle[judged], "process": proc[judged], "cpu": cpu[judged], "stages": stages[judged],
+    return {"handle": handle[judged], "process": proc[judged], "process_cpu": proc_cpu[judged], "cpu": cpu[judged],
+            "stages": stages[judged],
             "in_contact": rec.contact[judged], "onsets": onsets, "index": np.nonzero(judged)[0], "frames": n,
             "counters": dict(mon.counters)}
 
@@ -213,6 +217,7 @@ def offline(scene: Scene, seconds: float, seed: int, speed: float) -> dict[str, 
         col = staged["stages"][:, k]
         stage_rows[name] = summarize_us(col[staged["in_contact"]] if name == "localization" else col)
     stage_rows["pipeline"] = summarize_us(plain["process"])
+    stage_rows["pipeline cpu"] = summarize_us(plain["process_cpu"])
     stage_rows["total"] = summarize_us(total)
     stage_rows["cpu"] = summarize_us(reader[plain["index"]] + plain["cpu"])
     mean_us = float(total.mean()) / 1e3
@@ -227,7 +232,7 @@ def offline(scene: Scene, seconds: float, seed: int, speed: float) -> dict[str, 
 
 # -- the command ------------------------------------------------------------------------------------------
 DEFAULT_SCENES = ("ur5e", "ur5e-netft")
-ROWS = ("reader", "monitor", *STAGES, "pipeline", "total", "cpu")
+ROWS = ("reader", "monitor", *STAGES, "pipeline", "pipeline cpu", "total", "cpu")
 
 
 def run(json_path: Path | None = None, scenes: list[str] | None = None, rate_hz: float | None = None,

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import mujoco
 import numpy as np
 
 from ..model.inertials import N_PARAMS, body_params, set_body_params
@@ -129,7 +128,7 @@ class OnlineRefiner:
         m = comp.model.model
         for k, b in enumerate(self.error.body_ids):
             set_body_params(m, b, self.file_params[k] + theta[k * N_PARAMS:(k + 1) * N_PARAMS], nearest=True)
-        mujoco.mj_setConst(m, comp.model.data)
+        comp.model.set_const()
         if self.error.gain:
             comp.gain = self.file_gain + theta[N_PARAMS * len(self.bodies):].reshape(6, 6)
         self.theta = theta

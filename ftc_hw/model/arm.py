@@ -96,7 +96,7 @@ class ArmModel:
             for body, delta in self.inertials.items():
                 b = m.body(body).id
                 set_body_params(m, b, body_params(m, b) + np.asarray(delta, dtype=float), nearest=True)
-            mujoco.mj_setConst(m, self.data)
+            self.set_const()
         self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
         self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
         # the sensor's wrench in sensordata: one gather per frame instead of two slices
@@ -116,6 +116,9 @@ class ArmModel:
         self.surfaces = self._collect_surfaces()
         self.sign = scene.sensor.reading_sign
         self.total_mass = float(m.body_subtreemass[self.sensor_body])
+        self._posed = b""  # the q (bytes) whose kinematics the data holds (b"": none known)
+        self._sensor_q = b""  # the q (bytes) of _sensor_T, the last base_T_sensor
+        self._sensor_T = np.eye(4)
 
     # -- set-up ---------------------------------------------------------------------------------------
     def _collect_surfaces(self) -> tuple[Surface, ...]:
@@ -166,9 +169,15 @@ class ArmModel:
         none (default -pi..pi: one turn, what pose sampling wants)."""
         return self.joints.limits(self.model, unlimited)
 
+    def set_const(self) -> None:
+        """``mj_setConst`` after a change of the model's parameters (it poses the data at qpos0)."""
+        mujoco.mj_setConst(self.model, self.data)
+        self._posed = b""
+
     # -- state ----------------------------------------------------------------------------------------
-    def _set(self, q: Sequence[float] | np.ndarray, qd=None, qdd=None) -> None:
+    def _set(self, q: Sequence[float] | np.ndarray, qd=None, qdd=None) -> np.ndarray:
         q = np.asarray(q, dtype=float)
+        self._posed = b""
         if q.shape != (self.n_joints,):
             raise ValueError(f"q must have {self.n_joints} entries (joints {', '.join(self.joint_names)}), "
                              f"got shape {q.shape}")
@@ -189,6 +198,7 @@ class ArmModel:
         if self._forces_applied:
             d.xfrc_applied[:] = 0.0
             self._forces_applied = False
+        return q
 
     def kinematics(self, q) -> dict[str, np.ndarray]:
         """``base_T_<link>`` for every body at joint angles q (rad)."""
@@ -211,7 +221,20 @@ class ArmModel:
         return pose(self.data.site_xmat[sid].reshape(3, 3), self.data.site_xpos[sid])
 
     def base_T_sensor(self, q) -> np.ndarray:
-        return self.base_T_site(q, self.scene.sensor.site)
+        """``base_T_site`` of the sensor, read-only, computed once for a q: a contact frame's solve, its
+        event's uncertainty and its line of action all ask for it at the frame's q (three kinematics
+        passes an event before, measured by ``ftc bench pipeline``)."""
+        q = np.asarray(q, dtype=float)
+        key = q.tobytes()
+        if key != self._sensor_q:
+            if key != self._posed:  # else the frame's arm_loads has posed the data at q
+                self._set(q)
+                mujoco.mj_kinematics(self.model, self.data)
+                self._posed = key
+            out = pose(self.data.site_xmat[self.site_id].reshape(3, 3), self.data.site_xpos[self.site_id])
+            out.flags.writeable = False
+            self._sensor_T, self._sensor_q = out, key
+        return self._sensor_T
 
     def posed_surfaces(self, q) -> list[PosedSurface]:
         """Every touchable primitive with its pose ``base_T_geom`` at q."""
@@ -298,7 +321,7 @@ class ArmModel:
             return self.sign * d.sensordata[self._wrench_adr], tau
         if level != "gravity":
             raise ValueError(f"level must be bias, gravity or dynamics, got {level!r}")
-        self._set(q)
+        self._posed = self._set(q).tobytes()
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)
         b = self.sensor_body
@@ -344,10 +367,7 @@ class ArmModel:
         if level not in ("bias", "gravity", "dynamics"):
             raise ValueError(f"level must be bias, gravity or dynamics, got {level!r}")
         m, d = self.model, self.data
-        if level == "dynamics":
-            self._set(q, qd, qdd)
-        else:
-            self._set(q)
+        q = self._set(q, qd, qdd) if level == "dynamics" else self._set(q)
         opt = m.opt
         flags = opt.disableflags
         want = flags | GRAVITY_OFF if level == "bias" else flags & ~GRAVITY_OFF
@@ -361,6 +381,7 @@ class ArmModel:
                 apply_point_force(m, d, c.link, c.point, c.force)
             self._forces_applied = True
         mujoco.mj_inverse(m, d)
+        self._posed = q.tobytes()  # mj_inverse runs the kinematics
 
     # -- frames ---------------------------------------------------------------------------------------
     def wrench_sensor_to_base(self, q, wrench_sensor) -> np.ndarray:

@@ -1153,3 +1153,41 @@ def weight_stack(a, sigma_sensor, out):
         return False
     _chol_inverse(low, np.empty(6), np.empty(6), out[:6])
     return True
+
+
+@njit(**JIT_ALLOC)
+def frame_inputs(w, q, a, sigma_sensor, extra, use_extra, tau_ext, use_tau, tau_std, use_std, wmat, tau, tau_var):
+    """A frame's inputs to ``solve_frame_q`` checked and laid out in one call (a dozen numpy calls
+    before). False when w, q, ``extra`` (``use_extra``) or ``tau_ext`` (``use_tau``) hold NaN or Inf (a
+    sum that is not finite, as ``ContactSolver.solve`` judged them) or when sigma_sensor + extra is
+    not positive definite; nothing is written then. Else: with ``use_extra``, wmat = ``weight_stack``
+    of sigma_sensor + extra; with ``use_tau``, tau = tau_ext and, with ``use_std``, tau_var = tau_std^2."""
+    if not (math.isfinite(_sum(w)) and math.isfinite(_sum(q))):
+        return False
+    if use_extra:
+        if not math.isfinite(_sum(extra.ravel())):
+            return False
+        sigma = np.empty((6, 6))
+        for i in range(6):
+            for j in range(6):
+                sigma[i, j] = sigma_sensor[i, j] + extra[i, j]
+        if not weight_stack(a, sigma, wmat):
+            return False
+    if use_tau:
+        if not math.isfinite(_sum(tau_ext)):
+            return False
+        for j in range(tau.shape[0]):
+            tau[j] = tau_ext[j]
+        if use_std:
+            for j in range(tau.shape[0]):
+                tau_var[j] = tau_std[j] * tau_std[j]
+    return True
+
+
+@njit(**JIT)
+def _sum(x):
+    """The sum of a C-ordered array's entries, in order."""
+    s = 0.0
+    for v in x:
+        s += v
+    return s

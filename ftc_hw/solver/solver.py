@@ -171,6 +171,7 @@ class ContactSolver:
         self.prim_pulls = np.array([bool(touch.get(m.body(int(m.geom_bodyid[g])).name) and
                                          touch[m.body(int(m.geom_bodyid[g])).name].pulls) for g in geoms])
         self.links = tuple(m.body(b).name for b in range(m.nbody))
+        self._prim_names = tuple(self.links[b] for b in self.prim_link.tolist())  # each primitive's link
         self._kin_q: np.ndarray | None = None  # the q of the scratch's body poses (last solve)
         # joint j moves body b when j's body is b or an ancestor of b
         self.link_joint = np.zeros((m.nbody, m.njnt), dtype=np.bool_)
@@ -186,6 +187,8 @@ class ContactSolver:
         self.jnt_i[jm.jnt_ids, 0] = jm.joint
         self.jnt_ratio = np.zeros(m.njnt)
         self.jnt_ratio[jm.jnt_ids] = jm.ratio
+        self._a_pose: np.ndarray | None = None  # the sensor pose of _a, the last _sensor_to_base
+        self._a = np.eye(6)
         sensor_body = self.model.sensor_body
         self.sensor_moves = bool(self.link_joint[sensor_body].any())
         self.sigma_sensor = self.scene.sensor.noise_cov
@@ -227,6 +230,8 @@ class ContactSolver:
         self._cand_f = np.zeros((self.max_candidates, K.C_SIZE))
         self._tau = np.zeros(self.model.n_joints)
         self._tau_var_frame = self.tau_var.copy()
+        self._no_extra = np.zeros((6, 6))  # frame_inputs' extra covariance when there is none
+        self._sigma = np.array(self.sigma_sensor, dtype=np.float64)  # its own: C-ordered, writable
         self._ws = np.zeros(K.workspace_size(self.max_candidates))
         self._raw_prim = np.zeros(self.max_candidates, dtype=np.int64)
         self._qfull = np.zeros(m.nq)
@@ -237,12 +242,15 @@ class ContactSolver:
     def _sensor_to_base(self, q) -> np.ndarray:
         """A: maps a sensor-frame wrench about the sensor origin to the base frame about the base
         origin, at joint angles q."""
-        b_T_s = self.model.base_T_sensor(q)
+        b_T_s = self.model.base_T_sensor(q)  # the same array while q is (the model keeps the last)
+        if b_T_s is self._a_pose:
+            return self._a
         r, t = b_T_s[:3, :3], b_T_s[:3, 3]
         a = np.zeros((6, 6))
         a[:3, :3] = r
         a[3:, 3:] = r
         a[3:, :3] = _skew(t) @ r
+        self._a, self._a_pose = a, b_T_s  # (the callers only read it)
         return a
 
     def _frame_transform(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -272,37 +280,36 @@ class ContactSolver:
         to the sensor noise: it weights the fit and enters the reported covariance.
         """
         self._kin_q = None  # the scratch's body poses are stale until the kernel has run
-        w = np.asarray(wrench_sensor, dtype=np.float64).reshape(6)
-        q = np.asarray(q, dtype=np.float64).reshape(self.model.n_joints)
-        if not (math.isfinite(w.sum()) and math.isfinite(q.sum())):  # NaN or Inf anywhere
-            return self._invalid(saturated)
-        self.model.joints.set_qpos(q, self._qfull)
-        if extra_cov is not None:
-            extra = np.asarray(extra_cov, dtype=np.float64).reshape(6, 6)
-            a = self._sensor_to_base(q) if self.sensor_moves else self._A0
-            wmat = self._ws_extra
-            if not (math.isfinite(extra.sum()) and K.weight_stack(a, self.sigma_sensor + extra, wmat)):
-                return self._invalid(saturated)
+        n_j = self.model.n_joints
+        # copies, C-ordered and writable: frame_inputs is compiled (and warmed) for those (a read-only
+        # frame's array would be another signature, compiled at the first contact)
+        w = np.array(wrench_sensor, dtype=np.float64).reshape(6)
+        q = np.array(q, dtype=np.float64).reshape(n_j)
+        if self.sensor_moves and not (math.isfinite(np.add.reduce(w)) and math.isfinite(np.add.reduce(q))):
+            return self._invalid(saturated)  # NaN or Inf anywhere (checked first: the pose needs a finite q)
+        use_extra, use_tau = extra_cov is not None, tau_ext is not None
+        use_std = use_tau and tau_std is not None
+        if use_extra:
+            a, wmat = (self._sensor_to_base(q) if self.sensor_moves else self._A0), self._ws_extra
         elif self.sensor_moves:
             a, wmat = self._frame_transform(q)
         else:
             a, wmat = self._A0, self._WS0
+        tau_var = self._tau_var_frame if use_std else self.tau_var
+        # the checks, the weight with the extra covariance and the joint torques' layout: one kernel
+        if not K.frame_inputs(w, q, a, self._sigma,
+                              np.array(extra_cov, dtype=np.float64).reshape(6, 6) if use_extra else self._no_extra,
+                              use_extra, np.array(tau_ext, dtype=np.float64).reshape(n_j) if use_tau else self._tau,
+                              use_tau, _per_joint(tau_std, n_j) if use_std else self._tau, use_std, wmat, self._tau,
+                              tau_var):
+            return self._invalid(saturated)
+        self.model.joints.set_qpos(q, self._qfull)
         ext = self.ext_sign * (a @ w)
-        use_tau = tau_ext is not None
-        tau_var = self.tau_var
-        if use_tau:
-            tau_arr = np.asarray(tau_ext, dtype=float).reshape(self.model.n_joints)
-            if not math.isfinite(tau_arr.sum()):
-                return self._invalid(saturated)
-            self._tau[:] = tau_arr
-            if tau_std is not None:
-                tau_var = self._tau_var_frame
-                tau_var[:] = np.square(np.asarray(tau_std, dtype=float))
         tr, sc = self._tree, self._scratch
         n = K.solve_frame_q(ext, self._qfull, wmat, self.prim_i, self.sizes, self.link_joint, self.jnt_i,
                             self.jnt_ratio, self._tau, tau_var, use_tau, self.cfg, tr.tree_i, tr.tree_f, tr.geom_i,
                             tr.geom_f, self._out, self._cand_prim, self._cand_f, self._ws, self._raw_prim, *sc)
-        self._kin_q = q.copy()
+        self._kin_q = q  # the solver's own copy
         return self._estimate(n, saturated)
 
     def solved_body_poses(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -337,11 +344,11 @@ class ContactSolver:
             z = np.zeros(3)
             return ContactEstimate(False, None, z, z, z, sc[K.S_RESIDUAL], 0.0, np.zeros((6, 6)), math.inf,
                                    flag_names(bits), (), np.zeros((0, K.C_SIZE)))
-        links, prims = self.links, self.prim_link
-        cand_links = tuple([links[prims[g]] for g in self._cand_prim[:n].tolist()])
+        names = self._prim_names
+        cand_links = tuple([names[g] for g in self._cand_prim[:n].tolist()])
         out = out.copy()
         cov = out[K.O_COV:K.O_COV + 36].reshape(6, 6)
-        if not math.isfinite(cov.sum()):
+        if not math.isfinite(np.add.reduce(out[K.O_COV:K.O_COV + 36])):
             cov = _unbounded(cov)
         # below the noise floor the fit is reported but not called a contact
         return ContactEstimate(not bits & K.F_LOW_FORCE, cand_links[0], out[0:3], out[3:6], out[6:9],
@@ -446,6 +453,12 @@ def _bounding_radius(kind: int, size: np.ndarray) -> float:
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
+
+
+def _per_joint(x, n: int) -> np.ndarray:
+    """``x`` (one value or one per joint) as n contiguous floats."""
+    a = np.array(x, dtype=np.float64)  # a copy: C-ordered, writable (see solve)
+    return a if a.shape == (n,) else np.full(n, a)
 
 
 def _unbounded(cov: np.ndarray) -> np.ndarray:

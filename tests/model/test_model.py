@@ -1,6 +1,8 @@
 """The arm model against hand computations that do not use MuJoCo (leng2016, reference doc numbers)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -202,3 +204,28 @@ def test_bad_q_is_a_clear_error(leng):
         leng.predicted_wrench([0.0, np.nan, 0.0])
     with pytest.raises(ValueError, match="level"):
         leng.predicted_wrench(Q_PAPER, level="everything")
+
+
+def test_sensor_pose_is_computed_once_per_q_and_never_stale():
+    """base_T_sensor keeps its last q's pose and takes it from the kinematics arm_loads ran at that q;
+    another q, another call that poses the data, or set_const (which poses it at qpos0) is never read
+    as this q's pose. (On the flange: every built-in scene's sensor is under the base.)"""
+    ur5e = load_scene("ur5e")
+    scene = replace(ur5e, sensor=replace(ur5e.sensor, site="flange"))
+    arm, fresh = ArmModel(scene), ArmModel(scene)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        q, qd, qdd = rng.uniform(-2.0, 2.0, size=(3, arm.n_joints))
+        want = fresh.base_T_site(q, scene.sensor.site)
+        arm.arm_loads(q, qd, qdd, "dynamics")
+        got = arm.base_T_sensor(q)
+        np.testing.assert_array_equal(got, want)
+        assert arm.base_T_sensor(q.copy()) is got  # once per q
+        with pytest.raises(ValueError):
+            got[0, 3] = 1.0  # shared: read-only
+        arm.body_poses(q + 0.5)  # the data now posed elsewhere
+        arm.set_const()  # and at qpos0
+        q2 = q - 0.25
+        arm.arm_loads(q2, qd, qdd, "gravity")
+        arm.set_const()
+        np.testing.assert_array_equal(arm.base_T_sensor(q2), fresh.base_T_site(q2, scene.sensor.site))
