@@ -229,8 +229,10 @@ class URArm(ArmAdapter):
                 raise DeviceIOError(f"no RTDE packet for {silent:.3f} s: controller hung")
             if now > deadline:
                 return
-            # sleep most of a period after a packet, then poll finely
-            time.sleep(0.0002 if silent > 0.7 * self.period else 0.5 * self.period)
+            # after a packet, one sleep to 0.7 of a period (not two of half a period: a wake-up each, and
+            # in a monitor's process each takes the interpreter from the pipeline), then poll finely
+            near = 0.7 * self.period
+            time.sleep(0.0002 if silent > near else near - silent)
 
     def _publish(self, rtde: Any, ts: float) -> None:
         for _ in range(3):  # the getters are separate calls: make sure they saw the same packet

@@ -49,3 +49,10 @@ def preferred_cpu(nice: int = DEVICE_NICE) -> Iterator[bool]:
         if raised and os.getpriority(os.PRIO_PROCESS, 0) != before:
             with suppress(OSError):
                 os.setpriority(os.PRIO_PROCESS, 0, before)
+
+
+def name_process(name: str) -> None:
+    """Show this process as ``name`` (its first 15 bytes) in ps, top and /proc/<pid>/stat: the world, the
+    emulators and the readers are all ``python -c spawn_main(...)`` to their command line."""
+    with suppress(OSError), open("/proc/self/comm", "w", encoding="utf-8") as f:  # not Linux: stays python
+        f.write(name[:15])

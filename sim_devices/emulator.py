@@ -208,7 +208,7 @@ class Emulator:
 
     @staticmethod
     def saturation_bits(rec: np.ndarray) -> int:
-        return sum(1 << i for i in range(6) if rec[7 + i] > 0.5)
+        return sum(1 << i for i, v in enumerate(rec[7:13].tolist()) if v > 0.5)
 
     def count_sample(self) -> bool:
         """Account one sample to send; False once ``max_frames`` were sent (then nothing more is)."""

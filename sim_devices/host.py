@@ -43,6 +43,7 @@ import numpy as np
 
 from ftc_hw.model import Payload
 from ftc_hw.model.true_arm import true_arm_spec
+from ftc_hw.priority import name_process
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
 from .link import Command, Ring, RingReader, joint_width
@@ -210,6 +211,7 @@ class _Child:
 
 def _main(conn: Any, plan: _Plan) -> None:
     """Entry point of the world process."""
+    name_process("ftc-world")
     try:
         t0 = time.monotonic()
         runner = SimRunner(plan.scene, plan.scenario, duration=plan.duration or 1e12, seed=plan.seed,

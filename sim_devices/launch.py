@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from ftc_hw.priority import DEVICE_NICE, prefer_cpu
+from ftc_hw.priority import DEVICE_NICE, name_process, prefer_cpu
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .link import LinkInfo
@@ -38,6 +38,7 @@ def _entry(kind: str):
 
 def _serve(kind: str, device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:
     """Entry point of an emulator process."""
+    name_process(f"ftc-emu-{device.name}")
     # A device answers from its own threads (a dashboard reader beside the RTDE stream, a serial
     # reader beside the pacing loop): at Python's default 5 ms switch interval a thread ready to
     # answer can wait that long for the GIL, longer than a control period.

@@ -176,7 +176,7 @@ class RdtEmulator(Emulator):
             return
         self.check_continuity(n)
         status = self.saturation_bits(rec) | (STATUS_ERROR if self._reports_error(self.samples - 1) else 0)
-        biased = tuple(c - b for c, b in zip(counts, self.bias, strict=True))
+        biased = tuple(c - b for c, b in zip(counts, self.bias, strict=True)) if any(self.bias) else counts
         self.pending.append((n, RdtRecord(0, n - self.boot_n, status, biased)))  # type: ignore[arg-type]
         if len(self.pending) >= self.per_packet:
             self.send_packet()

@@ -534,6 +534,8 @@ class DashboardServer:
 
 
 # -- the emulator process ---------------------------------------------------------------------------------
+_FINE_S = 0.00025  # the stream loop's poll near a grid point
+_MARGIN_S = 0.0006  # ... which starts this long before the grid point's world time says it can come
 DEFAULT_ADDRESS = "127.0.0.2"  # where an emulated controller listens unless told (scenes name no address)
 
 
@@ -573,12 +575,14 @@ class Emulator:
         last_k = math.floor(float(latest[0]) * self.rate + 1e-6) if latest is not None else None
         exec_ms = 0.0
         parent, next_check = os.getppid(), time.monotonic() + 1.0
+        t_seen = None  # world time of the newest sample read
         while True:
             if time.monotonic() > next_check:
                 next_check += 1.0
                 if os.getppid() != parent:  # the world's process is gone: so are we
                     return
             for rec in reader.new():
+                t_seen = float(rec[0])
                 k = math.floor(rec[0] * self.rate + 1e-6)
                 if last_k is None and abs(rec[0] * self.rate - k) > 1e-6:
                     last_k = k  # the first sample is off the grid: wait for the next grid point
@@ -589,7 +593,17 @@ class Emulator:
                 temps = self.thermal.update(float(rec[0]), rec[1 + 3 * self.n:1 + 4 * self.n])
                 self.rtde.stream(Tick(rec, self.n, self.controller, self.kin, temps, exec_ms))
                 exec_ms = (time.perf_counter() - t0) * 1e3
-            time.sleep(0.0005)
+            time.sleep(self._pause(t_seen, last_k))
+
+    def _pause(self, t_seen: float | None, last_k: int | None) -> float:
+        """How long to sleep before looking again: finely (0.25 ms) near the next grid point, and until
+        near it when it is further off. The world never publishes a sample before its time, so the
+        next grid sample is at least its distance in world time from the newest one away; the margin
+        covers how late that newest one was read."""
+        if t_seen is None or last_k is None:
+            return _FINE_S
+        ahead_s = (last_k + 1) / self.rate - t_seen
+        return max(_FINE_S, ahead_s - _MARGIN_S)
 
 
 def serve(device: Any, scene: Any, link: Any, ready: Any, options: dict) -> None:

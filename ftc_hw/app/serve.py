@@ -35,7 +35,7 @@ from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
 from ftc_hw.bus.remote import RemotePublisher, open_session, stop_key
 from ftc_hw.bus.wire import decode
 from ftc_hw.devices.registry import role_of
-from ftc_hw.priority import READER_NICE, prefer_cpu
+from ftc_hw.priority import READER_NICE, name_process, prefer_cpu
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 
 from .rig import RigError, build_rig, check_located
@@ -76,6 +76,7 @@ def reader_main(scene_ref: str, overrides: tuple[str, ...], rig_file: Path | Non
     """One device's reader (a process): its adapter on a local bus, the bus forwarded to Zenoh, until
     SIGTERM or until ``owner_pid`` (the process that started it: ftc serve, a monitor) is gone. Its adapter
     reconnects by itself; an exception ends the process (the supervisor restarts it)."""
+    name_process(f"ftc-reader-{device}")
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     sys.setswitchinterval(READER_PROCESS_SWITCH_S)

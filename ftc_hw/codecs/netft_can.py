@@ -12,6 +12,7 @@ from pathlib import Path
 
 import cantools
 
+from .can_layout import FastLayout
 from .errors import FrameFormatError
 from .stream import StreamSample
 
@@ -57,29 +58,34 @@ class NetFTCodec:
         self._roles[self.status.frame_id + offset] = ("status", 0, self.status)
         self.ids = tuple(sorted(self._roles))
         self._offset = offset
+        self._positions = {i: {"request": -1, "data": index, "status": 3}[kind]
+                           for i, (kind, index, _) in self._roles.items()}
+        self._fast = {m.name: FastLayout(m) for m in (self.request, *self.data, self.status) if FastLayout.fits(m)}
+
+    def _encode(self, message, values: dict) -> bytes:
+        fast = self._fast.get(message.name)
+        data = fast.encode(values) if fast is not None else None
+        return message.encode(values) if data is None else data
 
     def position(self, frame_id: int) -> int | None:
         """Place of a frame in a sample: 0..2 data, 3 status, -1 the request; None: not this sensor's."""
-        role = self._roles.get(frame_id)
-        if role is None:
-            return None
-        kind, index, _ = role
-        return {"request": -1, "data": index, "status": 3}[kind]
+        return self._positions.get(frame_id)
 
     def frame_id(self, message) -> int:
         return message.frame_id + self._offset
 
     def encode_request(self, opcode: int) -> tuple[int, bytes]:
-        return self.frame_id(self.request), self.request.encode({"Opcode": opcode})
+        return self.frame_id(self.request), self._encode(self.request, {"Opcode": opcode})
 
     def encode_sample(self, wrench, counter: int, status: int = 0) -> list[tuple[int, bytes]]:
         """The four frames of one sample, in the order the sensor sends them."""
         out = []
         for i, m in enumerate(self.data):
             f, t = _PAIRS[i]
-            out.append((self.frame_id(m), m.encode({f: round(float(wrench[i]), 3), t: round(float(wrench[3 + i]), 3)})))
+            out.append((self.frame_id(m), self._encode(m, {f: round(float(wrench[i]), 3),
+                                                             t: round(float(wrench[3 + i]), 3)})))
         out.append((self.frame_id(self.status),
-                    self.status.encode({"Status": status & 0xFFFFFFFF, "SampleCounter": counter & 0xFFFFFFFF})))
+                    self._encode(self.status, {"Status": status & 0xFFFFFFFF, "SampleCounter": counter & 0xFFFFFFFF})))
         return out
 
     def decode(self, frame_id: int, data: bytes) -> CanPart | None:
@@ -91,8 +97,10 @@ class NetFTCodec:
         kind, index, m = role
         if len(data) != m.length:
             raise FrameFormatError(f"{m.name}: {len(data)} data bytes, expected {m.length}", consumed=0)
+        fast = self._fast.get(m.name)
         try:
-            values = m.decode(bytes(data), decode_choices=False, scaling=True)
+            values = fast.decode(bytes(data)) if fast is not None else m.decode(bytes(data), decode_choices=False,
+                                                                                  scaling=True)
         except Exception as exc:  # noqa: BLE001 - cantools raises several types on bad data
             raise FrameFormatError(f"{m.name}: {exc}", consumed=0) from None
         if kind == "request":

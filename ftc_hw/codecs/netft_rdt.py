@@ -23,6 +23,7 @@ import struct
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 from .errors import CodecError, FrameFormatError
 
@@ -83,7 +84,7 @@ class Calibration:
     rdt_rate_hz: float | None = None
     buffer_size: int | None = None
 
-    @property
+    @cached_property  # computed once: to_si and to_counts run for every record (7 kHz)
     def scale(self) -> tuple[float, ...]:
         f = FORCE_UNITS[self.force_unit] / self.counts_per_force
         t = TORQUE_UNITS[self.torque_unit] / self.counts_per_torque
@@ -95,7 +96,8 @@ class Calibration:
     def to_counts(self, wrench_si: Sequence[float]) -> tuple[int, ...]:
         """The counts the box sends for ``wrench_si``, clamped to int32 (the box's range)."""
         lo, hi = INT32
-        return tuple(min(hi, max(lo, round(float(w) / s))) for w, s in zip(wrench_si, self.scale, strict=True))
+        values = wrench_si.tolist() if hasattr(wrench_si, "tolist") else wrench_si  # floats, as float(w)
+        return tuple(min(hi, max(lo, round(float(w) / s))) for w, s in zip(values, self.scale, strict=True))
 
 
 # -- requests --------------------------------------------------------------------------------------

@@ -34,6 +34,11 @@ class FTSensorModel:
         self.coloured_tau = world.coloured_noise_tau_s
         self._coloured = np.zeros(6)
         self._t_last: float | None = None
+        # per read: the quantized axes' LSB (None: no axis is) and the clip's lower limit
+        quantized = np.asarray(spec.quantization) > 0
+        self._lsb = np.where(quantized, spec.quantization, 1.0) if np.any(quantized) else None
+        self._quantized = None if np.all(quantized) else quantized  # None: every axis
+        self._low = -np.asarray(spec.range)
 
     def read(self, clean: np.ndarray, t: float) -> SensorReading:
         s = self.spec
@@ -45,12 +50,11 @@ class FTSensorModel:
             w = w + self.rng.normal(0.0, 1.0, 6) * s.noise_std
             if self.coloured_std is not None:
                 w = w + self._coloured_step(t)
-        q = s.quantization
-        if np.any(q > 0):
-            lsb = np.where(q > 0, q, 1.0)
-            w = np.where(q > 0, np.round(w / lsb) * lsb, w)
+        if self._lsb is not None:
+            rounded = np.round(w / self._lsb) * self._lsb
+            w = rounded if self._quantized is None else np.where(self._quantized, rounded, w)
         saturated = np.abs(w) >= s.range
-        return SensorReading(np.clip(w, -s.range, s.range), saturated)
+        return SensorReading(np.minimum(np.maximum(w, self._low), s.range), saturated)  # np.clip's values
 
     def _coloured_step(self, t: float) -> np.ndarray:
         """First-order Gauss-Markov noise with the world's stationary std and correlation time."""

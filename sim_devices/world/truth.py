@@ -28,7 +28,7 @@ def truth_record(state: WorldState) -> dict:
 
 
 def _list(v: np.ndarray) -> list[float]:
-    return [float(x) for x in v]
+    return np.asarray(v, dtype=float).tolist()  # Python floats, as float(x) each
 
 
 class TruthWriter:

@@ -35,6 +35,12 @@ from .true_shell import mesh_point, shell_meshes
 _MESH_REACH_M = 0.1  # how far past the hull's contact the line may meet the mesh (the hull's hollows)
 
 
+def _run_view(a: np.ndarray, index: np.ndarray) -> np.ndarray | None:
+    """``a[index]`` as a view when ``index`` is one ascending run of addresses, else None."""
+    lo = int(index[0]) if len(index) else 0
+    return a[lo:lo + len(index)] if np.array_equal(index, np.arange(lo, lo + len(index))) else None
+
+
 @dataclass(frozen=True)
 class Probe:
     """A scripted probe pressing a point of a link: a trapezoid force profile, fixed direction."""
@@ -169,6 +175,7 @@ class World:
         mujoco.mj_forward(m, self.data)
         self.probes_off_mesh = 0  # probes of a mesh-shelled link whose ray missed it: pressed on the model
         self.setup = dataclasses.replace(setup, probes=tuple(self._on_true_shell(p) for p in setup.probes))
+        self._prepare_step()
         self.steps = 0
         self.state: WorldState = self._step()
 
@@ -208,8 +215,32 @@ class World:
             return p
         return dataclasses.replace(p, point_link=point, on_true_shell=True)
 
+    def _prepare_step(self) -> None:
+        """What every step reuses: buffers, and views of MuJoCo's arrays where the scene's joints sit in
+        one run of addresses (a fancy index costs more than the arithmetic on six numbers)."""
+        m, d, jm = self.model, self.data, self.joints
+        self._acc = np.zeros(m.nv)  # only the scene joints' dofs are ever written
+        self._inertial = np.zeros(m.nv)
+        self._f6 = np.zeros(6)
+        plain = not jm.coupled
+        self._qpos = _run_view(d.qpos, jm.qadr) if plain else None
+        self._qvel = _run_view(d.qvel, jm.dadr) if plain else None
+        self._qacc = _run_view(d.qacc, jm.dadr) if plain else None
+        self._bias = _run_view(d.qfrc_bias, jm.dadr) if plain else None
+        self._inertial_joints = _run_view(self._inertial, jm.dadr) if plain else None
+        f, t = self._fadr, self._tadr
+        self._ft = d.sensordata[f:f + 6] if t == f + 3 else None  # force then torque, one run
+        self._body_id = {p.link: m.body(p.link).id for p in self.setup.probes}
+        std = self.scene.robot.current_noise_std
+        self._current_noise = std if self.noise and np.any(std > 0) else None
+
     def _q(self) -> np.ndarray:
+        if self._qpos is not None:
+            return self._qpos.copy()
         return self.joints.joints_of(self.data.qpos, self.joints.qadr)
+
+    def _joints(self, view: np.ndarray | None, full: np.ndarray) -> np.ndarray:
+        return view.copy() if view is not None else self.joints.joints_of(full)
 
     # -- control ------------------------------------------------------------------------------------
     def halt(self) -> None:
@@ -249,13 +280,16 @@ class World:
         t = float(d.time)
         jm = self.joints
         q = self._q()
-        qd = jm.joints_of(d.qvel)
+        qd = self._joints(self._qvel, d.qvel)
         q_ref, qd_ref, qdd_ref = self._reference.reference(t - self._t_ref0)
-        acc = np.zeros(m.nv)
+        acc, inertial = self._acc, self._inertial
         jm.set_dofs(np.asarray(qdd_ref, dtype=float), acc)
-        inertial = np.zeros(m.nv)
         mujoco.mj_mulM(m, d, inertial, acc)
-        tau = r.kp * (q_ref - q) + r.kd * (qd_ref - qd) + jm.from_dofs(d.qfrc_bias + inertial)
+        if self._bias is not None:  # the same sum as from_dofs(qfrc_bias + inertial), on the joints' dofs only
+            feedforward = self._bias + self._inertial_joints
+        else:
+            feedforward = jm.from_dofs(d.qfrc_bias + inertial)
+        tau = r.kp * (q_ref - q) + r.kd * (qd_ref - qd) + feedforward
         if not self.torque_on:
             tau = np.zeros_like(tau)
         d.qfrc_applied[:] = 0.0
@@ -263,13 +297,33 @@ class World:
         if self._stribeck is not None:
             self._apply_stribeck()
         d.xfrc_applied[:] = 0.0
-        probes = []
         ts = None if self._script_t0 is None else t - self._script_t0  # scenario time
-        for p in self.setup.probes if ts is not None else ():
+        probes = self._press_probes(ts) if ts is not None and self.setup.probes else ()
+        mujoco.mj_step2(m, d)
+        self.steps += 1
+        if self._to_withdraw and ts is not None and any(ts >= o.until_s for _, o in self._to_withdraw):
+            self._withdraw_obstacles(ts)
+        if self._ft is not None:
+            wrench = self._sign * self._ft
+        else:
+            wrench = np.empty(6)
+            wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
+            wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
+            wrench = self._sign * wrench
+        current = tau / self.torque_constant
+        contacts = self._obstacle_contacts() if d.ncon else ()
+        return WorldState(t=t, q=q, qd=qd, qdd=self._joints(self._qacc, d.qacc), tau=tau, current=current,
+                          wrench=wrench, contacts=probes + contacts if probes else contacts)
+
+    def _press_probes(self, ts: float) -> tuple[ContactTruth, ...]:
+        """The scripted probes' forces at scenario time ``ts`` on ``xfrc_applied``; their truth."""
+        d = self.data
+        probes = []
+        for p in self.setup.probes:
             mag = p.magnitude_at(ts)
             if mag <= 0.0:
                 continue
-            bid = m.body(p.link).id
+            bid = self._body_id[p.link]
             rot = d.xmat[bid].reshape(3, 3)
             point = rot @ p.point_link + d.xpos[bid]
             shell = self.scene.world.shell_of(p.geom) if p.geom else self.scene.world.shell_offset
@@ -279,16 +333,7 @@ class World:
             d.xfrc_applied[bid, :3] += force
             d.xfrc_applied[bid, 3:] += np.cross(point - d.xipos[bid], force)
             probes.append(ContactTruth(p.link, point, force, "probe"))
-        mujoco.mj_step2(m, d)
-        self.steps += 1
-        if self._to_withdraw and ts is not None and any(ts >= o.until_s for _, o in self._to_withdraw):
-            self._withdraw_obstacles(ts)
-        wrench = np.empty(6)
-        wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
-        wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
-        current = tau / self.torque_constant
-        return WorldState(t=t, q=q, qd=qd, qdd=jm.joints_of(d.qacc), tau=tau, current=current,
-                          wrench=self._sign * wrench, contacts=tuple(probes) + self._obstacle_contacts())
+        return tuple(probes)
 
     def _apply_stribeck(self) -> None:
         """The friction above Coulomb near standstill (Stribeck): ``excess exp(-(v / vs)^2)``, against
@@ -311,7 +356,7 @@ class World:
     def _obstacle_contacts(self) -> tuple[ContactTruth, ...]:
         m, d = self.model, self.data
         out = []
-        f6 = np.zeros(6)
+        f6 = self._f6
         for i in range(d.ncon):
             c = d.contact[i]
             b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
@@ -357,9 +402,8 @@ class World:
 
     def read_current(self, state: WorldState | None = None) -> np.ndarray:
         s = state or self.state
-        std = self.scene.robot.current_noise_std
-        if self.noise and np.any(std > 0):
-            return s.current + self.rng.normal(size=s.current.shape) * std
+        if self._current_noise is not None:
+            return s.current + self.rng.normal(size=s.current.shape) * self._current_noise
         return s.current.copy()
 
     def run(self, duration: float) -> Iterator[tuple[WorldState, SensorReading]]:

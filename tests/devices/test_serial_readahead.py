@@ -102,3 +102,60 @@ def test_a_url_without_a_port_is_refused():
     serial_urls.register()
     with pytest.raises(serial.SerialException, match="no port"):
         serial.serial_for_url("readahead://", timeout=0.1)
+
+
+def _received(bus_class, name: str, master: int, data: bytes, limit: int = 400) -> list:
+    """What ``bus.recv`` gives for ``data`` until the line is quiet: each message's fields, or the
+    exception's type (the bus opened first: opening a port flushes its input)."""
+    out = []
+    bus = bus_class(channel=serial_urls.readahead_url(name), baudrate=115200, timeout=0.1)
+    try:
+        os.write(master, data)
+        time.sleep(0.01)
+        for _ in range(limit):
+            try:
+                msg = bus.recv(0.1)
+            except Exception as exc:  # noqa: BLE001 - the exception's type is what is compared
+                out.append(type(exc).__name__)
+                continue
+            if msg is None:  # a skipped byte, or the line is quiet
+                out.append(None)
+                if not bus._ser.in_waiting:
+                    break
+                continue
+            out.append((msg.timestamp, msg.arbitration_id, msg.dlc, bytes(msg.data), msg.is_extended_id,
+                        msg.is_error_frame, msg.is_remote_frame))
+    finally:
+        bus.shutdown()
+    return out
+
+
+_FRAME = st.builds(lambda ts, dlc, aid, data, end: (b"\xaa" + ts.to_bytes(4, "little") + bytes([dlc])
+                                                    + aid.to_bytes(4, "little") + data[:dlc] + end),
+                   st.integers(0, 2**32 - 1), st.integers(0, 10), st.integers(0, 2**32 - 1), st.binary(min_size=10,
+                   max_size=10), st.sampled_from([b"\xbb", b"\xbb", b"\xbb", b"\x00"]))
+
+
+@settings(max_examples=20, deadline=None)
+@given(parts=st.lists(st.one_of(_FRAME, _FRAME, st.binary(min_size=1, max_size=5)), min_size=1, max_size=12))
+def test_whole_frames_parsed_at_once_give_what_python_can_gives(parts):
+    """ftc_hw.devices.can_serial's fast path against python-can's own parser on the same bytes: valid
+    frames of every DLC and id, bad DLCs, bad end bytes, noise between them."""
+    from can.interfaces.serial.serial_can import SerialBus
+
+    from ftc_hw.devices.can_serial import ReadAheadSerialBus
+
+    data = b"".join(parts)
+    got = {}
+    for bus_class in (SerialBus, ReadAheadSerialBus):
+        master, slave = os.openpty()
+        name = os.ttyname(slave)
+        try:
+            make_raw(name)
+            serial_urls.register()
+            got[bus_class.__name__] = _received(bus_class, name, master, data)
+        finally:
+            os.close(master)
+            os.close(slave)
+    assert got["ReadAheadSerialBus"] == got["SerialBus"]
+    assert got["SerialBus"]  # the bytes were read: messages, errors or skipped bytes
