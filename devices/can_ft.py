@@ -1,7 +1,6 @@
 """CAN F/T sensors (scene kind ``ft-can``: ATI Net F/T over CAN, frames from a DBC file through cantools)
 received with python-can: ``interface="serial"`` on a serial port or an ``ftc sim`` pty (no kernel
-CAN here; the port is opened as ``readahead://<port>``, :mod:`ftc_hw.devices.serial_urls`, and whole
-frames are taken from its buffer in one parse, :mod:`ftc_hw.devices.can_serial`, unless
+CAN here; the port is opened as ``readahead://<port>``, :mod:`ftc_hw.devices.serial_urls`, unless
 ``read_ahead=False``), ``"virtual"`` in-process, or any python-can interface on real hardware.
 
 ``mode="stream"`` asks the sensor to send every sample (opcode 2) and stops it on close (opcode 3);
@@ -25,7 +24,6 @@ from ftc_hw.codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTAssembler, 
 
 from . import serial_urls
 from .base import DeviceError, DeviceIOError
-from .can_serial import ReadAheadSerialBus
 from .ft_base import FTAdapter, Silence
 
 
@@ -76,9 +74,8 @@ class CanFTAdapter(FTAdapter):
         channel = self.channel
         if self.interface == "serial" and self.read_ahead and "://" not in channel:
             serial_urls.register()
-            self.can = ReadAheadSerialBus(channel=serial_urls.readahead_url(channel), **kwargs)
-        else:
-            self.can = can.Bus(interface=self.interface, channel=channel, **kwargs)
+            channel = serial_urls.readahead_url(channel)
+        self.can = can.Bus(interface=self.interface, channel=channel, **kwargs)
         self.assembler.reset()
         if self.mode == "stream":
             self._send(OP_START)

@@ -41,15 +41,6 @@ class Serial(serial.Serial):
         super().reset_input_buffer()
 
     def read(self, size: int = 1) -> bytes:
-        ahead = self.fill(size)
-        n = min(size, len(ahead))
-        out = bytes(ahead[:n])
-        del ahead[:n]
-        return out
-
-    def fill(self, size: int = 1) -> bytearray:
-        """Wait (up to the port's timeout) until ``size`` bytes are buffered; the buffer, which the
-        caller may read and consume from (``del buffer[:n]``) as ``read`` would have."""
         if not self.is_open:
             raise PortNotOpenError()
         ahead = self._ahead
@@ -74,7 +65,10 @@ class Serial(serial.Serial):
                     ahead += chunk
                 if timeout.expired():
                     break
-        return ahead
+        n = min(size, len(ahead))
+        out = bytes(ahead[:n])
+        del ahead[:n]
+        return out
 
 
 def serial_class_for_url(url: str) -> tuple[str, type[Serial]]:

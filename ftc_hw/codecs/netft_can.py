@@ -58,8 +58,6 @@ class NetFTCodec:
         self._roles[self.status.frame_id + offset] = ("status", 0, self.status)
         self.ids = tuple(sorted(self._roles))
         self._offset = offset
-        self._positions = {i: {"request": -1, "data": index, "status": 3}[kind]
-                           for i, (kind, index, _) in self._roles.items()}
         self._fast = {m.name: FastLayout(m) for m in (self.request, *self.data, self.status) if FastLayout.fits(m)}
 
     def _encode(self, message, values: dict) -> bytes:
@@ -69,7 +67,11 @@ class NetFTCodec:
 
     def position(self, frame_id: int) -> int | None:
         """Place of a frame in a sample: 0..2 data, 3 status, -1 the request; None: not this sensor's."""
-        return self._positions.get(frame_id)
+        role = self._roles.get(frame_id)
+        if role is None:
+            return None
+        kind, index, _ = role
+        return {"request": -1, "data": index, "status": 3}[kind]
 
     def frame_id(self, message) -> int:
         return message.frame_id + self._offset
