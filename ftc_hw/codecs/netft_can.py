@@ -12,7 +12,6 @@ from pathlib import Path
 
 import cantools
 
-from .can_layout import FastLayout
 from .errors import FrameFormatError
 from .stream import StreamSample
 
@@ -58,12 +57,6 @@ class NetFTCodec:
         self._roles[self.status.frame_id + offset] = ("status", 0, self.status)
         self.ids = tuple(sorted(self._roles))
         self._offset = offset
-        self._fast = {m.name: FastLayout(m) for m in (self.request, *self.data, self.status) if FastLayout.fits(m)}
-
-    def _encode(self, message, values: dict) -> bytes:
-        fast = self._fast.get(message.name)
-        data = fast.encode(values) if fast is not None else None
-        return message.encode(values) if data is None else data
 
     def position(self, frame_id: int) -> int | None:
         """Place of a frame in a sample: 0..2 data, 3 status, -1 the request; None: not this sensor's."""
@@ -77,17 +70,16 @@ class NetFTCodec:
         return message.frame_id + self._offset
 
     def encode_request(self, opcode: int) -> tuple[int, bytes]:
-        return self.frame_id(self.request), self._encode(self.request, {"Opcode": opcode})
+        return self.frame_id(self.request), self.request.encode({"Opcode": opcode})
 
     def encode_sample(self, wrench, counter: int, status: int = 0) -> list[tuple[int, bytes]]:
         """The four frames of one sample, in the order the sensor sends them."""
         out = []
         for i, m in enumerate(self.data):
             f, t = _PAIRS[i]
-            out.append((self.frame_id(m), self._encode(m, {f: round(float(wrench[i]), 3),
-                                                             t: round(float(wrench[3 + i]), 3)})))
+            out.append((self.frame_id(m), m.encode({f: round(float(wrench[i]), 3), t: round(float(wrench[3 + i]), 3)})))
         out.append((self.frame_id(self.status),
-                    self._encode(self.status, {"Status": status & 0xFFFFFFFF, "SampleCounter": counter & 0xFFFFFFFF})))
+                    self.status.encode({"Status": status & 0xFFFFFFFF, "SampleCounter": counter & 0xFFFFFFFF})))
         return out
 
     def decode(self, frame_id: int, data: bytes) -> CanPart | None:
@@ -99,10 +91,8 @@ class NetFTCodec:
         kind, index, m = role
         if len(data) != m.length:
             raise FrameFormatError(f"{m.name}: {len(data)} data bytes, expected {m.length}", consumed=0)
-        fast = self._fast.get(m.name)
         try:
-            values = fast.decode(bytes(data)) if fast is not None else m.decode(bytes(data), decode_choices=False,
-                                                                                  scaling=True)
+            values = m.decode(bytes(data), decode_choices=False, scaling=True)
         except Exception as exc:  # noqa: BLE001 - cantools raises several types on bad data
             raise FrameFormatError(f"{m.name}: {exc}", consumed=0) from None
         if kind == "request":

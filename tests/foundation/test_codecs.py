@@ -398,29 +398,3 @@ def test_rdt_calibration_that_disagrees_with_the_scene_names_both_values():
     assert rdt.reconcile(None, counts_per_force=10.0, counts_per_torque=20.0).scale == (0.1,) * 3 + (0.05,) * 3
     with pytest.raises(rdt.CalibrationError, match="not read"):
         rdt.reconcile(None, counts_per_force=10.0)
-
-
-_MILLI = st.one_of(st.floats(-3e6, 3e6), st.sampled_from([math.nan, math.inf, -math.inf])).map(lambda v: round(v, 3))
-_EDGES = st.sampled_from([0.0, -0.0, 0.0005, -0.0005, 0.0015, 2147483.647, -2147483.648, 2147483.6475,
-                          -2147483.6485, 1e-9])
-
-
-@settings(max_examples=400, deadline=None)
-@given(values=st.lists(st.one_of(_MILLI, _EDGES), min_size=2, max_size=2),
-       counters=st.lists(st.integers(-1, (1 << 33)), min_size=2, max_size=2))
-def test_netft_fast_layout_gives_cantools_bytes_values_and_errors(values, counters):
-    """The struct fast path (ftc_hw.codecs.can_layout) against cantools' own encode and decode."""
-    codec = NetFTCodec()
-    messages = [*codec.data, codec.status]
-    assert {m.name for m in messages} <= set(codec._fast)  # the Net F/T's frames all take the fast path
-    for m in messages:
-        names = [s.name for s in m.signals]
-        values_in = dict(zip(names, counters if m is codec.status else values, strict=True))
-        try:
-            expected = m.encode(values_in)
-        except Exception as exc:  # noqa: BLE001 - whatever cantools raises, the codec must raise alike
-            with pytest.raises(type(exc)):
-                codec._encode(m, values_in)
-            continue
-        assert codec._encode(m, values_in) == expected
-        assert codec._fast[m.name].decode(expected) == m.decode(expected, decode_choices=False, scaling=True)
