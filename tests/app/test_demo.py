@@ -41,7 +41,7 @@ def run_in_pty(args: list[str], timeout: float = 180) -> tuple[int, str]:
 
 
 def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary(clean_or_loaded):
-    rc, out = run_in_pty([sys.executable, "-m", "ftc_hw", "demo", "--duration", "5", "--identify-seconds", "15"])
+    rc, out = run_in_pty([sys.executable, "-m", "ftc_hw", "demo", "--duration", "10", "--identify-seconds", "15"])
     loaded = clean_or_loaded(rc, re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out))
     assert "Traceback" not in out and "Error" not in out, out[-4000:]
     assert "\x1b[" in out  # a terminal: rich drew (and redrew) the live view with escape sequences
@@ -50,8 +50,9 @@ def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary(clean_or_load
     for part in ("wrench (sensor frame)", "contact (base frame)", "CONTACT", "fused", "wrist_3", "monitor/input",
                  "contacts: detected against ground truth"):
         assert part in plain, part
-    # ends by itself with the summary: the 5 s run's one collision, found (tests/cli once ran it again
-    # through typer's runner only for this)
+    # ends by itself with the summary: the 10 s run's two collisions, found (tests/cli once ran it again
+    # through typer's runner only for this). Two: a model identified from 15 s keeps a large error while
+    # the arm moves, and once held the first contact open to the run's end, hiding the second
     said = " ".join(plain.split())
     assert "reality typical" in said and "step 1/2: identifying the drawn arm" in said, said[:3000]
     assert "contact points on the scene's meshes" in said, said[:3000]  # UR's, fetched by the bootstrap
@@ -65,5 +66,5 @@ def test_demo_renders_live_in_a_terminal_and_ends_with_the_summary(clean_or_load
     # the collision found; only a run that said its host left F/T frames unjudged (exit 3: "contacts may
     # be missed") may miss it
     judged_all = not any("of F/T frames not judged" in r for r in loaded)
-    found = re.search(r"(\d)/1 contacts detected, \d+ within 3 ms of their first sample, \d+ false alarms", said)
-    assert found and (found.group(1) == "1" or not judged_all), said[-3000:]
+    found = re.search(r"(\d)/2 contacts detected, \d+ within 3 ms of their first sample, \d+ false alarms", said)
+    assert found and (found.group(1) == "2" or not judged_all), said[-3000:]

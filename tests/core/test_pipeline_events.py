@@ -105,3 +105,22 @@ def test_a_new_pipeline_has_its_compiled_kernels_loaded():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "True"
+
+
+def test_a_model_error_that_stays_large_blinds_the_offset_test_for_a_bounded_time():
+    """A model identified from too little motion can carry an error as large as an onset all the while
+    the arm moves: the contact must still end (after ``max_blind_s``), or it would hide every later one."""
+    from ftc_hw.detection import ContactDetector
+
+    det = ContactDetector(np.eye(6) * 0.01, n_on=2, n_off=5, max_blind_s=0.5)
+    push = np.array([0.0, 0.0, 20.0, 0.0, 0.0, 0.0])
+    blinding = np.array([[0.0, 0.0, 50.0, 0.0, 0.0, 0.0]])
+    ms = 1_000_000
+    for contact in range(2):
+        t0 = contact * 2000 * ms
+        assert det.update(t0, push).change is None and det.update(t0 + ms, push).change == "onset"
+        changes = {k: det.update(t0 + k * ms, np.zeros(6), blinding) for k in range(2, 1000)}
+        blind = [k for k, d in changes.items() if d.blind]
+        assert blind == list(range(2, 502)), (contact, blind[:3], blind[-3:])  # 0.5 s from its first blind sample
+        ended = [k for k, d in changes.items() if d.change == "offset"]
+        assert ended == [506], (contact, ended)  # then five small samples
