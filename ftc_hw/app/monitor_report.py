@@ -100,9 +100,8 @@ def web_line(web: dict) -> str:
     making, and from an onset's sample, to the page's sending it to the browsers)."""
     tick = web.get("tick_ms") or {}
     onsets = web.get("onset_ms") or []
-    return (f"live page {web['url']}: {web['ticks']} ticks sent"
-            + (f" ({web['view_hz']:g} Hz)" if "view_hz" in web else "")
-            + f", {web['dropped']} dropped (page behind)"
+    return (f"live page {web['url']}: {web['ticks']} ticks sent ({web['view_hz']:g} Hz), {web['dropped']} dropped "
+            "(page behind)"
             + (f", {web['errors']} feed errors" if web.get("errors") else "")
             + (f"; slowed down {web['slowdowns']}x, {web['slowed_s']:.1f} s in all, while the monitor fell behind"
                if web.get("slowdowns") else "")
