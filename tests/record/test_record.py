@@ -3,6 +3,7 @@ a bit-exact round trip, and a recorder killed with SIGKILL (with or without the 
 leaves a file readable up to its last chunk."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -149,3 +150,23 @@ def test_a_pipeline_input_recorded_before_joint_gaps_were_kept_reads_as_no_gap()
     old = json.loads(data)
     del old["joint_gap_ns"]
     assert decode(name, json.dumps(old).encode()).joint_gap_ns == 0
+
+
+def test_messages_with_non_finite_numbers_or_numpy_scalars_keep_their_values():
+    """orjson writes NaN as null and refuses NumPy scalars: such messages are written by json, as before."""
+    from ftc_hw.record.schemas import decode, encode
+
+    ev = DeviceEvent.make(7, "ft", "error", "stalled", {"lost": float("nan"), "rate": float("inf"), "n": 3})
+    name, data = encode(ev)
+    assert b"NaN" in data and b"Infinity" in data
+    got = decode(name, data)
+    assert np.isnan(got.counters["lost"]) and got.counters["rate"] == float("inf") and got.counters["n"] == 3.0
+    ce = ContactEvent.make(9, "onset", "wrist_3_link", [0.1, 0.2, 0.3], [1.0, 2.0, 3.0], [1e-3] * 3, probability=0.9)
+    name, data = encode(dataclasses.replace(ce, duration_s=np.float64(0.125)))  # past make's float()
+    assert decode(name, data).duration_s == 0.125
+    inp = PipelineInput(5, None, 1, "ft", np.array([0.1, 1e-300, -2.5e17, 1 / 3, 0.0, -0.0]), np.zeros(3),
+                        np.zeros(3), np.zeros(3))
+    name, data = encode(inp)
+    back = decode(name, data)
+    assert back.wrench.tobytes() == inp.wrench.tobytes()  # bit for bit, -0.0 included
+    assert json.loads(data) == json.loads(json.dumps(json.loads(data)))  # plain JSON
