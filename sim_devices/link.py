@@ -39,7 +39,7 @@ RING_SLOTS = 4096  # about 4 s of 1 kHz samples
 @dataclass(frozen=True)
 class Command:
     """A device's request to the world. ``kind``: ``goal`` (q rad, the joints' order), ``stop``
-    (hold where the arm is), ``torque`` (on: bool), ``pause``/``resume`` (trajectory time)."""
+    (hold where the arm is), ``torque`` (on: bool), ``resume`` (continue the trajectory a stop interrupted)."""
 
     source: str
     kind: str

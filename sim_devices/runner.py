@@ -105,6 +105,8 @@ class SimRunner:
             self.world.set_goal(np.asarray(cmd.q, dtype=float))
         elif cmd.kind == "stop":
             self.world.halt()
+        elif cmd.kind == "resume":
+            self.world.resume()
         elif cmd.kind == "torque":
             self.world.set_torque(bool(cmd.on))
 

@@ -22,16 +22,18 @@ sample and ``actual_q/qd/current`` its values, bit for bit. ``target_*`` report 
 F/T ring holds the base sensor, which no UR has). Not modelled: momentum, tool I/O, euromap (0).
 
 Options: ``address``, ``rtde_port``, ``dashboard_port``, ``controller_version`` and ``frequency``
-(override the device's).
+(override the device's), ``resume_after_s`` (below).
 
 Dashboard: power on / power off / brake release / play / pause / stop / robotmode / safetymode /
 safetystatus / PolyscopeVersion / get serial number / get robot model / running / programState /
 load / get loaded program / is in remote control / unlock protective stop / close (safety) popup /
 popup / addToLog / quit. The emulated robot starts powered, brakes released, its program (the
 world's scenario) playing. ``stop`` and ``pause`` (while playing) and ``power off`` halt the arm
-(``Command("stop")``: it holds where it is); ``play`` only changes the runtime state (the world has
-no command to resume its scenario). Modes show in RTDE's robot_mode, safety_mode, runtime_state,
-robot_status_bits and joint_mode.
+(``Command("stop")``: it holds where it is); ``play`` (from paused or stopped) continues the scenario
+from where it was halted (``Command("resume")``; a real controller starts a stopped program from its
+beginning, the world has only the one scenario). Option ``resume_after_s``: an operator presses play
+that long after every stop or pause (a sweep then meets each of its contacts with a stop). Modes show
+in RTDE's robot_mode, safety_mode, runtime_state, robot_status_bits and joint_mode.
 """
 from __future__ import annotations
 
@@ -65,8 +67,12 @@ def parse_version(text: str) -> tuple[int, int, int, int]:
 
 # -- the controller's state (modes, I/O) ------------------------------------------------------------------
 class Controller:
-    def __init__(self, version: tuple[int, int, int, int], world: Any, source: str, serial: str, model: str) -> None:
+    def __init__(self, version: tuple[int, int, int, int], world: Any, source: str, serial: str, model: str,
+                 resume_after_s: float | None = None) -> None:
         self.version = version
+        self.resume_after_s = resume_after_s
+        self.resumes = 0
+        self._operator: threading.Timer | None = None
         self.world = world  # .send(Command)
         self.source = source
         self.serial = serial
@@ -90,6 +96,23 @@ class Controller:
     def halt(self) -> None:
         self.halts += 1
         self.world.send(Command(self.source, "stop", extra={"t_rx_ns": self._t_rx_ns}))
+        if self.resume_after_s is not None and self.robot_mode == D.ROBOT_RUNNING:
+            if self._operator is not None:
+                self._operator.cancel()
+            self._operator = threading.Timer(self.resume_after_s, self._operator_plays)
+            self._operator.daemon = True
+            self._operator.start()
+
+    def _operator_plays(self) -> None:
+        with self.lock:
+            self._t_rx_ns = 0
+            self._dashboard("play", "play")
+
+    def _play(self) -> None:
+        if self.runtime != D.RUNTIME_PLAYING:
+            self.resumes += 1
+            self.world.send(Command(self.source, "resume"))
+        self.runtime = D.RUNTIME_PLAYING
 
     # -- RTDE views ----------------------------------------------------------------------------------------
     @property
@@ -165,7 +188,7 @@ class Controller:
         if low == "play":
             if self.robot_mode != D.ROBOT_RUNNING or self.safety_mode != D.SAFETY_NORMAL:
                 return "Failed to execute: play"
-            self.runtime = D.RUNTIME_PLAYING
+            self._play()
             return "Starting program"
         if low == "pause":
             if self.runtime != D.RUNTIME_PLAYING:
@@ -555,8 +578,12 @@ class Emulator:
                              f"controller streams at most {version_max:g} Hz")
         self.side = EmulatorSide(link)
         self.n = scene.n_joints
+        resume = options.get("resume_after_s")
+        if resume is not None and not 0.0 <= float(resume) <= 3600.0:
+            raise ValueError(f"resume_after_s {resume!r}: expected seconds in [0, 3600]")
         self.controller = Controller(self.version, self.side, device.name, str(p.get("serial", "20205500001")),
-                                     str(p.get("robot_model", "UR5")))
+                                     str(p.get("robot_model", "UR5")),
+                                     resume_after_s=None if resume is None else float(resume))
         self.kin = URKinematics(scene)
         self.thermal = ThermalModel(self.n, ambient_c=25.0, gain_c_per_a2=0.5, tau_s=900.0)
         self.rtde_port = int(options.get("rtde_port", D.RTDE_PORT))

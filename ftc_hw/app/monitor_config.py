@@ -25,6 +25,7 @@ class MonitorConfig:
     calibration: Path | None = None
     record: Path | None = None
     reflex: str | None = None  # "stop"
+    resume_after_s: float | None = None  # with sim and a UR arm: its emulated operator plays again after a stop
     events: Path | None = None
     truth: Path | None = None
     noise: bool = True

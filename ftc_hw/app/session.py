@@ -33,6 +33,7 @@ from ftc_hw.bus import (
 from ftc_hw.bus.remote import free_loopback_endpoint
 from ftc_hw.calibration.file import CalibrationError, load_calibration
 from ftc_hw.devices.base import frozen_heap, responsive_readers
+from ftc_hw.devices.registry import role_of
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import EventWriter, event_record, read_truth
 from ftc_hw.record.replay import pipeline_kwargs_to_json
@@ -163,7 +164,7 @@ def _start_world(cfg: MonitorConfig, console: Console, scene: Scene, stack: cont
         truth_path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))) / "truth.jsonl"
     try:
         world = WorldHost(scene, cfg.scenario, duration=cfg.duration, seed=cfg.seed, noise=cfg.noise, preroll=True,
-                          truth=truth_path, reality=cfg.reality)
+                          truth=truth_path, reality=cfg.reality, options=_resume_options(cfg, scene))
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
     console.print(f"starting the world (MuJoCo, reality [cyan]{cfg.reality}[/]) and the emulated devices of "
@@ -179,6 +180,17 @@ def _start_world(cfg: MonitorConfig, console: Console, scene: Scene, stack: cont
     console.print(f"world up in {time.monotonic() - t0:.1f} s (built in {took.get('world', 0.0):.1f} s); emulators up: "
                   + ", ".join(f"{n} ({e['kind']}) {took.get(n, 0.0):.1f} s" for n, e in world.endpoints.items()))
     return world, truth_path
+
+
+def _resume_options(cfg: MonitorConfig, scene: Scene) -> dict[str, dict]:
+    """The emulators' options for ``--resume-after``: the UR controller's operator (no other arm has one)."""
+    if cfg.resume_after_s is None:
+        return {}
+    arms = [d for d in scene.devices if role_of(d.kind) == "arm"]
+    if not arms or any(d.kind != "ur-rtde" for d in arms):
+        raise MonitorSetupError(f"--resume-after: only an emulated UR controller resumes its program; {scene.name}'s "
+                                f"arm is {', '.join(d.kind for d in arms) or 'missing'}")
+    return {d.name: {"resume_after_s": cfg.resume_after_s} for d in arms}
 
 
 def _start_recorder(cfg: MonitorConfig, scene: Scene, bus: Bus, monitor_meta: dict[str, str],

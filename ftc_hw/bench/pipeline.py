@@ -23,8 +23,9 @@ mean total; ``core share``: the rate times the mean total. Detection: onsets aga
 contacts; ``detect ms``: from the first contact sample to the end of the frame that emitted the onset
 (sample times plus that frame's cost; the reflex's stop call is not in it: the real-time leg measures it).
 
-Real-time leg (``realtime_s`` > 0, :mod:`.pipeline_live`): ``ftc monitor --sim`` with the stop reflex,
-its frames lost and judged, CPU share, onset delay and stop latency.
+Real-time leg (``realtime_s`` > 0, :mod:`.pipeline_live`): ``ftc monitor --sim`` with the stop reflex
+(a UR arm's operator resuming after each stop) and a recording, its frames lost and judged, CPU share,
+onset delay and stop latency, and the recording's replay.
 """
 from __future__ import annotations
 
@@ -288,7 +289,7 @@ def _summary_table(results: dict) -> Table:
                         "--sim with the stop reflex)")
     for c in ("scene@Hz", "capacity Hz", "core share", "detected", "false alarms", "detect ms (med)",
               "rt load", "rt sent", "rt received", "rt lost", "rt judged", "rt not judged", "rt detected",
-              "rt onset ms", "rt stop ms (med/max)", "rt CPU share", "rt arm missed"):
+              "rt onset ms", "rt stops: ms med/p99/max", "rt CPU share", "rt arm missed", "rt recorded, replay"):
         table.add_column(c, justify="left" if c == "scene@Hz" else "right")
     for k, r in results.items():
         if k == "meta":
@@ -298,7 +299,7 @@ def _summary_table(results: dict) -> Table:
                  f"{d['false_alarms']}", f"{d['detect_ms_median']:.2f}"]
         rt = r.get("realtime")
         if rt is None:
-            cells += ["-"] * 11
+            cells += ["-"] * 12
         else:
             lost = (rt["sent"] - rt["received"]) if rt["sent"] is not None else rt["seq_lost"]
             cells += [f"{rt['load_1min']:.1f}", f"{rt['sent'] if rt['sent'] is not None else '-'}",
@@ -306,7 +307,10 @@ def _summary_table(results: dict) -> Table:
                       f"{rt['not_judged']} ({100 * rt['not_judged_share']:.0f} %)",
                       f"{rt['detected']}/{rt['contacts']} ({rt['false_alarms']} false)" if rt["evaluated"] else "-",
                       f"{rt['onset_delay_ms_median']:.2f}",
-                      f"{rt['stop_after_onset_ms_median']:.2f} / {rt['stop_after_onset_ms_max']:.2f}",
-                      f"{rt['cpu_share']:.2f}", f"{rt['arm_missed']}"]
+                      f"{rt['stops']}: {rt['stop_after_onset_ms_median']:.2f} / {rt['stop_after_onset_ms_p99']:.2f}"
+                      f" / {rt['stop_after_onset_ms_max']:.2f}",
+                      f"{rt['cpu_share']:.2f}", f"{rt['arm_missed']}",
+                      f"{rt['recorded_inputs']} inputs, {rt['recorder_drops']} dropped; "
+                      + ("identical" if rt["replay_identical"] else "DIFFERS")]
         table.add_row(*cells)
     return table

@@ -1,5 +1,7 @@
-"""The real-time leg of ``ftc bench pipeline``: ``ftc monitor --scene S --sim --duration D`` with the stop
-reflex (readers in threads, no live view), and what it kept up with.
+"""The real-time leg of ``ftc bench pipeline``: ``ftc monitor --scene S --sim --duration D --reflex stop
+--resume-after 0.5 --record F`` (readers in threads, no live view), and what it kept up with. The
+emulated UR controller's operator plays again half a second after each stop, so every contact of the
+sweep meets a stop (a UR arm's scenes; with another arm the sweep stops at its first contact).
 
 Figures: the F/T adapter's counters (for RDT ``box_packets``, the box's own count of what it sent,
 against ``packets`` received and ``kernel_drops``, the socket's overflows; for every kind ``lost``,
@@ -7,14 +9,18 @@ the samples its sequence says are missing), the monitor's frames judged and not 
 its queue, no joint state, unjudged at the end), contacts detected and false alarms against the world's
 truth, onset delay (from the first contact sample's publication) and the stop reflex's latency (sent
 after the onset's time), and this process's CPU share (readers, monitor, pipeline: the world and the
-emulators run in processes of their own) while it streamed.
+emulators run in processes of their own) while it streamed. The recording, afterwards: its messages
+against what the monitor judged, the recorder's drops, and a replay of it (``ftc replay --check``):
+whether it gives the run's events bit for bit.
 """
 from __future__ import annotations
 
 import io
 import os
+import tempfile
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,6 +28,13 @@ from rich.console import Console
 
 from ftc_hw.app.monitor_config import MonitorConfig
 from ftc_hw.app.session import run_monitor
+from ftc_hw.devices.registry import role_of
+from ftc_hw.monitor import MONITOR_INPUT
+from ftc_hw.record.reader import read_recording
+from ftc_hw.record.replay import replay
+from ftc_hw.scene import load_scene
+
+RESUME_AFTER_S = 0.5
 
 NOT_JUDGED = ("ft_frames_dropped", "no_joint_state", "blind_frames", "ft_frames_unjudged_at_stop")
 
@@ -63,11 +76,29 @@ def _share(a: tuple[float, float], b: tuple[float, float]) -> float:
 
 
 def live(scene: str, seconds: float, seed: int) -> dict[str, Any]:
-    cfg = MonitorConfig(scene, sim=True, duration=seconds, seed=seed, view=False, reflex="stop", readers="thread",
-                        title="ftc bench pipeline")
-    load = os.getloadavg()[0]
-    with CpuSampler() as cpu:
-        out = run_monitor(cfg, Console(file=io.StringIO(), width=200))
+    arms = [d.kind for d in load_scene(scene).devices if role_of(d.kind) == "arm"]
+    ur = bool(arms) and all(k == "ur-rtde" for k in arms)
+    with tempfile.TemporaryDirectory(prefix="ftc-bench-") as tmp:
+        path = Path(tmp) / "run.mcap"
+        cfg = MonitorConfig(scene, sim=True, duration=seconds, seed=seed, view=False, reflex="stop", readers="thread",
+                            title="ftc bench pipeline", record=path, resume_after_s=RESUME_AFTER_S if ur else None)
+        load = os.getloadavg()[0]
+        with CpuSampler() as cpu:
+            out = run_monitor(cfg, Console(file=io.StringIO(), width=200))
+        return {**_figures(scene, seconds, load, out, cpu), **_replayed(path)}
+
+
+def _replayed(path: Path) -> dict[str, Any]:
+    """The recording against the run: inputs recorded and judged, and its replay's events."""
+    rec = read_recording(path)
+    result = replay(rec)
+    recorder = rec.metadata.get("recorder", {})
+    return {"recorded_inputs": sum(m.topic == MONITOR_INPUT for m in rec.messages),
+            "recorder_drops": int(recorder.get("drops", -1)), "recording_complete": rec.complete,
+            "replayed_events": len(result.events), "replay_identical": result.identical}
+
+
+def _figures(scene: str, seconds: float, load: float, out, cpu: CpuSampler) -> dict[str, Any]:
     c = out.counters
     ft = next((v for v in out.device_counters.values() if "records" in v or "frames" in v), {})
     judged = int(c.get("frames", 0))
@@ -87,7 +118,9 @@ def live(scene: str, seconds: float, seed: int) -> dict[str, Any]:
         "false_alarms": len(ev.false_alarms) if ev else 0,
         "onset_delay_ms_median": float(np.median(delays)) if delays else float("nan"),
         "stop_after_onset_ms_median": float(np.median(stops)) if stops else float("nan"),
-        "stop_after_onset_ms_max": float(np.max(stops)) if stops else float("nan"),
+        "stop_after_onset_ms_p99": float(np.percentile(stops, 99)) if stops else float("nan"),
+        "stop_after_onset_ms_max": float(np.max(stops)) if stops else float("nan"), "stops": len(stops),
+        "reflex_errors": list(out.reflex.get("errors", [])),
         "cpu_share": cpu.busy_share(),
         "degraded": list(out.degraded), "problems": list(out.problems), "device_counters": out.device_counters,
     }

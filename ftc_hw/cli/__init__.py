@@ -233,6 +233,10 @@ def monitor(
                                                         "without one the sensor is tared on the first 0.1 s.")] = None,
     record: Annotated[Optional[Path], typer.Option(help="Record every bus topic to this MCAP file.")] = None,  # noqa: UP045
     reflex: Annotated[Optional[Reflex], typer.Option(help="stop: a contact onset commands the arm to stop.")] = None,  # noqa: UP045
+    resume_after: Annotated[Optional[float], typer.Option(  # noqa: UP045
+        min=0.0, metavar="S", help="With --sim and a UR arm: the emulated controller's operator presses play S s "
+        "after each stop, and the arm goes on with the scenario where it stopped (with --reflex stop, every "
+        "contact of a sweep meets a stop).")] = None,
     events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
     truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
     noise: Annotated[bool, typer.Option("--noise/--no-noise", metavar="", help="With --sim: sensor noise.")] = True,
@@ -275,7 +279,8 @@ def monitor(
                                          tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
                                          reality=reality.value, refine=refine, remote=remote,
                                          remote_name=remote_name, zenoh_config=zenoh_config,
-                                         readers=readers.value, web_page=(host, port, view_hz)))
+                                         readers=readers.value, web_page=(host, port, view_hz),
+                                         resume_after=resume_after))
 
 
 @app.command()

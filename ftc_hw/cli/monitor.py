@@ -19,12 +19,16 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
                         rig: Path | None = None, reality: str = "ideal", refine: bool = False,
                         remote: str | None = None, remote_name: str | None = None,
                         zenoh_config: Path | None = None, readers: str = "auto",
-                        web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ)) -> int:
+                        web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ),
+                        resume_after: float | None = None) -> int:
     if truth is not None and not sim:
         typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
         return 2
     if refine and calibration is None:
         typer.echo("error: --refine needs --calibration (a file with an identification: ftc identify)", err=True)
+        return 2
+    if resume_after is not None and not sim:
+        typer.echo("error: --resume-after needs --sim (the emulated controller's operator resumes the arm)", err=True)
         return 2
     if faults and not sim:
         typer.echo("error: --fault needs --sim (faults are played on the emulated devices)", err=True)
@@ -37,7 +41,8 @@ def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duratio
                         view=view in (True, "terminal"), web=web_options(view, web_page),
                         level=None if level == "scene" else level, faults=faults,
                         device_overrides=device_overrides, rig=rig, reality=reality, refine=refine,
-                        remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config, readers=readers)
+                        remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config, readers=readers,
+                        resume_after_s=resume_after)
     out = run_guarded(cfg, make_console())
     return out if isinstance(out, int) else out.exit_code
 

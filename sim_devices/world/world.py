@@ -170,6 +170,7 @@ class World:
         self.torque_on = True
         self._reference: Trajectory = setup.trajectory
         self._t_ref0 = 0.0
+        self._halted_from: tuple[Trajectory, float, float] | None = None  # what a halt interrupted, for resume
         q0, _, _ = self._reference.reference(0.0)
         jm.set_qpos(np.asarray(q0, dtype=float), self.data.qpos)
         mujoco.mj_forward(m, self.data)
@@ -244,11 +245,25 @@ class World:
 
     # -- control ------------------------------------------------------------------------------------
     def halt(self) -> None:
-        """Stop the arm where it is (the reflex a stop command triggers): hold the current position."""
-        self.set_reference(Hold(self._q()))
+        """Stop the arm where it is (the reflex a stop command triggers): hold the current position.
+        The trajectory it interrupted is kept for :meth:`resume` (the first one, when halted twice)."""
+        if self._halted_from is None:
+            self._halted_from = (self._reference, self._t_ref0, self.data.time)
+        self._reference, self._t_ref0 = Hold(self._q()), self.data.time
+
+    def resume(self) -> bool:
+        """Continue the trajectory the last halt interrupted from the point it had reached (its time
+        shifted by the halt's length); False when nothing was halted."""
+        if self._halted_from is None:
+            return False
+        reference, t_ref0, t_halt = self._halted_from
+        self._halted_from = None
+        self._reference, self._t_ref0 = reference, t_ref0 + (self.data.time - t_halt)
+        return True
 
     def set_reference(self, trajectory: Trajectory) -> None:
         """Follow another trajectory from now on; its time starts at the current world time."""
+        self._halted_from = None
         self._reference = trajectory
         self._t_ref0 = self.data.time
 

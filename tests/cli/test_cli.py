@@ -184,3 +184,11 @@ def test_plot_is_on_by_default_and_no_plot_reaches_calibrate_and_identify(monkey
         r = runner.invoke(app, args)
         assert r.exit_code == 0, r.output
     assert seen == [True, False, True, False]
+
+
+def test_resume_after_needs_the_simulated_world_and_a_ur_controller():
+    r = runner.invoke(app, ["monitor", "--scene", "ur5e", "--resume-after", "0.5", "--view", "none"])
+    assert r.exit_code == 2 and "--resume-after needs --sim" in r.output, r.output
+    r = runner.invoke(app, ["monitor", "--scene", "dxl-arm", "--sim", "--resume-after", "0.5", "--view", "none",
+                            "--duration", "1"])
+    assert r.exit_code == 1 and "only an emulated UR controller resumes" in r.output, r.output

@@ -102,3 +102,31 @@ def test_no_controller_at_all():
         probe_rtde("127.0.0.44", timeout=0.2)
     with pytest.raises(DeviceError):
         DashboardLink("127.0.0.44", timeout=0.2).command("stop")
+
+
+def test_an_operator_resumes_the_scenario_after_each_stop():
+    """With ``resume_after_s`` the emulated controller plays again after a stop: the world holds the arm
+    for that long, then continues the sweep from where it was; a second stop halts it again."""
+    options = {"arm": {"address": "127.0.0.44", "resume_after_s": 0.3}}
+    with WorldHost(SCENE, "sweep", devices=["arm"], options=options, noise=False) as w:
+        bus = Bus()
+        frames = bus.subscribe("joints/arm", maxsize=100_000)
+        adapter = make_adapter(DEVICE, bus, w.endpoint("arm"), scene=SCENE)
+        with adapter:
+            assert adapter.wait_connected(10.0)
+            time.sleep(0.3)
+            for _ in range(2):
+                adapter.stop()
+                time.sleep(0.15)
+                frames.drain()
+                time.sleep(0.1)
+                held = frames.drain()  # well inside the halt
+                time.sleep(0.35)
+                frames.drain()
+                time.sleep(0.1)
+                moving = frames.drain()
+                assert max(np.abs(f.qd).max() for f in held) < 0.01
+                assert max(np.abs(f.qd).max() for f in moving) > 0.05
+            kinds = [a.kind for a in w.applied()]
+        assert kinds == ["stop", "resume", "stop", "resume"]
+        assert adapter.runtime_state == 2 and adapter.counters["stops"] == 2  # playing again
