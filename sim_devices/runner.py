@@ -113,8 +113,11 @@ class SimRunner:
         for cmd in self.link.drain_commands():
             self.apply(cmd)
 
-    def step(self) -> WorldState:
-        self.apply_pending()
+    def step(self, drain: bool = True) -> WorldState:
+        """One physics step, its samples published; first the commands that arrived (``drain``; False: the
+        caller has just seen that none did)."""
+        if drain:
+            self.apply_pending()
         state = self.world.step()
         self._publish(state, with_ft=self.world.steps % self.world.steps_per_sample == 0)
         return state
@@ -136,14 +139,17 @@ class SimRunner:
         w = self.world
         t0 = w.t
         self._clock = (time.monotonic_ns(), t0) if realtime else None
+        quiet = False  # the wait before this step ended by its timeout: no command came (no need to look again)
         while w.t - t0 < self.duration - 1e-12:
-            state = self.step()
+            state = self.step(drain=not quiet)
             if on_sample is not None and w.steps % w.steps_per_sample == 0:
                 on_sample(state)
             if realtime:
                 due = self.due_ns(w.t)
+                quiet = False
                 while (left := due - time.monotonic_ns()) > 0:
-                    if self.link.wait_commands(left / 1e9):
+                    quiet = not self.link.wait_commands(left / 1e9)
+                    if not quiet:
                         self.apply_pending()
 
     def stop(self) -> None:
