@@ -208,7 +208,10 @@ class Emulator:
 
     @staticmethod
     def saturation_bits(rec: np.ndarray) -> int:
-        return sum(1 << i for i, v in enumerate(rec[7:13].tolist()) if v > 0.5)
+        flags = rec[7:13].tolist()
+        if not any(flags):  # the common case: nothing saturated
+            return 0
+        return sum(1 << i for i, v in enumerate(flags) if v > 0.5)
 
     def count_sample(self) -> bool:
         """Account one sample to send; False once ``max_frames`` were sent (then nothing more is)."""

@@ -84,6 +84,7 @@ class FaultInjector:
         self.t0 = clock()
         self._cooldown = 0
         self._disconnects = list(config.disconnect_at_s)
+        self._none = not any(getattr(config, name) for name in PROBABILISTIC)  # no frame can get a fault
 
     def start(self) -> None:
         """Times in the configuration count from here (the emulator is ready)."""
@@ -96,6 +97,8 @@ class FaultInjector:
         """The fault of the next frame (None: send it as is). ``kind`` also counts it as ``kind.fault``;
         ``sample`` (the frame's sample number) is kept in ``at``."""
         u = self.rng.random()  # one draw per frame, always
+        if self._none:
+            return None
         if self._cooldown > 0:
             self._cooldown -= 1
             return None
@@ -113,6 +116,8 @@ class FaultInjector:
         return None
 
     def stalled(self) -> bool:
+        if not self.config.stall_s:
+            return False
         t = self.elapsed()
         return any(a <= t < a + d for a, d in self.config.stall_s)
 

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import multiprocessing as mp
 import os
 import random
+import select
 import signal
 import socket
 import threading
@@ -48,7 +48,8 @@ from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
 from .link import Command, Ring, RingReader, joint_width
 from .runner import AppliedCommand, SimRunner
-from .world import Hold, Reality, truth_record, with_reality
+from .world import Hold, Reality, with_reality
+from .world.truth import truth_line
 
 UR_PORTS = (30004, 29999)  # RTDE (hard-coded by ur_rtde) and dashboard
 START_TIMEOUT_S = 90.0  # without `ftc warm` first, the world compiles its kernels
@@ -114,13 +115,16 @@ class _Child:
         self.lock = threading.Lock()
         self.counts = {"samples": 0, "contact": 0}
         self.t_go: float | None = None  # world time at go (the scenario's t = 0)
+        # polled after every sample: a poll object on the pipe costs 0.3 us, the Connection's poll() 2.3 us
+        self._pipe = select.poll()
+        self._pipe.register(conn.fileno(), select.POLLIN)
 
     def reply(self, kind: str, value: Any) -> None:
         with self.lock:
             self.conn.send((kind, value))
 
     def poll(self, go_ok: bool = False) -> None:
-        while self.conn.poll():
+        while self._pipe.poll(0):  # a message, or the parent's end closed (recv raises EOFError)
             self.handle(self.conn.recv(), go_ok)
 
     def handle(self, msg: tuple, go_ok: bool) -> None:
@@ -197,13 +201,11 @@ class _Child:
                 self.counts["samples"] += 1
                 self.counts["contact"] += bool(state.contacts)
                 if out is not None:
-                    rec = truth_record(state)
-                    rec["t"] = round(state.t - t_go, 9)  # scenario time
-                    rec["t_world"] = round(state.t, 9)
+                    fields = {"t": round(state.t - t_go, 9), "t_world": round(state.t, 9)}  # scenario, world time
                     if self.plan.realtime:  # as fast as it goes, the world runs ahead of any clock
-                        rec["t_host_ns"] = now
-                        rec["t_due_ns"] = clock0 + round((state.t - t0) * 1e9)
-                    out.write(json.dumps(rec, separators=(",", ":")) + "\n")
+                        fields["t_host_ns"] = now
+                        fields["t_due_ns"] = clock0 + round((state.t - t0) * 1e9)
+                    out.write(truth_line(state, fields))
                 self.poll()
 
             self.runner.run(realtime=self.plan.realtime, on_sample=on_sample)

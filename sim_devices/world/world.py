@@ -158,6 +158,11 @@ class World:
         self._sign = scene.sensor.reading_sign
         sensor_body = m.site_bodyid[m.site(scene.sensor.site).id]
         self._arm_bodies = {b for b in range(m.nbody) if descends(m, b, sensor_body)}
+        # per geom, what the contacts' truth asks of it every step in contact (model lookups cost more)
+        self._geom_on_arm = [int(b) in self._arm_bodies for b in m.geom_bodyid]
+        self._geom_link = [m.body(int(b)).name for b in m.geom_bodyid]
+        self._geom_kind = [GEOM_KINDS.get(int(k)) for k in m.geom_type]
+        self._geom_is_mesh = [int(k) == mujoco.mjtGeom.mjGEOM_MESH for k in m.geom_type]
         self.sensor = FTSensorModel(scene.sensor, self.rng, noise=noise, world=w)
         self.dt = float(m.opt.timestep)
         ratio = 1.0 / (scene.sensor.rate_hz * self.dt)
@@ -372,17 +377,18 @@ class World:
         m, d = self.model, self.data
         out = []
         f6 = self._f6
+        on_arm = self._geom_on_arm
         for i in range(d.ncon):
             c = d.contact[i]
-            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
-            arm1, arm2 = b1 in self._arm_bodies, b2 in self._arm_bodies
-            if arm1 == arm2:
+            g1, g2 = c.geom1, c.geom2
+            arm2 = on_arm[g2]
+            if on_arm[g1] == arm2:
                 continue
             mujoco.mj_contactForce(m, d, i, f6)
             force = c.frame.reshape(3, 3).T @ f6[:3]  # world frame; acts on geom2 (normal from geom1 to geom2)
-            on_arm, arm_geom = (force, c.geom2) if arm2 else (-force, c.geom1)
-            link = m.body(m.geom_bodyid[arm_geom]).name
-            out.append(ContactTruth(link, self._on_arm_surface(arm_geom, c.pos, on_arm), on_arm, "obstacle"))
+            force_on_arm, arm_geom = (force, g2) if arm2 else (-force, g1)
+            out.append(ContactTruth(self._geom_link[arm_geom], self._on_arm_surface(arm_geom, c.pos, force_on_arm),
+                                    force_on_arm, "obstacle"))
         return tuple(out)
 
     def _on_arm_surface(self, geom: int, pos: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -393,12 +399,11 @@ class World:
         collides as its hull, which bridges the mesh's hollows: the point is where the line meets the
         mesh's own triangles (the surface a localizer on the meshes answers with).
         """
-        norm = float(np.linalg.norm(force))
-        m, d = self.model, self.data
-        kind = GEOM_KINDS.get(int(m.geom_type[geom]))
-        is_mesh = m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_MESH
+        norm = math.sqrt(force.dot(force))  # np.linalg.norm's own sum, without its overhead
+        kind, is_mesh = self._geom_kind[geom], self._geom_is_mesh[geom]
         if norm == 0.0 or (kind is None and not is_mesh):
             return pos.copy()
+        m, d = self.model, self.data
         u = force / norm
         start = pos - 0.05 * u
         if is_mesh:  # collided as its part's convex hull: the line enters the mesh itself at or past it

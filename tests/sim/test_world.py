@@ -1,6 +1,7 @@
 """The physics world: with noise off its sensor reading equals the model's prediction for the true contacts."""
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -10,6 +11,7 @@ from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import builtin_names, load_scene
 from ftc_hw.sim_devices.world import SCENARIOS, World, build_scenario, truth_record
 from ftc_hw.sim_devices.world.sensor_model import FTSensorModel
+from ftc_hw.sim_devices.world.truth import truth_line
 
 
 def _world(scene_name, scenario, duration, seed=3, noise=False):
@@ -94,6 +96,25 @@ def test_truth_record_fields():
         assert isinstance(r["t"], float) and r["link"] in ("link1", "link2", "link3")
         assert len(r["point"]) == 3 and len(r["force"]) == 3
     assert all(r["link"] is None for r in free)
+
+
+def test_truth_line_is_what_json_writes():
+    """The world's fast truth line is byte for byte json.dumps of the record: contact-free and probed
+    samples, two contacts (sorted by force), and the fields json spells its own way (NaN, Infinity)."""
+    _, _, world = _world("leng2016", "static-pokes", 0.4)
+    states = [s for s, _ in world.run(0.4)]
+    touched = [s for s in states if s.contacts]
+    assert touched and len(touched) < len(states)
+    c = touched[0].contacts[0]
+    stronger = dataclasses.replace(c, link="link3", force=3.0 * c.force, source="obstacle")
+    states.append(dataclasses.replace(touched[0], contacts=(c, stronger)))
+    states.append(dataclasses.replace(touched[0], q=np.array([np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-300])))
+    for i, s in enumerate(states):
+        fields = {"t": round(s.t - 0.125, 9), "t_world": round(s.t, 9), "t_host_ns": 10**15 + i, "t_due_ns": i}
+        rec = truth_record(s)
+        rec.update(fields)
+        assert truth_line(s, fields) == json.dumps(rec, separators=(",", ":")) + "\n"
+        assert truth_line(s, {}) == json.dumps(truth_record(s), separators=(",", ":")) + "\n"
 
 
 def test_halt_stops_the_arm():
