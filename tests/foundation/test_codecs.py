@@ -140,18 +140,22 @@ def test_corrupted_frame_never_decodes_and_is_counted_once(fmt: StreamFormat, n:
 def test_garbage_and_truncation_lose_nothing_else(fmt: StreamFormat, garbage, cut, data):
     ks = list(range(200, 210))
     frames = _frames(fmt, ks)
+    sent = list(frames)
     t = data.draw(st.integers(1, 8))
     frames[t] = frames[t][:min(cut, fmt.size - 1)]  # truncated
     chunks = list(frames)
     for g in garbage:
         chunks.insert(data.draw(st.integers(1, len(chunks) - 1)), g)
+    stream = b"".join(chunks)
     p = StreamParser(fmt)
-    out = p.feed(b"".join(chunks))
+    out = p.feed(stream)
     got = [_key(fmt, s.wrench) for s in out]
     assert set(got) <= _originals(fmt, ks)  # nothing that was not sent
-    intact = [_key(fmt, _sample(fmt, k)[0]) for j, k in enumerate(ks) if j != t]
+    # garbage that happens to be the truncated frame's missing bytes makes it whole again: then it counts
+    mended = sent[t] in stream
+    intact = [_key(fmt, _sample(fmt, k)[0]) for j, k in enumerate(ks) if j != t or mended]
     assert got == intact  # and everything that was sent whole
-    assert p.checksum_errors + p.resyncs + p.format_errors >= 1
+    assert p.checksum_errors + p.resyncs + p.format_errors >= 1 or stream == b"".join(sent)
 
 
 def test_stream_format_tables():
