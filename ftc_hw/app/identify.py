@@ -263,7 +263,7 @@ def _record_sim(scene: Scene, scenario: str, duration: float, seed: int, reality
                                   f"({', '.join(FREE_SCENARIOS)})")
     console.print(f"recording {duration:g} s of [cyan]{scenario}[/] on the emulated devices (reality {reality}) ...")
     cfg = MonitorConfig(str(scene.path), sim=True, scenario=scenario, seed=seed, duration=duration, record=path,
-                        view=False, reality=reality, title="ftc identify")
+                        view=False, reality=reality, title="ftc identify", judged=False)
     run_monitor(cfg, console)  # its alarms are the untrained model's: the scenario has no contact
     return path
 

@@ -43,6 +43,8 @@ class MonitorConfig:
     remote_rig: str | None = None  # the rig's name in ftc/<rig>/... (default: the scene's name)
     zenoh_config: Path | None = None  # with remote: a Zenoh JSON5 file (TLS, credentials), docs/bus.md
     readers: str = "auto"  # without remote: "process" (each reader in its own, as ftc serve), "thread", "auto"
+    judged: bool = True  # with sim: the summary judges the events against the truth (not for a run that records
+    # free motion for identification, where the model not yet identified raises alarms that mean nothing)
 
 
 @dataclass

@@ -85,10 +85,14 @@ def print_summary(console: Console, cfg: MonitorConfig, served: bool, bus: Bus, 
     if recorder is not None:
         console.print(f"recorded {sum(recorder.counts.values())} messages -> {recorder.path} "
                       f"(drops {recorder.drops})")
-    if out.evaluation is not None:
+    if out.evaluation is not None and not cfg.judged:
+        onsets = sum(e["kind"] == "onset" for e in out.events)
+        console.print(f"contacts not judged: a recording of free motion, {onsets} onsets of the model not yet "
+                      "identified (expected)")
+    elif out.evaluation is not None:
         console.print(evaluation_table(out.evaluation))
-        if cfg.truth:
-            console.print(f"ground truth -> {cfg.truth}")
+    if out.evaluation is not None and cfg.truth:
+        console.print(f"ground truth -> {cfg.truth}")
     for p in out.problems:
         console.print(f"[yellow]{p}[/]")
     if out.degraded:
