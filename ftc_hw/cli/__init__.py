@@ -10,8 +10,19 @@ from pathlib import Path
 from typing import Annotated, Any, Optional
 
 import typer
+import typer.core
 
 from ftc_hw import __version__
+
+_typed = typer.core.TyperOption.display_type_rich
+
+
+def _flag_untyped(self: typer.core.TyperOption, ctx: Any) -> str | None:
+    """No type for a flag, which takes no value (typer 0.29 writes ``<bool>`` after every flag in --help)."""
+    return None if self.is_flag and self.metavar is None else _typed(self, ctx)
+
+
+typer.core.TyperOption.display_type_rich = _flag_untyped  # type: ignore[method-assign]
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
                   help="ftc-hw: where, in which direction and how hard a robot arm was touched, "

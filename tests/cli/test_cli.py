@@ -192,3 +192,11 @@ def test_resume_after_needs_the_simulated_world_and_a_ur_controller():
     r = runner.invoke(app, ["monitor", "--scene", "dxl-arm", "--sim", "--resume-after", "0.5", "--view", "none",
                             "--duration", "1"])
     assert r.exit_code == 1 and "only an emulated UR controller resumes" in r.output, r.output
+
+
+@pytest.mark.parametrize("command", [[], ["monitor"], ["calibrate"], ["identify"], ["sim"], ["serve"],
+                                     ["bench", "reality"]])
+def test_help_shows_no_type_after_a_flag(command):
+    r = runner.invoke(app, [*command, "--help"], env={"COLUMNS": "200"})
+    assert r.exit_code == 0 and "--help" in r.output
+    assert "<bool>" not in r.output, [line for line in r.output.splitlines() if "<bool>" in line]
