@@ -37,7 +37,7 @@ from ftc_hw.devices.registry import role_of
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.events import EventWriter, event_record, read_truth
 from ftc_hw.record.replay import pipeline_kwargs_to_json
-from ftc_hw.record.writer import McapRecorder
+from ftc_hw.record.writer_process import RecorderProcess
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
@@ -194,12 +194,15 @@ def _resume_options(cfg: MonitorConfig, scene: Scene) -> dict[str, dict]:
 
 
 def _start_recorder(cfg: MonitorConfig, scene: Scene, bus: Bus, monitor_meta: dict[str, str],
-                    cal_meta: dict[str, str] | None) -> McapRecorder:
+                    cal_meta: dict[str, str] | None) -> RecorderProcess:
     toml = Path(scene.path).read_text(encoding="utf-8")
     meta = {"scene": {"name": scene.name, "path": str(scene.path), "toml": toml}, "monitor": monitor_meta}
     if cal_meta is not None:
         meta["calibration"] = cal_meta
-    return McapRecorder(bus, cfg.record, metadata=meta, scene=scene).start()
+    try:
+        return RecorderProcess(bus, cfg.record, metadata=meta, scene=scene).start()
+    except OSError as exc:
+        raise MonitorSetupError(f"--record {cfg.record}: {exc}") from None
 
 
 def _tare_then_go(cfg: MonitorConfig, monitor: LiveMonitor, world: WorldHost) -> None:
@@ -381,7 +384,7 @@ def _watch(cfg: MonitorConfig, console: Console, view: LiveView, monitor: LiveMo
 
 
 def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: StopReflex | None,
-            world: WorldHost | None, truth_path: Path | None, recorder: McapRecorder | None,
+            world: WorldHost | None, truth_path: Path | None, recorder: RecorderProcess | None,
             out: MonitorOutcome) -> None:
     """Counters, the evaluation against the world's truth, the recording's final metadata, problems."""
     out.counters = dict(monitor.counters)
@@ -403,6 +406,8 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
         recorder.stop(final)
         if recorder.drops:
             out.problems.append(f"recorder dropped {recorder.drops} frames")
+        if recorder.error is not None:
+            out.degraded.append(f"the recording is incomplete: {recorder.error}; {recorder.lost} frames not written")
     if monitor.counters.get("errors"):
         out.problems.append(f"pipeline errors: {monitor.counters['errors']}")
     if out.counters.get("frames", 0) == 0:

@@ -38,6 +38,15 @@ PROFILE = ""  # no well-known MCAP profile (not ROS); the schemas say what the m
 LIBRARY = f"ftc-hw/{__version__}"
 
 
+def end_polling(sub: Any, stop: threading.Event, thread: threading.Thread | None) -> None:
+    """Close a recorder's subscription and wait for its polling thread to end (the caller then drains
+    what is left); None, for the caller's thread attribute."""
+    sub.close()
+    stop.set()
+    if thread is not None:
+        thread.join(timeout=30.0)
+
+
 class McapRecorder:
     """``with McapRecorder(bus, "run.mcap", metadata={...}):`` records every topic under ``prefix``;
     with ``scene``, the Foxglove channels too."""
@@ -73,7 +82,17 @@ class McapRecorder:
     def start(self) -> McapRecorder:
         if self._writer is not None:
             return self
-        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in stop()
+        self.open()
+        self._sub = self.bus.subscribe(self.prefix, maxsize=self.maxsize, prefix=True)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="mcap-recorder", daemon=True)
+        self._thread.start()
+        return self
+
+    def open(self) -> None:
+        """The file, its header and start metadata (``start`` then records the bus; a writer fed another
+        way, :mod:`.writer_process`, calls ``write``, ``flush`` and ``finish`` itself)."""
+        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in finish()
         self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library=LIBRARY)
         for name, data in self.metadata.items():
@@ -82,11 +101,11 @@ class McapRecorder:
             self._writer.add_metadata("foxglove", self.foxglove.describe())
             self._feed_foxglove(self.foxglove.start, time.monotonic_ns())
         self._writer.flush()
-        self._sub = self.bus.subscribe(self.prefix, maxsize=self.maxsize, prefix=True)
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="mcap-recorder", daemon=True)
-        self._thread.start()
-        return self
+
+    def flush(self) -> None:
+        """Close the chunk in progress and flush the file (what a killed recorder leaves readable)."""
+        with self._lock:
+            self._writer.flush()
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         with self._lock:
@@ -149,8 +168,7 @@ class McapRecorder:
             for f in self._sub.drain():
                 self.write(f)
             if time.monotonic() - last_flush >= self.flush_s:
-                with self._lock:
-                    self._writer.flush()  # closes the chunk and flushes the file
+                self.flush()
                 last_flush = time.monotonic()
             self._stop.wait(self.poll_s)
         self.cpu_s += time.thread_time() - cpu0
@@ -159,16 +177,16 @@ class McapRecorder:
         """Write what is queued, then ``final_metadata`` and the summary; close the file."""
         if self._writer is None:
             return
-        self._sub.close()
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=30.0)
-            self._thread = None
+        self._thread = end_polling(self._sub, self._stop, self._thread)
         cpu0 = time.thread_time()
         for f in self._sub.drain():
             self.write(f)
         self.cpu_s += time.thread_time() - cpu0
         self.drops = self._sub.drops
+        self.finish(final_metadata)
+
+    def finish(self, final_metadata: dict[str, dict[str, str]] | None = None) -> None:
+        """The summary (drops, counts, CPU) and ``final_metadata``; the file closed."""
         with self._lock:
             meta = {"recorder": {"drops": str(self.drops), "skipped": str(self.skipped), "cpu_s": f"{self.cpu_s:.3f}",
                                  **{f"messages:{k}": str(v) for k, v in sorted(self.counts.items())},

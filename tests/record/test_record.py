@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import signal
-import subprocess
 import sys
 import textwrap
 import time
@@ -20,6 +18,8 @@ from ftc_hw.bus import Bus, ContactEvent, DeviceEvent, JointFrame, WrenchFlag, W
 from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.writer import McapRecorder
+
+from .killing import kill_when_ready
 
 RNG = np.random.default_rng(3)
 
@@ -119,14 +119,7 @@ RECORDER = textwrap.dedent("""
 @pytest.mark.parametrize("view", ["bus", "foxglove"])
 def test_a_killed_recorder_leaves_a_file_readable_up_to_its_last_chunk(tmp_path, view):
     path = tmp_path / "killed.mcap"
-    proc = subprocess.Popen([sys.executable, "-c", RECORDER, str(path), view], stdout=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "ready"
-        time.sleep(0.5)
-    finally:
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(10)
-    assert proc.returncode == -signal.SIGKILL
+    assert kill_when_ready([sys.executable, "-c", RECORDER, str(path), view], 0.5) == -signal.SIGKILL
     got = read_recording(path)
     assert not got.complete and got.error is not None
     seqs = [m.frame.seq for m in got.messages]
