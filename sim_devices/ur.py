@@ -71,7 +71,6 @@ class Controller:
                  resume_after_s: float | None = None) -> None:
         self.version = version
         self.resume_after_s = resume_after_s
-        self.resumes = 0
         self._operator: threading.Timer | None = None
         self.world = world  # .send(Command)
         self.source = source
@@ -105,12 +104,10 @@ class Controller:
 
     def _operator_plays(self) -> None:
         with self.lock:
-            self._t_rx_ns = 0
             self._dashboard("play", "play")
 
     def _play(self) -> None:
         if self.runtime != D.RUNTIME_PLAYING:
-            self.resumes += 1
             self.world.send(Command(self.source, "resume"))
         self.runtime = D.RUNTIME_PLAYING
 

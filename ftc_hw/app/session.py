@@ -182,15 +182,24 @@ def _start_world(cfg: MonitorConfig, console: Console, scene: Scene, stack: cont
     return world, truth_path
 
 
+def _arms(scene: Scene) -> list[DeviceSpec]:
+    return [d for d in scene.devices if role_of(d.kind) == "arm"]
+
+
+def resumable(scene: Scene) -> bool:
+    """Whether ``--resume-after`` applies: the scene's arm is a UR controller (no other has an operator)."""
+    arms = _arms(scene)
+    return bool(arms) and all(d.kind == "ur-rtde" for d in arms)
+
+
 def _resume_options(cfg: MonitorConfig, scene: Scene) -> dict[str, dict]:
-    """The emulators' options for ``--resume-after``: the UR controller's operator (no other arm has one)."""
+    """The emulators' options for ``--resume-after``: the UR controller's operator."""
     if cfg.resume_after_s is None:
         return {}
-    arms = [d for d in scene.devices if role_of(d.kind) == "arm"]
-    if not arms or any(d.kind != "ur-rtde" for d in arms):
+    if not resumable(scene):
         raise MonitorSetupError(f"--resume-after: only an emulated UR controller resumes its program; {scene.name}'s "
-                                f"arm is {', '.join(d.kind for d in arms) or 'missing'}")
-    return {d.name: {"resume_after_s": cfg.resume_after_s} for d in arms}
+                                f"arm is {', '.join(d.kind for d in _arms(scene)) or 'missing'}")
+    return {d.name: {"resume_after_s": cfg.resume_after_s} for d in _arms(scene)}
 
 
 def _start_recorder(cfg: MonitorConfig, scene: Scene, bus: Bus, monitor_meta: dict[str, str],

@@ -27,8 +27,7 @@ import numpy as np
 from rich.console import Console
 
 from ftc_hw.app.monitor_config import MonitorConfig
-from ftc_hw.app.session import run_monitor
-from ftc_hw.devices.registry import role_of
+from ftc_hw.app.session import resumable, run_monitor
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import replay
@@ -76,8 +75,7 @@ def _share(a: tuple[float, float], b: tuple[float, float]) -> float:
 
 
 def live(scene: str, seconds: float, seed: int) -> dict[str, Any]:
-    arms = [d.kind for d in load_scene(scene).devices if role_of(d.kind) == "arm"]
-    ur = bool(arms) and all(k == "ur-rtde" for k in arms)
+    ur = resumable(load_scene(scene))
     with tempfile.TemporaryDirectory(prefix="ftc-bench-") as tmp:
         path = Path(tmp) / "run.mcap"
         cfg = MonitorConfig(scene, sim=True, duration=seconds, seed=seed, view=False, reflex="stop", readers="thread",

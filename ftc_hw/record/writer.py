@@ -40,7 +40,7 @@ LIBRARY = f"ftc-hw/{__version__}"
 
 def end_polling(sub: Any, stop: threading.Event, thread: threading.Thread | None) -> None:
     """Close a recorder's subscription and wait for its polling thread to end (the caller then drains
-    what is left); None, for the caller's thread attribute."""
+    what is left)."""
     sub.close()
     stop.set()
     if thread is not None:
@@ -177,7 +177,8 @@ class McapRecorder:
         """Write what is queued, then ``final_metadata`` and the summary; close the file."""
         if self._writer is None:
             return
-        self._thread = end_polling(self._sub, self._stop, self._thread)
+        end_polling(self._sub, self._stop, self._thread)
+        self._thread = None
         cpu0 = time.thread_time()
         for f in self._sub.drain():
             self.write(f)

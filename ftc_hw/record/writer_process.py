@@ -36,7 +36,7 @@ from .writer import McapRecorder, end_polling
 
 # the frequent frame types, sent as columns: their array fields stacked, the rest as lists
 COLUMNS: dict[type, tuple[str, ...]] = {WrenchFrame: ("wrench",), PipelineInput: ("wrench", "q", "qd", "current")}
-_CODE = {cls: i + 1 for i, cls in enumerate(COLUMNS)}  # 0: pickled as it is
+_CODE = {cls: i + 1 for i, cls in enumerate(COLUMNS)}  # 0: another kind, sent in its JSON
 _FRAMES, _STOP = b"F", b"S"
 
 
@@ -180,7 +180,8 @@ class RecorderProcess:
         """Hand over what is queued and ``final_metadata``; wait for the writer to close the file."""
         if self._sub is None:
             return
-        self._thread = end_polling(self._sub, self._stop, self._thread)
+        end_polling(self._sub, self._stop, self._thread)
+        self._thread = None
         self._send(self._sub.drain())
         self.drops = self._sub.drops
         self._sub = None
