@@ -31,8 +31,9 @@ def frame_of_yaw(yaw: float) -> np.ndarray:
     return out
 
 
-def extras_kwargs(extras: dict[str, Any], scene: Scene) -> dict[str, Any]:
-    """Pipeline keywords of ``ftc calibrate``'s optional fits (those that are not zero)."""
+def extra_corrections(extras: dict[str, Any], scene: Scene) -> dict[str, Any]:
+    """The pipeline's corrections (:class:`~ftc_hw.pipeline.Corrections` fields) of ``ftc calibrate``'s
+    optional fits (those that are not zero)."""
     out: dict[str, Any] = {}
     yaw = float(extras.get("mount_yaw", 0.0) or 0.0)
     if yaw:

@@ -3,9 +3,10 @@ parameters with their standard errors, the fit's figures and the pose set.
 
 ``load_calibration(path, scene=..., sensor_serial=...)`` checks it against the setup it is meant for
 and raises :class:`CalibrationError` (with the file and the key) on anything wrong: schema, scene,
-sensor serial, missing or malformed values. ``cal.pipeline_kwargs(scene)`` gives ``ContactPipeline``
-everything the file estimates: bias, payload, and (:mod:`.applied`) the mount yaw, gravity tilt,
-arm-gravity corrections and ``[identification]`` (``ftc identify``: link inertials, the load gain).
+sensor serial, missing or malformed values. ``cal.corrections(scene)`` gives ``ContactPipeline``
+(:class:`~ftc_hw.pipeline.Corrections`) everything the file estimates: bias, payload, and
+(:mod:`.applied`) the mount yaw, gravity tilt, arm-gravity corrections and ``[identification]``
+(``ftc identify``: link inertials, the load gain).
 """
 from __future__ import annotations
 
@@ -21,9 +22,10 @@ import numpy as np
 import tomli_w
 
 from ftc_hw.model import Payload
+from ftc_hw.pipeline import Corrections, ModelErrorSpec
 from ftc_hw.scene import Scene, load_scene
 
-from .applied import extras_kwargs, merge_inertials
+from .applied import extra_corrections, merge_inertials
 
 SCHEMA = 1
 KIND = "ftc-hw calibration"
@@ -62,11 +64,11 @@ class Identification:
             return np.eye(6)
         return self.gain.copy()
 
-    def model_error(self) -> dict[str, Any] | None:
-        """The pipeline's ``model_error`` keyword (:class:`ftc_hw.compensation.ModelError`)."""
+    def model_error(self) -> ModelErrorSpec | None:
+        """What the identified model may still get wrong, as the pipeline takes it."""
         if self.covariance is None:
             return None
-        return {"bodies": list(self.inertials), "cov": self.covariance.copy(), "gain": self.gain_fitted}
+        return ModelErrorSpec(tuple(self.inertials), self.covariance.copy(), self.gain_fitted)
 
     def to_dict(self) -> dict[str, Any]:
         out = {"date": self.date, "source": self.source, "verdict": self.verdict, "reasons": list(self.reasons),
@@ -142,8 +144,8 @@ class Calibration:
     rezero: list[dict[str, Any]] = field(default_factory=list)  # {date, bias}: re-zero history
     identification: Identification | None = None  # ftc identify's result
 
-    def pipeline_kwargs(self, scene: Scene | None = None) -> dict[str, Any]:
-        """``ContactPipeline(scene, **cal.pipeline_kwargs(scene))``: everything the file estimates.
+    def corrections(self, scene: Scene | None = None) -> Corrections:
+        """Everything the file estimates, as the pipeline takes it (``PipelineSettings(corrections=...)``).
         ``scene``: the one it was made for (None: the built-in scene of that name, when it has extras)."""
         out: dict[str, Any] = {"bias": self.bias.copy(), "payload": self.payload}
         extras = {}
@@ -153,7 +155,7 @@ class Calibration:
                     scene = load_scene(self.scene)
                 except ValueError as exc:
                     raise CalibrationError(f"its corrections need the scene {self.scene!r}: {exc}") from None
-            extras = extras_kwargs(self.extras, scene)
+            extras = extra_corrections(self.extras, scene)
         out.update({k: v for k, v in extras.items() if k != "inertials"})
         tables = [extras.get("inertials", {})]
         if self.identification is not None:
@@ -162,12 +164,11 @@ class Calibration:
             out["contact_gain"] = self.identification.told_gain()
             if self.identification.joints:
                 out["joints"] = {k: v.copy() for k, v in self.identification.joints.items()}
-            if self.identification.covariance is not None:
-                out["model_error"] = self.identification.model_error()
+            out["model_error"] = self.identification.model_error()
         inertials = merge_inertials(*tables)
         if inertials:
             out["inertials"] = inertials
-        return out
+        return Corrections(**out)
 
     def with_bias(self, bias, when: str | None = None) -> Calibration:
         """A copy with a new bias (a re-zero), the old one kept in the history."""

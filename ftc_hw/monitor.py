@@ -55,7 +55,7 @@ from .bus import (
     joints_topic,
     wrench_topic,
 )
-from .pipeline import ContactPipeline, FrameResult
+from .pipeline import ContactPipeline, FrameResult, PipelineSettings
 from .scene import Scene
 
 MONITOR_INPUT = "monitor/input"
@@ -97,10 +97,10 @@ class LiveMonitor:
     def __init__(self, bus: Bus, scene: Scene, *, ft_source: str = "ft", arm_source: str = "arm",
                  tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
                  max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, ft_lost_s: float = LOST_S,
-                 arm_lost_s: float = LOST_S, **pipeline_options) -> None:
+                 arm_lost_s: float = LOST_S, settings: PipelineSettings | None = None) -> None:
         self.bus = bus
         self.scene = scene
-        self.pipeline = ContactPipeline(scene, **pipeline_options)
+        self.pipeline = ContactPipeline(scene, settings)
         self.ft_topic = wrench_topic(ft_source)
         self.joint_topic = joints_topic(arm_source)
         self.tare_s = tare_s

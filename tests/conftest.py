@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from ftc_hw.model import ArmModel
+from ftc_hw.pipeline import SECTION_TYPES, PipelineSettings
 from ftc_hw.scene import Scene, load_scene
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
 
@@ -20,6 +21,16 @@ REALTIME_MODULES = {"test_bus_remote.py", "test_monitor.py", "test_stream_loss.p
 COMPUTE_MODULES = {"test_monitor_eval.py", "test_device_params.py", "test_dxl_protocol.py", "test_shells.py",
                    "test_world.py", "test_solve_cli.py", "test_warm.py", "test_vendor_output.py", "test_cli.py",
                    "test_reality.py", "test_sim_link.py", "test_record.py"}
+
+
+def settings(**values) -> PipelineSettings:
+    """Tests' shorthand: ``PipelineSettings`` from field names (``level="gravity", use_currents=False``),
+    each put in the section that has it."""
+    owner = {f: name for name, cls in SECTION_TYPES.items() for f in cls.__dataclass_fields__}
+    sections: dict[str, dict] = {name: {} for name in SECTION_TYPES}
+    for k, v in values.items():
+        sections[owner[k]][k] = v
+    return PipelineSettings(**{name: SECTION_TYPES[name](**kw) for name, kw in sections.items()})
 
 
 def pytest_collection_modifyitems(config, items):

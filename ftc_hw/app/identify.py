@@ -39,6 +39,7 @@ from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import MONITOR_INPUT
+from ftc_hw.pipeline import Corrections
 from ftc_hw.record.reader import Recording, RecordingError, read_recording
 from ftc_hw.scene import Scene
 
@@ -139,10 +140,10 @@ def base_calibration(scene: Scene, opts: IdentifyOptions) -> Calibration | None:
 def identify(scene: Scene, segments: list[MotionData], base: Calibration | None, source: str,
              gain: bool = True) -> tuple[Calibration, FreeMotionFit]:
     """Fit on top of ``base`` (its payload, corrections and frame) and return the updated calibration."""
-    kwargs = base.pipeline_kwargs(scene) if base is not None else {}
-    model_scene = scene if "gravity" not in kwargs else dataclasses.replace(scene, gravity=kwargs["gravity"])
-    arm = ArmModel(model_scene, kwargs.get("payload"), kwargs.get("inertials"))
-    frame = kwargs.get("frame")
+    c = base.corrections(scene) if base is not None else Corrections()
+    model_scene = scene if c.gravity is None else dataclasses.replace(scene, gravity=c.gravity)
+    arm = ArmModel(model_scene, c.payload, c.inertials)
+    frame = c.frame
     if frame is not None:  # fit in the model's sensor frame
         inv = np.linalg.inv(frame)
         segments = [dataclasses.replace(s, wrench=s.wrench @ inv.T) for s in segments]

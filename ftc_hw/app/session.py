@@ -6,6 +6,7 @@ ground truth when simulated) at the end. ``ftc monitor`` and ``ftc demo`` run th
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import signal
@@ -13,7 +14,6 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 from rich.console import Console
 from rich.live import Live
@@ -35,8 +35,8 @@ from ftc_hw.calibration.file import CalibrationError, load_calibration
 from ftc_hw.devices.base import frozen_heap, responsive_readers
 from ftc_hw.devices.registry import role_of
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
+from ftc_hw.pipeline import Corrections, PipelineSettings
 from ftc_hw.record.events import EventWriter, event_record, read_truth
-from ftc_hw.record.replay import pipeline_kwargs_to_json
 from ftc_hw.record.writer_process import RecorderProcess
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
@@ -55,22 +55,23 @@ from .web_feed import WebFeed, WebViewError
 SETTLE_S = 0.5
 
 
-def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[dict[str, Any], dict[str, str]]:
-    """``(pipeline kwargs, MCAP metadata)`` of a calibration file (issue 7's ``load_calibration``)."""
+def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[Corrections, dict[str, str]]:
+    """``(the pipeline's corrections, MCAP metadata)`` of a calibration file (``load_calibration``)."""
     try:
         cal = load_calibration(path, scene=scene, sensor_serial=None)
     except Exception as exc:  # noqa: BLE001 - its typed error (or an OS error): shown to the user
         raise MonitorSetupError(f"--calibration {path}: {exc}") from None
     try:
-        kwargs = {k: v for k, v in cal.pipeline_kwargs(scene).items() if v is not None}
+        corrections = cal.corrections(scene)
     except (CalibrationError, ValueError) as exc:
         raise MonitorSetupError(f"--calibration {path}: {exc}") from None
     text = Path(path).read_text(encoding="utf-8", errors="replace")
-    meta = {"file": str(path), "content": text, "pipeline": pipeline_kwargs_to_json(kwargs)}
-    applied = [k for k in ("frame", "gravity", "inertials", "gain", "joints", "model_error") if k in kwargs]
+    meta = {"file": str(path), "content": text, "pipeline": PipelineSettings(corrections=corrections).to_json()}
+    applied = [k for k in ("frame", "gravity", "inertials", "gain", "joints", "model_error")
+               if getattr(corrections, k) is not None]
     if applied:
         meta["applied"] = ", ".join(applied)
-    return kwargs, meta
+    return corrections, meta
 
 
 def _devices(scene: Scene, sim: bool, remote: bool = False) -> tuple[DeviceSpec, DeviceSpec | None]:
@@ -105,17 +106,17 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
         faults = [Fault.parse(f) for f in cfg.faults]
     except FaultError as exc:
         raise MonitorSetupError(str(exc)) from None
-    cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
+    corrections, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else (None, None)
     out = MonitorOutcome(0)
     if cal_meta and cal_meta.get("applied"):
-        console.print(f"calibration {cfg.calibration}: bias{', payload' if cal_kwargs.get('payload') else ''} and "
+        console.print(f"calibration {cfg.calibration}: bias{', payload' if corrections.payload else ''} and "
                       f"its corrections ({cal_meta['applied']})")
     # readers that poll, and the reflex, while the pipeline computes (the pipeline in the readers' tier even
     # when they run in processes of their own: at ordinary priority it fell behind the world and emulators
     # on a host with no core to spare, docs/bus.md); vendor C++ lines made readable
     with responsive_readers(), vendor_stderr() as vendor:
         out.vendor_lines = vendor.counts
-        return _run(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out, faults)
+        return _run(cfg, console, scene, ft_dev, arm_dev, corrections, cal_meta, out, faults)
 
 
 SIM_PROCESS_READERS_MIN_CPUS = 4
@@ -227,7 +228,7 @@ def _tare_then_go(cfg: MonitorConfig, monitor: LiveMonitor, world: WorldHost) ->
 
 
 def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
-         cal_kwargs: dict[str, Any], cal_meta: dict[str, str] | None, out: MonitorOutcome,
+         corrections: Corrections | None, cal_meta: dict[str, str] | None, out: MonitorOutcome,
          faults: list[Fault]) -> MonitorOutcome:
     with contextlib.ExitStack() as stack:
         _stop_on_sigterm(stack)
@@ -241,15 +242,16 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         ft_name, arm_name = ft_dev.name, arm_dev.name if arm_dev is not None else "arm"
         topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]
         ev_sub = bus.subscribe("events/", maxsize=None)
-        tare_s = None if cal_kwargs else 0.1
-        pipeline_kwargs = {**cal_kwargs, **({"level": cfg.level} if cfg.level else {})}
-        if cfg.refine and "model_error" in cal_kwargs:
-            pipeline_kwargs["refine"] = True
+        tare_s = None if corrections is not None else 0.1
+        settings = PipelineSettings(corrections=corrections or Corrections()).with_level(cfg.level)
+        if cfg.refine and corrections is not None and corrections.model_error is not None:
+            settings = settings.replace(motion=dataclasses.replace(settings.motion, refine=True))
         elif cfg.refine:
             console.print("[yellow]--refine: the calibration holds no identification (ftc identify): nothing to "
                           "refine[/]")
         console.print("loading the pipeline (its compiled kernels) ...")
-        monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
+        monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s,
+                              settings=settings)
         console.print(f"contact points on the scene's {monitor.pipeline.surface_source}"
                       + (" (its vendor meshes are not fetched: ftc scenes --fetch-meshes)"
                          if scene.robot.vendor_shell and monitor.pipeline.surface_source == "primitives" else ""))
@@ -257,7 +259,7 @@ def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec,
         if cfg.record:
             recorder = _start_recorder(cfg, scene, bus, {
                 "ft_source": ft_name, "arm_source": arm_name, "tare_s": str(tare_s),
-                "pipeline": pipeline_kwargs_to_json(pipeline_kwargs), "ftc_hw": __version__, "sim": str(cfg.sim),
+                "pipeline": settings.to_json(), "ftc_hw": __version__, "sim": str(cfg.sim),
                 "scenario": cfg.scenario if cfg.sim else "", "seed": str(cfg.seed),
                 "started_host_ns": str(time.monotonic_ns())}, cal_meta)
             stack.callback(recorder.stop)  # on a failed start; a no-op after the final stop below

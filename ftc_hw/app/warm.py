@@ -20,7 +20,7 @@ from numba.core.dispatcher import Dispatcher
 from ftc_hw.bus import ClockAligner
 from ftc_hw.detection.kernels import mahalanobis2, quad_sum
 from ftc_hw.model import ArmModel, Contact
-from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.pipeline import ContactPipeline, PipelineSettings
 from ftc_hw.scene import Scene, builtin_names, load_scene
 from ftc_hw.sim_devices.world import SCENARIOS, World, build_scenario
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
@@ -45,14 +45,14 @@ def _world(scene: Scene) -> None:
 def _pipeline(scene: Scene) -> None:
     """The monitor process: a pipeline calls each of its kernels once when it is built; then the
     detector's kernels with the model error the pipeline passes once the arm moves, whose rows are
-    a transposed array (Fortran order: another signature, ContactPipeline._model_error), and the
+    a transposed array (Fortran order: another signature, MotionStage._model_error), and the
     solver's tree kinematics, which a contact's track asks for at a q the last solve was not at."""
-    pipe = ContactPipeline(scene, level="dynamics")
+    pipe = ContactPipeline(scene, PipelineSettings().with_level("dynamics"))
     ClockAligner()  # the monitor's and the readers' clock alignment: its fit's kernels load with the first one
     rows = np.zeros((6, 2)).T
     mahalanobis2(np.zeros(6), pipe.detector.cov, rows)
     quad_sum(rows, pipe.detector.inv)
-    pipe.solver.body_poses(np.asarray(scene.robot.home, dtype=float) + 0.01)
+    pipe.localization.solver.body_poses(np.asarray(scene.robot.home, dtype=float) + 0.01)
 
 
 def _evaluation(scene: Scene) -> None:

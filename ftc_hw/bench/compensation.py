@@ -23,7 +23,7 @@ from rich.table import Table
 from ftc_hw.bench.report import table_console
 from ftc_hw.devices.registry import role_of
 from ftc_hw.model import ArmModel
-from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.pipeline import ContactPipeline, PipelineSettings
 from ftc_hw.scene import COMPENSATION_LEVELS, Scene, builtin_names, load_scene
 from ftc_hw.sim_devices.world import World, with_reality
 from ftc_hw.sim_devices.world.scenarios import SCENARIOS
@@ -95,7 +95,7 @@ def record(scene: Scene, scenario: str, duration: float, speed: float, seed: int
 
 
 def evaluate(scene: Scene, rec: Recording, level: str) -> dict:
-    pipe = ContactPipeline(scene, level=level)
+    pipe = ContactPipeline(scene, PipelineSettings().with_level(level))
     # tare on the settled arm, in the rest the sweeps begin with
     i0, i1 = np.searchsorted(rec.t, [TARE_FROM_S, TARE_FROM_S + TARE_S])
     pipe.compensator.tare(rec.wrench[i0:i1].mean(axis=0), rec.q[i0:i1].mean(axis=0), np.zeros(scene.n_joints),

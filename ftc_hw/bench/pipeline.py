@@ -42,7 +42,7 @@ import numpy as np
 from rich.table import Table
 
 from ftc_hw.bench.compensation import Recording, _episodes, arm_rate, record
-from ftc_hw.bench.pipeline_stages import STAGES, instrument, summarize_us
+from ftc_hw.bench.pipeline_stages import FrameClock, StageTimer, summarize_us
 from ftc_hw.bench.report import table_console
 from ftc_hw.bus import Bus, JointFrame, WrenchFlag, WrenchFrame, wrench_topic
 from ftc_hw.codecs.netft_rdt import RdtRecord, encode_records
@@ -51,6 +51,7 @@ from ftc_hw.devices.ft_base import FTAdapter
 from ftc_hw.devices.netft_rdt import RdtFTAdapter
 from ftc_hw.devices.registry import role_of
 from ftc_hw.monitor import LiveMonitor
+from ftc_hw.pipeline import STAGES
 from ftc_hw.scene import Scene, load_scene
 
 HOST_EPOCH_NS = 10**12  # host time of the world's t = 0
@@ -148,18 +149,8 @@ def monitor_pass(scene: Scene, rec: Recording, staged: bool) -> dict[str, Any]:
     the stages' ns (``staged``), and the onsets (frame index)."""
     ft, joints = _frames(scene, rec)
     mon = LiveMonitor(Bus(), scene, tare_s=0.1)
-    timer = instrument(mon) if staged else None
-    process_ns = [0, 0]  # wall, thread CPU
-    process = mon.pipeline.process
-
-    def timed_process(*args, **kwargs):
-        c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
-        try:
-            return process(*args, **kwargs)
-        finally:
-            process_ns[0] = time.perf_counter_ns() - t0
-            process_ns[1] = time.thread_time_ns() - c0
-    mon.pipeline.process = timed_process
+    clock = StageTimer() if staged else FrameClock()
+    mon.pipeline.clock = clock
     n = len(ft)
     handle, proc, proc_cpu, cpu = (np.zeros(n, dtype=np.int64) for _ in range(4))
     stages = np.zeros((n, len(STAGES)), dtype=np.int64)
@@ -167,15 +158,13 @@ def monitor_pass(scene: Scene, rec: Recording, staged: bool) -> dict[str, Any]:
     for i, frame in enumerate(ft):
         for jf in joints[i]:
             mon.on_joints(jf)
-        if timer is not None:
-            timer.start_frame()
-        process_ns[0] = process_ns[1] = 0
+        clock.reset()
         c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
         mf = mon.handle(frame)
         handle[i], cpu[i] = time.perf_counter_ns() - t0, time.thread_time_ns() - c0
-        proc[i], proc_cpu[i] = process_ns
-        if timer is not None:
-            stages[i] = timer.frame_times()
+        proc[i], proc_cpu[i] = clock.wall_ns, clock.cpu_ns
+        if staged:
+            stages[i] = clock.frame_times()
         if mf is not None and any(e.kind == "onset" for e in mf.result.events):
             onsets.append(i)
     judged = proc > 0

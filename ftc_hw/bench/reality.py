@@ -19,6 +19,7 @@ difference at a time, what each costs without identification (``only:<difference
 """
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 import json
 import math
@@ -37,7 +38,7 @@ from ftc_hw.bench.compensation import Recording, record
 from ftc_hw.bench.report import table_console
 from ftc_hw.calibration.free_motion import MotionData
 from ftc_hw.model.mesh_surface import MeshShell, pipeline_mesh_shell
-from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.pipeline import ContactPipeline, Corrections, LocalizationSettings, MotionSettings, PipelineSettings
 from ftc_hw.scene import Scene, builtin_names, load_scene
 from ftc_hw.sim_devices.world import DIFFERENCES, with_reality
 from ftc_hw.tracking import FUSED_FLAGS
@@ -88,24 +89,25 @@ def run_job(job: Job) -> dict[str, Any]:
     scene = load_scene(job.scene)
     only = (job.column.only,) if job.column.only else None
     world = with_reality(scene, job.column.reality, seed=job.draw, only=only)
-    kwargs: dict[str, Any] = {}
+    corrections = Corrections()
     if job.column.identify_from:
         train = record(scene, job.column.identify_from, job.identify_s, 1.0, 1000 + job.draw, world)
         cal, _ = identify(scene, [MotionData(train.t, train.wrench, train.q, train.qd, train.current)], None,
                           f"bench: {job.column.identify_from}")
-        kwargs = cal.pipeline_kwargs(scene)
-        kwargs.pop("bias", None)  # tared at rest like every column
+        corrections = dataclasses.replace(cal.corrections(scene), bias=None)  # tared at rest like every column
     shell = pipeline_mesh_shell(scene)
-    free = _run(scene, record(scene, "sweep", job.free_s, 1.0, job.draw, world), kwargs)
-    moving = _run(scene, record(scene, "sweep-with-collision", job.contact_s, 1.0, job.draw, world), kwargs, shell)
-    pokes = _run(scene, record(scene, "static-pokes", job.contact_s, 1.0, job.draw, world), kwargs, shell)
+    settings = PipelineSettings(corrections=corrections, motion=MotionSettings(level="dynamics"),
+                                localization=LocalizationSettings(surface="primitives"))
+    free = _run(scene, record(scene, "sweep", job.free_s, 1.0, job.draw, world), settings)
+    moving = _run(scene, record(scene, "sweep-with-collision", job.contact_s, 1.0, job.draw, world), settings, shell)
+    pokes = _run(scene, record(scene, "static-pokes", job.contact_s, 1.0, job.draw, world), settings, shell)
     return _summarize(free, [moving, pokes])
 
 
-def _run(scene: Scene, rec: Recording, kwargs: dict[str, Any], shell: MeshShell | None = None) -> dict[str, Any]:
+def _run(scene: Scene, rec: Recording, settings: PipelineSettings, shell: MeshShell | None = None) -> dict[str, Any]:
     """The pipeline over one recording. Its events are taken on the primitives and moved onto ``shell``
     by the pipeline's own step (what it does with ``surface="meshes"``), so both are measured."""
-    pipe = ContactPipeline(scene, level="dynamics", surface="primitives", **kwargs)
+    pipe = ContactPipeline(scene, settings)
     i0, i1 = np.searchsorted(rec.t, [TARE_FROM_S, TARE_FROM_S + TARE_S])
     pipe.tare(rec.wrench[i0:i1].mean(axis=0), rec.q[i0:i1].mean(axis=0), i1 - i0, int(rec.t[i1] * 1e9))
     resid, stat, onsets, offsets, points = [], [], [], [], []

@@ -15,7 +15,7 @@ from ftc_hw.bus import Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import event_line
 from ftc_hw.record.reader import RecordingError, read_recording
-from ftc_hw.record.replay import ReplayError, recorded_scene, replay
+from ftc_hw.record.replay import ReplayError, recorded_scene, recorded_settings, replay
 
 
 def run_replay(path: Path, speed: float, events_path: Path | None, calibration: Path | None, check: bool,
@@ -24,7 +24,9 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
     try:
         rec = read_recording(path)
         scene = recorded_scene(rec)
-        kwargs = load_pipeline_calibration(calibration, scene)[0] if calibration else None
+        settings = recorded_settings(rec)
+        if calibration:  # the recorded settings with this calibration's corrections
+            settings = settings.replace(corrections=load_pipeline_calibration(calibration, scene)[0])
     except (RecordingError, ReplayError, MonitorSetupError, OSError) as exc:
         typer.echo(f"error: {exc}", err=True)
         return 1
@@ -68,7 +70,7 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
     try:
         if live is not None:
             live.start()
-        result = replay(rec, scene=scene, pipeline_kwargs=kwargs, speed=0.0 if timeline else speed, bus=bus,
+        result = replay(rec, scene=scene, settings=settings, speed=0.0 if timeline else speed, bus=bus,
                         on_message=on_message,
                         monitor_ready=ready)
     except ReplayError as exc:

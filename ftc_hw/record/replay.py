@@ -5,15 +5,13 @@ the live view's stream statistics, on their recorded host times).
 """
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, STREAM_EVENT_KINDS, Bus, ContactEvent, DeviceEvent
-from ftc_hw.model import Payload
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
+from ftc_hw.pipeline import PipelineSettings, SettingsError
 from ftc_hw.record.events import event_record
 from ftc_hw.scene import Scene, SceneError, load_scene
 
@@ -22,28 +20,6 @@ from .reader import Recording
 
 class ReplayError(Exception):
     pass
-
-
-def pipeline_kwargs_to_json(kwargs: dict[str, Any]) -> str:
-    out: dict[str, Any] = {}
-    for k, v in kwargs.items():
-        if isinstance(v, Payload):
-            out[k] = {"mass": v.mass, "com": list(v.com)}
-        elif hasattr(v, "tolist"):
-            out[k] = v.tolist()
-        elif isinstance(v, dict):  # inertials (body -> array), joints, model_error
-            out[k] = {b: (x.tolist() if hasattr(x, "tolist") else x) for b, x in v.items()}
-        else:
-            out[k] = v
-    return json.dumps(out)
-
-
-def pipeline_kwargs_from_json(text: str) -> dict[str, Any]:
-    out = json.loads(text)
-    if isinstance(out.get("payload"), dict):
-        p = out["payload"]
-        out["payload"] = Payload(float(p["mass"]), tuple(float(x) for x in p["com"]))
-    return out
 
 
 def recorded_scene(rec: Recording) -> Scene:
@@ -58,6 +34,14 @@ def recorded_scene(rec: Recording) -> Scene:
         except (SceneError, OSError):
             continue
     raise ReplayError(f"{rec.path}: scene {meta.get('name')!r} ({meta.get('path')}) not found; give --scene")
+
+
+def recorded_settings(rec: Recording) -> PipelineSettings:
+    """The pipeline's settings the recording was made with (any version's form; ReplayError if unreadable)."""
+    try:
+        return PipelineSettings.from_json(rec.metadata.get("monitor", {}).get("pipeline", "{}"))
+    except SettingsError as exc:
+        raise ReplayError(f"{rec.path}: {exc}") from None
 
 
 @dataclass
@@ -85,21 +69,21 @@ class ReplayResult:
         return None
 
 
-def replay(rec: Recording, *, scene: Scene | None = None, pipeline_kwargs: dict[str, Any] | None = None,
+def replay(rec: Recording, *, scene: Scene | None = None, settings: PipelineSettings | None = None,
            speed: float = 0.0, bus: Bus | None = None, on_message: Callable[[LiveMonitor], None] | None = None,
            monitor_ready: Callable[[LiveMonitor], None] | None = None) -> ReplayResult:
-    """``speed``: 0 as fast as possible, else the recording's pace times ``speed``. ``pipeline_kwargs``:
+    """``speed``: 0 as fast as possible, else the recording's pace times ``speed``. ``settings``:
     instead of the recorded ones (e.g. another calibration). ``on_message``: called after each message."""
     scene = scene or recorded_scene(rec)
     meta = rec.metadata.get("monitor", {})
-    kwargs = pipeline_kwargs_from_json(meta.get("pipeline", "{}")) if pipeline_kwargs is None else pipeline_kwargs
+    settings = recorded_settings(rec) if settings is None else settings
     tare = meta.get("tare_s", "0.1")
     inputs = [m for m in rec.messages if m.topic == MONITOR_INPUT]
     if not inputs:
         raise ReplayError(f"{rec.path}: no {MONITOR_INPUT} messages (not recorded by ftc monitor)")
     bus = bus or Bus()
     monitor = LiveMonitor(bus, scene, ft_source=meta.get("ft_source", "ft"), arm_source=meta.get("arm_source", "arm"),
-                          tare_s=None if tare in ("", "None") else float(tare), publish_inputs=False, **kwargs)
+                          tare_s=None if tare in ("", "None") else float(tare), publish_inputs=False, settings=settings)
     if monitor_ready is not None:
         monitor_ready(monitor)
     sub = bus.subscribe("events/", maxsize=None)

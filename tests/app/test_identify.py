@@ -89,7 +89,8 @@ def test_identification_goes_into_the_calibration_file_on_top_of_its_payload(tmp
     np.testing.assert_allclose(cal.bias[:3], [0.2, -0.1, 0.3], atol=0.05)
     back = load_calibration(save_calibration(cal, tmp_path / "cal.toml"), scene=SCENE)
     assert back.identification.source == "synthetic.mcap" and back.rezero  # the old bias kept in the history
-    assert "inertials" in back.pipeline_kwargs(SCENE) and "gain" in back.pipeline_kwargs(SCENE)
+    corrections = back.corrections(SCENE)
+    assert corrections.inertials is not None and corrections.gain is not None
 
 
 def test_too_little_free_motion_is_a_clear_error():

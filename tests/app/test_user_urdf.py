@@ -74,4 +74,4 @@ def test_a_users_urdf_with_mesh_links_calibrates_monitors_and_identifies(tmp_pat
     check_png(ident.with_suffix(".png"), IDENTIFY_PX)
     back = load_calibration(ident, scene=scene)
     assert back.identification is not None and back.identification.source.endswith("run.mcap")
-    assert "inertials" in back.pipeline_kwargs(scene)
+    assert back.corrections(scene).inertials is not None

@@ -16,6 +16,7 @@ from ftc_hw.app.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.bus import Bus
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor, PipelineInput
+from ftc_hw.pipeline import PipelineSettings
 from ftc_hw.record.events import event_record
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import World, build_scenario, truth_record
@@ -40,7 +41,7 @@ def demo_path(scene_name: str = "ur5e", scenario: str = "sweep-with-collision", 
     Returns the number of contact events."""
     scene = load_scene(scene_name)
     world = World(scene, build_scenario(scenario, scene, ArmModel(scene), seed=1, duration=seconds), seed=1)
-    monitor = LiveMonitor(Bus(), scene, level="dynamics")
+    monitor = LiveMonitor(Bus(), scene, settings=PipelineSettings().with_level("dynamics"))
     events, truth = [], []
     for seq, (state, reading) in enumerate(world.run(seconds)):
         t_ns = int(round(state.t * 1e9))

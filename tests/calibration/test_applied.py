@@ -18,9 +18,9 @@ from ftc_hw.calibration.file import (
 )
 from ftc_hw.calibration.regressor import GeometryModel, predict
 from ftc_hw.model import ArmModel, Payload
-from ftc_hw.pipeline import ContactPipeline
-from ftc_hw.record.replay import pipeline_kwargs_from_json, pipeline_kwargs_to_json
+from ftc_hw.pipeline import ContactPipeline, PipelineSettings
 from ftc_hw.scene import load_scene
+from tests.conftest import settings
 
 
 @pytest.mark.parametrize("name", ["ur5e", "dxl-arm"])
@@ -35,9 +35,9 @@ def test_calibrated_extras_reach_the_compensator(name):
     extras.update({name_k: float(b) for name_k, b in zip(basis.names, beta, strict=True)})
     cal = Calibration(scene=scene.name, sensor_serial=None, date="2026-11-26T00:00:00Z", bias=bias, payload=payload,
                       extras=extras)
-    kwargs = cal.pipeline_kwargs(scene)
-    assert {"frame", "gravity", "inertials"} <= set(kwargs)
-    pipe = ContactPipeline(scene, level="gravity", **kwargs)
+    corrections = cal.corrections(scene)
+    assert all(getattr(corrections, k) is not None for k in ("frame", "gravity", "inertials"))
+    pipe = ContactPipeline(scene, PipelineSettings(corrections=corrections).with_level("gravity"))
     theta = np.concatenate([bias, [payload.mass], payload.mass * np.asarray(payload.com)])
     rng = np.random.default_rng(0)
     lo, hi = gm.arm.joint_limits()
@@ -47,7 +47,7 @@ def test_calibrated_extras_reach_the_compensator(name):
                            (extras["gravity_tilt_x"], extras["gravity_tilt_y"]), basis.delta(beta))
         # what the pipeline leaves of that reading is nothing: it predicts the same load
         np.testing.assert_allclose(pipe.compensator.external(expected, q), np.zeros(6), atol=1e-9)
-    plain = ContactPipeline(scene, level="gravity", bias=bias, payload=payload)
+    plain = ContactPipeline(scene, settings(level="gravity", bias=bias, payload=payload))
     assert np.abs(plain.compensator.external(expected, q)).max() > 1e-3  # the corrections matter
 
 
@@ -63,9 +63,8 @@ def test_identification_round_trips_through_the_file_and_the_recording(tmp_path)
     np.testing.assert_allclose(back.identification.gain, gain)
     np.testing.assert_allclose(back.identification.inertials["forearm"], np.arange(10) * 1e-3)
     assert back.identification.untold == ["wrist_3.Ixx"]
-    kwargs = back.pipeline_kwargs(scene)
-    restored = pipeline_kwargs_from_json(pipeline_kwargs_to_json(kwargs))
-    pipe = ContactPipeline(scene, **restored)
+    restored = PipelineSettings.from_json(PipelineSettings(corrections=back.corrections(scene)).to_json())
+    pipe = ContactPipeline(scene, restored)
     np.testing.assert_allclose(pipe.compensator.gain, gain)
     # the contact's wrench: the file's contact_gain undone (the identified gain where the data told it);
     # a file without one (written before): a wholly told gain undone, one with an untold term left as read
@@ -77,8 +76,8 @@ def test_identification_round_trips_through_the_file_and_the_recording(tmp_path)
     told = dataclasses.replace(ident, untold=["gain[3,4]"])
     contact = np.array([5.0, -8.0, 12.0, 0.4, 2.0, -0.3])
     for ident_i, undone in ((ident, gain), (told, np.eye(6)), (back_kept.identification, partly)):
-        kw = dataclasses.replace(cal, identification=ident_i).pipeline_kwargs(scene)
-        comp = ContactPipeline(scene, **kw).compensator
+        corrections = dataclasses.replace(cal, identification=ident_i).corrections(scene)
+        comp = ContactPipeline(scene, PipelineSettings(corrections=corrections)).compensator
         np.testing.assert_allclose(comp.gain, gain)  # the arm's loads: the whole estimate either way
         np.testing.assert_allclose(comp.contact_wrench(gain @ contact, np.zeros(6)),
                                    np.linalg.solve(undone, gain @ contact), atol=1e-12)

@@ -27,11 +27,12 @@ from ftc_hw.calibration.plan import candidate_poses
 from ftc_hw.calibration.regressor import arm_load, core_rows
 from ftc_hw.compensation import Compensator
 from ftc_hw.model import ArmModel, Payload
-from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.pipeline import ContactPipeline, PipelineSettings
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import World
 from ftc_hw.sim_devices.world.trajectory import Hold, PointToPoint
 from ftc_hw.sim_devices.world.world import Probe, ScenarioSetup
+from tests.conftest import settings
 
 SCENE = load_scene("dxl-arm")  # FT 300: 0.1 N / 0.005 N m (Mz 0.003) per axis at 100 Hz
 TICK = 2 * np.pi / 4096  # DYNAMIXEL X-series position resolution
@@ -329,8 +330,9 @@ def test_calibration_file_round_trip(tmp_path, good_fit, plan12):
     assert np.allclose(back.poses, plan12.q)
     assert back.samples_per_pose == 100
     assert np.allclose(back.std["com_m"], good_fit.derived_std["com"])
-    kw = back.pipeline_kwargs()
-    assert set(kw) == {"bias", "payload"} and np.allclose(kw["bias"], good_fit.bias)
+    corrections = back.corrections()
+    given = {f.name for f in dataclasses.fields(corrections) if getattr(corrections, f.name) is not None}
+    assert given == {"bias", "payload"} and np.allclose(corrections.bias, good_fit.bias)
     assert load_calibration(path, scene="dxl-arm", sensor_serial=None).date == cal.date
 
 
@@ -360,8 +362,8 @@ def test_the_pipeline_loads_the_calibration(tmp_path, identifier, plan12):
     fit = identifier.fit(samples)
     path = save_calibration(calibration_from_fit(fit, SCENE, "FTS-0042", plan12.q, 100), tmp_path / "c.toml")
     cal = load_calibration(path, scene=SCENE, sensor_serial="FTS-0042")
-    pipe = ContactPipeline(SCENE, level="gravity", **cal.pipeline_kwargs())
-    uncal = ContactPipeline(SCENE, level="gravity")
+    pipe = ContactPipeline(SCENE, PipelineSettings(corrections=cal.corrections()).with_level("gravity"))
+    uncal = ContactPipeline(SCENE, settings(level="gravity"))
     noise = np.sqrt(np.diag(SCENE.sensor.noise_cov))
     for s in samples:
         ext = pipe.compensator.external(s.wrench, s.q)

@@ -12,6 +12,7 @@ from ftc_hw.model import ArmModel, Contact
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import Hold, Probe, ScenarioSetup, Sinusoid, World, build_scenario
+from tests.conftest import settings
 
 
 def test_levels_compute_only_what_they_need(monkeypatch):
@@ -213,19 +214,19 @@ def test_the_lag_error_sees_a_pulse_whose_ends_agree():
     """The acceleration estimate rises by 0.2 rad/s^2 and falls back within the 4 ms window: the
     change across the window is zero, the lag error is not (the estimate still lags by the pulse)."""
     scene = load_scene("leng2016")
-    pipe = ContactPipeline(scene, level="dynamics")
+    pipe = ContactPipeline(scene, settings(level="dynamics"))
     n = scene.n_joints
     pulse = [0.0, 0.1, 0.2, 0.1, 0.0]
-    out = [pipe._lag_errors(i * 1_000_000, np.full(n, a))[0] for i, a in enumerate(pulse)]
+    out = [pipe.motion._lag_errors(i * 1_000_000, np.full(n, a))[0] for i, a in enumerate(pulse)]
     assert out[0] is None  # nothing to compare with yet
-    assert out[-1] is not None and np.allclose(out[-1], pipe.lag_gain * 0.2)
+    assert out[-1] is not None and np.allclose(out[-1], pipe.motion.lag_gain * 0.2)
     # a still arm: no lag error, no inverse dynamics spent on it
-    still = ContactPipeline(scene, level="dynamics")
-    assert all(still._lag_errors(i * 1_000_000, np.zeros(n)) == (None, None) for i in range(10))
+    still = ContactPipeline(scene, settings(level="dynamics"))
+    assert all(still.motion._lag_errors(i * 1_000_000, np.zeros(n)) == (None, None) for i in range(10))
     # a sparse stream (100 Hz, longer than the window) still compares with its previous sample
-    sparse = ContactPipeline(scene, level="dynamics")
-    sparse._lag_errors(0, np.zeros(n))
-    assert np.allclose(sparse._lag_errors(10_000_000, np.full(n, 0.5))[0], sparse.lag_gain * 0.5)
+    sparse = ContactPipeline(scene, settings(level="dynamics"))
+    sparse.motion._lag_errors(0, np.zeros(n))
+    assert np.allclose(sparse.motion._lag_errors(10_000_000, np.full(n, 0.5))[0], sparse.motion.lag_gain * 0.5)
 
 
 def test_the_detector_s_lag_window_holds_three_samples_of_a_slow_sensor():
@@ -235,17 +236,17 @@ def test_the_detector_s_lag_window_holds_three_samples_of_a_slow_sensor():
     false alarm. The solver's lag error keeps 2 tau (a longer one cost localization)."""
     scene = load_scene("dxl-arm")
     assert scene.sensor.rate_hz == 100.0
-    pipe = ContactPipeline(scene, level="dynamics")
+    pipe = ContactPipeline(scene, settings(level="dynamics"))
     n = scene.n_joints
     step = [np.zeros(n)] + [np.full(n, 0.5)] * 5
-    out = [pipe._lag_errors(i * 10_000_000, a) for i, a in enumerate(step)]
-    assert np.allclose(out[1][0], pipe.lag_gain * 0.5) and np.allclose(out[1][1], pipe.lag_gain * 0.5)
+    out = [pipe.motion._lag_errors(i * 10_000_000, a) for i, a in enumerate(step)]
+    assert np.allclose(out[1][0], pipe.motion.lag_gain * 0.5) and np.allclose(out[1][1], pipe.motion.lag_gain * 0.5)
     for k in (2, 3, 4):  # one, two, three samples later: held (the window and the newest sample before it)
-        assert out[k][1] is not None and np.allclose(out[k][1], pipe.lag_gain * 0.5), k
+        assert out[k][1] is not None and np.allclose(out[k][1], pipe.motion.lag_gain * 0.5), k
         assert out[k][0] is None, k  # the solver's: the previous sample only
     assert out[5][1] is None  # the step has left the window: no lag left
-    fast = ContactPipeline(load_scene("ur5e"), level="dynamics")  # 1 kHz: 2 tau holds three samples
-    assert fast._judge_window_ns == fast._lag_window_ns
+    fast = ContactPipeline(load_scene("ur5e"), settings(level="dynamics"))  # 1 kHz: 2 tau holds three samples
+    assert fast.motion._judge_window_ns == fast.motion.lag_window_ns
 
 
 def test_the_compiled_per_frame_steps_give_numpy_s_numbers_to_the_bit():

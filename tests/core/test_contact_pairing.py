@@ -8,6 +8,7 @@ import pytest
 
 from ftc_hw.model import Contact
 from ftc_hw.pipeline import ContactPipeline
+from tests.conftest import settings
 
 RATE_HZ = 1000.0
 
@@ -27,7 +28,7 @@ def _run(pipe, model, q, point, normal, profile, rng, t0_ns=0):
 
 def test_a_contact_s_events_share_an_id_and_its_offset_carries_its_last_estimate(link3_push):
     scene, model, q, point, normal = link3_push
-    pipe = ContactPipeline(scene, level="gravity", use_currents=False)
+    pipe = ContactPipeline(scene, settings(level="gravity", use_currents=False))
     rng = np.random.default_rng(1)
     push = np.concatenate([np.linspace(0, 30, 50), np.full(200, 30.0), np.linspace(30, 0, 50)])
     profile = np.concatenate([np.zeros(100), push, np.zeros(100), np.full(100, 20.0), np.zeros(100)])
@@ -55,7 +56,7 @@ def test_a_contact_s_events_share_an_id_and_its_offset_carries_its_last_estimate
 
 def test_a_lost_stream_closes_the_open_contact_with_a_lost_offset(link3_push):
     scene, model, q, point, normal = link3_push
-    pipe = ContactPipeline(scene, level="gravity", use_currents=False)
+    pipe = ContactPipeline(scene, settings(level="gravity", use_currents=False))
     rng = np.random.default_rng(2)
     events = _run(pipe, model, q, point, normal, np.concatenate([np.zeros(50), np.full(100, 25.0)]), rng)
     assert pipe.in_contact and [e.kind for e in events].count("offset") == 0

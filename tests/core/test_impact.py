@@ -10,6 +10,7 @@ from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import build_scenario
 from ftc_hw.sim_devices.world.world import World
+from tests.conftest import settings
 
 SCENE = load_scene("leng2016")
 WINDOW_S = 0.005
@@ -21,7 +22,7 @@ def first_collision(noise: bool, measured_qdd: bool = False, **kwargs) -> list[t
     exact at every F/T sample)."""
     setup = build_scenario("sweep-with-collision", SCENE, ArmModel(SCENE), 0, 2.1)
     world = World(SCENE, setup, seed=3, noise=noise)
-    pipe = ContactPipeline(SCENE, level="dynamics", bias=np.zeros(6), **kwargs)
+    pipe = ContactPipeline(SCENE, settings(level="dynamics", bias=np.zeros(6), **kwargs))
     out, onset = [], None
     for state, reading in world.run(2.1):
         raw = reading.wrench if noise else state.wrench
@@ -30,7 +31,7 @@ def first_collision(noise: bool, measured_qdd: bool = False, **kwargs) -> list[t
         if r.detection.change == "onset":
             onset = r.detection.onset_t_ns * 1e-9
         if onset is not None and r.estimate is not None and state.contacts:
-            fused = pipe.track.fused if pipe.track is not None and pipe.track.active else 0
+            fused = pipe.events.track.fused if pipe.events.track is not None and pipe.events.track.active else 0
             out.append((state.t - onset, r.estimate, state.contacts[0].point, fused))
         if onset is not None and state.t - onset > 0.03:
             return out

@@ -14,6 +14,7 @@ from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import World, build_scenario
+from tests.conftest import settings
 
 SCENE = load_scene("ur5e")
 REVERSAL_S = 2.3  # the sweep's high end (0.3 s at rest, then a 4 s period)
@@ -50,7 +51,7 @@ def monitor_onsets(wrenches, joints, missed_from_s: float, **options) -> tuple[l
     the joint stream is complete before the F/T frames go in (the live monitor waits for it)."""
     bus = Bus()
     events = bus.subscribe(EVENTS_CONTACT, maxsize=None)
-    monitor = LiveMonitor(bus, SCENE, publish_inputs=False, **options)
+    monitor = LiveMonitor(bus, SCENE, publish_inputs=False, settings=settings(**options))
     start = round(missed_from_s * 1e9)
     for j in joints:
         if not start <= j.t_host_ns < start + MISSED * 2_000_000:

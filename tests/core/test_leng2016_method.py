@@ -15,6 +15,7 @@ from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import _cone, visible_filter
 from ftc_hw.solver import BatchEstimate, ContactEstimate, ContactSolver, Solver, flag_names, make_solver
 from ftc_hw.solver.leng2016 import Leng2016Solver, _inliers
+from tests.conftest import settings
 from tests.model import geometry_reference as G
 
 PAPER_Q = np.array([math.pi / 6, -math.pi / 6, -math.pi / 4])  # section 6
@@ -230,8 +231,8 @@ def test_both_methods_are_solvers_and_either_drives_the_pipeline(setup, cases):
     e = leng.solve(w, PAPER_Q, tau_std=np.ones(3), extra_cov=np.zeros((6, 6)))
     assert _exact(e, sp, force)
     assert "invalid_input" in leng.solve(w, PAPER_Q, extra_cov=np.full((6, 6), np.nan)).flags
-    pipe = ContactPipeline(scene, level="bias", bias=np.zeros(6), use_currents=False, method="leng2016")
-    assert isinstance(pipe.solver, Leng2016Solver)
+    pipe = ContactPipeline(scene, settings(level="bias", bias=np.zeros(6), use_currents=False, method="leng2016"))
+    assert isinstance(pipe.localization.solver, Leng2016Solver)
     std = np.sqrt(np.diag(scene.sensor.noise_cov))
     rng = np.random.default_rng(5)
     events = []

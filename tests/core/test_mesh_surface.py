@@ -11,6 +11,7 @@ from ftc_hw.model.mesh_surface import pipeline_mesh_shell
 from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
 from ftc_hw.scene.vendor import VENDOR_SHELLS, shell_fetched
+from tests.conftest import settings
 
 UR5E = load_scene("ur5e")
 HOME = np.array(UR5E.robot.home, dtype=float)
@@ -37,8 +38,8 @@ def test_an_event_on_a_meshed_link_lies_on_its_meshes(link):
     assert on_mesh is not None
     wrench = model.predicted_wrench(HOME, level="bias", contacts=[Contact(link, on_mesh, 40.0 * inward)])
     kwargs = dict(level="bias", bias=np.zeros(6), use_currents=False)
-    meshes = _onset(ContactPipeline(UR5E, **kwargs), wrench)
-    primitives = _onset(ContactPipeline(UR5E, surface="primitives", **kwargs), wrench)
+    meshes = _onset(ContactPipeline(UR5E, settings(**kwargs)), wrench)
+    primitives = _onset(ContactPipeline(UR5E, settings(surface="primitives", **kwargs)), wrench)
     assert meshes.link == primitives.link == link
     assert np.linalg.norm(meshes.point - on_mesh) < 1e-6
     assert np.linalg.norm(primitives.point - on_mesh) > 2e-4  # the primitives round UR's shapes off
@@ -48,36 +49,37 @@ def test_an_event_on_a_meshed_link_lies_on_its_meshes(link):
 
 
 def test_the_surface_answered_on_is_said_and_a_bad_one_refused():
-    assert ContactPipeline(UR5E, level="bias").surface_source == "meshes"
-    assert ContactPipeline(UR5E, level="bias", surface="primitives").surface_source == "primitives"
-    assert ContactPipeline(load_scene("dxl-arm"), level="bias").surface_source == "primitives"  # no meshes
+    assert ContactPipeline(UR5E, settings(level="bias")).surface_source == "meshes"
+    assert ContactPipeline(UR5E, settings(level="bias", surface="primitives")).surface_source == "primitives"
+    assert ContactPipeline(load_scene("dxl-arm"), settings(level="bias")).surface_source == "primitives"  # no meshes
     with pytest.raises(ValueError, match="surface: expected 'meshes' or 'primitives', got 'hull'"):
-        ContactPipeline(UR5E, level="bias", surface="hull")
+        ContactPipeline(UR5E, settings(level="bias", surface="hull"))
 
 
 def test_the_line_followed_is_the_wrenchs_not_the_solvers_point():
     """Where the real shell stands out of the primitives, the true line misses them and the solver's point
     is off it: the point is moved onto the line the external wrench acts along, then into the meshes."""
     model = ArmModel(UR5E)
-    pipe = ContactPipeline(UR5E, level="bias", bias=np.zeros(6), use_currents=False)
+    pipe = ContactPipeline(UR5E, settings(level="bias", bias=np.zeros(6), use_currents=False))
     link = "upper_arm"
     surf = next(s for s in model.surfaces if s.link == link)
     centre = (model.kinematics(HOME)[link] @ surf.link_T_geom)[:3, 3]
     push = np.array([0.0, 40.0, 0.0])
-    on_mesh = pipe.mesh_shell.entry(link, HOME, centre, push)
+    on_mesh = pipe.events.mesh_shell.entry(link, HOME, centre, push)
     b_T_s = model.base_T_sensor(HOME)
     f_s, c_s = b_T_s[:3, :3].T @ push, b_T_s[:3, :3].T @ (on_mesh - b_T_s[:3, 3])
     wrench = np.r_[f_s, np.cross(c_s, f_s)]  # the push as the sensor sees it: m = c x f
     off = on_mesh + np.array([0.004, 0.0, 0.0])  # a point 4 mm off the line, as a primitive's might be
     ev = ContactEvent.make(0, "update", link, off, push, (0.002, 0.002, 0.002))
-    assert np.linalg.norm(pipe.on_meshes(ev, HOME, wrench=wrench).point - on_mesh) < 1e-6
-    assert np.linalg.norm(pipe.on_meshes(ev, HOME).point - on_mesh) > 3e-3  # its own line: 4 mm off
+    assert np.linalg.norm(pipe.events.on_meshes(ev, HOME, wrench=wrench).point - on_mesh) < 1e-6
+    assert np.linalg.norm(pipe.events.on_meshes(ev, HOME).point - on_mesh) > 3e-3  # its own line: 4 mm off
 
 
 def test_the_recent_wrench_is_the_mean_of_the_last_update_period():
-    pipe = ContactPipeline(UR5E, level="bias")
-    window = round(pipe.update_period_ns * 1e-9 * UR5E.sensor.rate_hz)
+    pipe = ContactPipeline(UR5E, settings(level="bias"))
+    window = round(pipe.events.update_period_ns * 1e-9 * UR5E.sensor.rate_hz)
     xs = np.random.default_rng(0).normal(size=(3 * window + 7, 6))
     for i, x in enumerate(xs):
-        pipe._add_recent(x)
-        np.testing.assert_allclose(pipe.recent_external(), xs[max(0, i + 1 - window):i + 1].mean(axis=0), atol=1e-12)
+        pipe.events._add_recent(x)
+        want = xs[max(0, i + 1 - window):i + 1].mean(axis=0)
+        np.testing.assert_allclose(pipe.events.recent_external(), want, atol=1e-12)

@@ -1,4 +1,4 @@
-"""Online refinement (``ContactPipeline(refine=True)``, ``ftc monitor --refine``): while the arm moves
+"""Online refinement (``MotionSettings(refine=True)``, ``ftc monitor --refine``): while the arm moves
 free, recursive least squares with forgetting keeps refining the identified link parameters; an arm
 that is not the calibration's (a link 20 % heavier) is explained better and reported as drifted, the
 calibration's own arm is not, and a contact's frames are never learned from."""
@@ -9,8 +9,9 @@ import pytest
 
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.model.inertials import N_PARAMS
-from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.pipeline import ContactPipeline, ModelErrorSpec
 from ftc_hw.scene import load_scene
+from tests.conftest import settings
 
 SCENE = load_scene("dxl-arm")
 HOME = np.asarray(SCENE.robot.home)
@@ -19,14 +20,15 @@ BODIES = ["link2", "link3", "link4", "link5"]
 PRIOR_STD = np.tile([0.01, 0.001, 0.001, 0.001] + [1e-5] * 6, len(BODIES))
 
 
-def _model_error() -> dict:
-    return {"bodies": BODIES, "cov": np.diag(PRIOR_STD**2), "gain": False}
+def _model_error() -> ModelErrorSpec:
+    return ModelErrorSpec(tuple(BODIES), np.diag(PRIOR_STD**2), False)
 
 
 def _run(true_arm: ArmModel, refine: bool, seconds: float = 60.0, touch_at: float | None = None):
     """The pipeline on ``seconds`` of every joint swinging (100 Hz), read through ``true_arm``; the
     moment residual's RMS over the last 20 s, and the pipeline."""
-    pipe = ContactPipeline(SCENE, level="dynamics", model_error=_model_error(), refine=refine, use_currents=False)
+    pipe = ContactPipeline(SCENE, settings(level="dynamics", model_error=_model_error(), refine=refine,
+                                           use_currents=False))
     rng = np.random.default_rng(0)
     w = 2 * np.pi * np.array([0.11, 0.17, 0.23, 0.29, 0.0])
     amp = np.array([0.9, 0.4, 0.5, 0.6, 0.0])

@@ -1,4 +1,4 @@
-"""Contact events (ContactPipeline._event): an estimate the event cannot carry (no link, or an infinite
+"""Contact events (ftc_hw.pipeline.events.contact_event): an estimate the event cannot carry (no link, or an infinite
 uncertainty) still gives its event, flagged ``no_estimate``, instead of losing it (an onset among them)."""
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ftc_hw.pipeline import ContactPipeline
+from ftc_hw.pipeline.events import contact_event
 
-event = ContactPipeline._event
+event = contact_event
 
 
 def estimate(link, std, contact=True):

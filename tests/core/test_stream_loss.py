@@ -13,6 +13,7 @@ from ftc_hw.bus import Bus, ContactEvent, JointFrame, WrenchFrame, joints_topic
 from ftc_hw.model import Contact
 from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
+from tests.conftest import settings
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -67,7 +68,7 @@ def test_a_lost_stream_closes_the_contact_and_nothing_is_judged_until_it_is_back
     touched = model.predicted_wrench(q, level="gravity", contacts=[Contact("link3", point, force)])
     bus = Bus()
     events = bus.subscribe("events/", maxsize=None)
-    monitor = LiveMonitor(bus, scene, level="gravity", use_currents=False, publish_inputs=False)
+    monitor = LiveMonitor(bus, scene, publish_inputs=False, settings=settings(level="gravity", use_currents=False))
     with Streams(bus, free, touched, q) as s, monitor:
         _until(lambda: monitor.tared and monitor.counters["frames"] > 100)
         s.touch = True

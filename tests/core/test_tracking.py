@@ -13,6 +13,7 @@ from ftc_hw.pipeline import ContactPipeline
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import _ray_to_surface
 from ftc_hw.tracking import ContactTrack
+from tests.conftest import settings
 
 SCENE = load_scene("ur5e")
 MODEL = ArmModel(SCENE)
@@ -147,8 +148,8 @@ def held_contact_events(track_slide):
     # what fusing frames gains, alone: no systematic share (surface tolerance, sensor accuracy)
     exact = dataclasses.replace(SCENE, robot=dataclasses.replace(SCENE.robot, surface_tolerance=0.0),
                                 sensor=dataclasses.replace(SCENE.sensor, accuracy=0.0))
-    pipe = ContactPipeline(exact, level="bias", bias=np.zeros(6), use_currents=False, track_slide=track_slide,
-                           surface="primitives")  # the truth is on the primitives: the track alone
+    pipe = ContactPipeline(exact, settings(level="bias", bias=np.zeros(6), use_currents=False, track_slide=track_slide,
+                           surface="primitives"))  # the truth is on the primitives: the track alone
     surf = next(s for s in MODEL.surfaces if s.link == LINK)
     b_T_l = MODEL.kinematics(HOME)[LINK]
     centre = (b_T_l @ surf.link_T_geom)[:3, 3]
@@ -202,7 +203,7 @@ def test_the_solvers_body_poses_are_mujocos():
 def test_the_onset_rests_on_the_sample_before_it_too():
     """The onset goes out at the second sample above the threshold: the first one, already above,
     is fused too, so the onset's point rests on two frames (on the primitives the wrench was made on)."""
-    pipe = ContactPipeline(SCENE, level="bias", bias=np.zeros(6), use_currents=False, surface="primitives")
+    pipe = ContactPipeline(SCENE, settings(level="bias", bias=np.zeros(6), use_currents=False, surface="primitives"))
     surf = next(s for s in MODEL.surfaces if s.link == LINK)
     centre = (MODEL.kinematics(HOME)[LINK] @ surf.link_T_geom)[:3, 3]
     inward = np.array([0.0, -1.0, 0.0])
@@ -213,7 +214,7 @@ def test_the_onset_rests_on_the_sample_before_it_too():
     assert not pipe.process(20 * MS, clean, HOME).events  # above the threshold: one sample is no onset
     (onset,) = pipe.process(21 * MS, clean, HOME).events
     assert onset.kind == "onset" and onset.t_host_ns == 20 * MS
-    assert pipe.track.fused == 2 and np.linalg.norm(onset.point - point) < 1e-9
+    assert pipe.events.track.fused == 2 and np.linalg.norm(onset.point - point) < 1e-9
 
 
 def test_events_carry_what_fusing_cannot_average_away():
@@ -222,8 +223,8 @@ def test_events_carry_what_fusing_cannot_average_away():
     report more than the fused frames alone, and at least the surface tolerance on every axis."""
     fused, _ = held_contact_events(0.01)
     rng = np.random.default_rng(3)
-    pipe = ContactPipeline(SCENE, level="bias", bias=np.zeros(6), use_currents=False, track_slide=0.01,
-                           surface="primitives")
+    pipe = ContactPipeline(SCENE, settings(level="bias", bias=np.zeros(6), use_currents=False, track_slide=0.01,
+                           surface="primitives"))
     surf = next(s for s in MODEL.surfaces if s.link == LINK)
     centre = (MODEL.kinematics(HOME)[LINK] @ surf.link_T_geom)[:3, 3]
     inward = np.array([0.0, -1.0, 0.0])

@@ -12,9 +12,10 @@ import pytest
 from mcap.reader import make_reader
 
 from ftc_hw.monitor import MONITOR_INPUT
+from ftc_hw.pipeline import PipelineSettings
 from ftc_hw.record.events import read_events
 from ftc_hw.record.reader import read_recording
-from ftc_hw.record.replay import pipeline_kwargs_from_json, replay
+from ftc_hw.record.replay import replay
 from tests.record.foxglove_check import contact_markers_in_base, read_foxglove
 
 
@@ -43,7 +44,8 @@ def test_the_recording_has_one_channel_per_topic_and_the_run_as_metadata(recorde
     assert {"foxglove/tf", "foxglove/arm", "foxglove/contacts", "foxglove/wrench"} <= topics
     assert metadata["scene"]["name"] == "dxl-arm" and "[[devices]]" in metadata["scene"]["toml"]
     assert metadata["monitor"]["ft_source"] == "ft" and metadata["monitor"]["sim"] == "True"
-    assert pipeline_kwargs_from_json(metadata["monitor"]["pipeline"]) == {"level": "dynamics"}
+    recorded = PipelineSettings.from_json(metadata["monitor"]["pipeline"])
+    assert recorded.to_json() == PipelineSettings().with_level("dynamics").to_json()
     events = read_events(recorded / "events.jsonl")
     assert [json.loads(line) for line in metadata["events"]["jsonl"].splitlines()] == events
     assert any(e["kind"] == "onset" for e in events)
@@ -61,7 +63,7 @@ def test_replay_with_another_setting_gives_other_events(recorded):
     rec = read_recording(recorded / "run.mcap")
     same = replay(rec)
     assert same.identical and same.inputs == len(rec.topic(MONITOR_INPUT))
-    other = replay(rec, pipeline_kwargs={"level": "gravity"})  # the arm's inertia no longer compensated
+    other = replay(rec, settings=PipelineSettings().with_level("gravity"))  # the arm's inertia no longer compensated
     assert not other.identical and other.first_difference() is not None
 
 

@@ -1,0 +1,236 @@
+"""The pipeline's settings: one frozen object, made once (from defaults, a calibration file, the
+command line) and passed whole from the session through the monitor to the pipeline's stages.
+
+    PipelineSettings
+      corrections   Corrections          what a calibration file corrects (bias, payload, the
+                                         identified model); None: not corrected
+      motion        MotionSettings       the compensation level, the acceleration estimate, impacts
+      detection     DetectionSettings    the detector's false-alarm rate, hysteresis, extra noise
+      localization  LocalizationSettings the method and the surface a point is put on
+      events        EventSettings        how often an open contact is reported, the track
+
+Units: SI (s, N, N m, kg, m, rad); arrays as the stages take them (shapes below). ``to_json`` writes
+every field (a recording replays with the settings it was made with, whatever the defaults become);
+``from_json`` reads that, and the flat keyword dict that recordings made before this object held
+(``{"level": "dynamics", "bias": [...], ...}``), and names any field it does not know or misses.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from ftc_hw.model import Payload
+from ftc_hw.scene import CompensationLevel
+
+SCHEMA = 2  # 1: the flat keyword dict of recordings made before these types (no "schema" key)
+SURFACES = ("meshes", "primitives")
+METHODS = ("ours", "leng2016")
+
+
+class SettingsError(ValueError):
+    """Settings that cannot be read: a field unknown to this version, a field missing, a bad value."""
+
+
+@dataclass(frozen=True, eq=False)
+class ModelErrorSpec:
+    """The identified model's parameter covariance (:class:`~ftc_hw.compensation.ModelError`):
+    ``bodies`` the identified bodies, ``cov`` their base parameters' covariance (p x p), ``gain``
+    whether the sensor's gain was fitted beside them."""
+
+    bodies: tuple[str, ...]
+    cov: np.ndarray
+    gain: bool
+
+
+@dataclass(frozen=True, eq=False)
+class Corrections:
+    """What a calibration file corrects (:meth:`ftc_hw.calibration.file.Calibration.corrections`).
+
+    ``bias`` (6,) N, N m: the reading with nothing on the sensor; ``payload`` on the flange;
+    ``gain`` (6, 6) the sensor's linear error on the arm's loads; ``contact_gain`` (6, 6) what of it
+    is undone on the contact's wrench (None: ``gain``); ``inertials`` body -> (10,) corrections to its
+    standard inertial parameters; ``frame`` (6, 6) the sensor's true frame (a mount yaw); ``gravity``
+    (3,) m/s^2 in the base frame (a tilt); ``joints`` ``torque_constant``, ``friction_viscous``,
+    ``friction_coulomb`` -> (n,) per joint; ``model_error`` what the identified model may still get
+    wrong."""
+
+    bias: np.ndarray | None = None
+    payload: Payload | None = None
+    gain: np.ndarray | None = None
+    contact_gain: np.ndarray | None = None
+    inertials: Mapping[str, np.ndarray] | None = None
+    frame: np.ndarray | None = None
+    gravity: np.ndarray | None = None
+    joints: Mapping[str, np.ndarray] | None = None
+    model_error: ModelErrorSpec | None = None
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """``level``: the compensation level (None: the scene's); ``use_currents``: joint torques from the
+    motor currents for the solver; ``qdd_tau`` s: the acceleration estimate's time constant (its lag
+    window is 2 tau); ``impact_window_s``: how long after an onset the arm's reaction to the contact is
+    refitted (None: never); ``refine``: with an identified model error, keep refining the model while
+    the arm moves free (:class:`~ftc_hw.compensation.OnlineRefiner`)."""
+
+    level: CompensationLevel | None = None
+    use_currents: bool = True
+    qdd_tau: float = 0.002
+    impact_window_s: float | None = 0.005
+    refine: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class DetectionSettings:
+    """``p_false``: the false-alarm probability per frame of the chi-square test; ``n_on``/``n_off``:
+    frames above / below the threshold for an onset / offset; ``extra_cov`` (6, 6): noise beside the
+    sensor's (None: none); ``gap_hold_s``: over missed joint samples the lag error is held at its
+    largest of the gap and this long before it (None: never widened)."""
+
+    p_false: float = 1e-9
+    n_on: int = 2
+    n_off: int = 5
+    extra_cov: np.ndarray | None = None
+    gap_hold_s: float | None = 0.1
+
+
+@dataclass(frozen=True)
+class LocalizationSettings:
+    """``method``: ``ours`` or ``leng2016`` (the reference paper's); ``surface``: ``meshes`` puts each
+    event's point where its line of action enters the touched link's meshes, where the scene has them,
+    ``primitives`` leaves it on the solver's primitives; ``flag_uncertain``: flag an event whose point
+    is less certain than its link is big."""
+
+    method: str = "ours"
+    surface: str = "meshes"
+    flag_uncertain: bool = True
+
+    def __post_init__(self) -> None:
+        if self.surface not in SURFACES:
+            raise ValueError(f"surface: expected 'meshes' or 'primitives', got {self.surface!r}")
+
+
+@dataclass(frozen=True)
+class EventSettings:
+    """``update_period_s``: an open contact's update event at most this often; ``track_slide`` m/sqrt(s):
+    how fast the fused point may slide (None: no track, each event its frame's own estimate);
+    ``bias_var_ratio``: a given bias (calibration, scene) is known to this fraction of one sample's
+    noise variance."""
+
+    update_period_s: float = 0.02
+    track_slide: float | None = 0.01
+    bias_var_ratio: float = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class PipelineSettings:
+    """Everything the pipeline is set by, besides its scene (see the module's docstring)."""
+
+    corrections: Corrections = field(default_factory=Corrections)
+    motion: MotionSettings = field(default_factory=MotionSettings)
+    detection: DetectionSettings = field(default_factory=DetectionSettings)
+    localization: LocalizationSettings = field(default_factory=LocalizationSettings)
+    events: EventSettings = field(default_factory=EventSettings)
+
+    def with_level(self, level: CompensationLevel | None) -> PipelineSettings:
+        """These settings at another compensation level (None: unchanged)."""
+        return self if level is None else self.replace(motion=dataclasses.replace(self.motion, level=level))
+
+    def replace(self, **sections: Any) -> PipelineSettings:
+        return dataclasses.replace(self, **sections)
+
+    def to_json(self) -> str:
+        return json.dumps({"schema": SCHEMA, **{f.name: _section_out(getattr(self, f.name)) for f in fields(self)}})
+
+    @staticmethod
+    def from_json(text: str) -> PipelineSettings:
+        """The settings ``to_json`` wrote, or a recording's flat keyword dict from before (schema 1)."""
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise SettingsError(f"pipeline settings are not JSON: {exc}") from None
+        if not isinstance(data, dict):
+            raise SettingsError(f"pipeline settings: expected a JSON object, got {type(data).__name__}")
+        if "schema" not in data:
+            data = _from_flat(data)
+        elif data["schema"] != SCHEMA:
+            raise SettingsError(f"pipeline settings schema {data['schema']!r}: this version reads {SCHEMA}")
+        sections = {f.name: f.type for f in fields(PipelineSettings)}
+        _check_keys("pipeline settings", data.keys() - {"schema"}, set(sections), set(sections))
+        return PipelineSettings(**{name: _section_in(name, data[name]) for name in sections})
+
+
+SECTION_TYPES: dict[str, type] = {"corrections": Corrections, "motion": MotionSettings,
+                                   "detection": DetectionSettings, "localization": LocalizationSettings,
+                                   "events": EventSettings}
+
+
+def _from_flat(flat: dict[str, Any]) -> dict[str, Any]:
+    """A flat keyword dict (schema 1: each key a ``ContactPipeline`` keyword) as sections, every field
+    not given at its default (the defaults have not changed since)."""
+    owner = {f.name: name for name, cls in SECTION_TYPES.items() for f in fields(cls)}
+    unknown = sorted(flat.keys() - owner.keys())
+    if unknown:
+        raise SettingsError(f"recorded pipeline setting(s) {', '.join(unknown)} unknown to this version")
+    out: dict[str, Any] = {name: _section_out(cls()) for name, cls in SECTION_TYPES.items()}
+    for k, v in flat.items():
+        out[owner[k]][k] = v
+    return out
+
+
+def _section_out(section: Any) -> dict[str, Any]:
+    return {f.name: _value_out(getattr(section, f.name)) for f in fields(section)}
+
+
+def _value_out(v: Any) -> Any:
+    if isinstance(v, Payload):
+        return {"mass": v.mass, "com": list(v.com)}
+    if isinstance(v, ModelErrorSpec):
+        return {"bodies": list(v.bodies), "cov": np.asarray(v.cov).tolist(), "gain": v.gain}
+    if isinstance(v, Mapping):
+        return {k: _value_out(x) for k, x in v.items()}
+    return v.tolist() if hasattr(v, "tolist") else v
+
+
+def _check_keys(where: str, given: set[str], known: set[str], required: set[str]) -> None:
+    unknown, missing = sorted(given - known), sorted(required - given)
+    if unknown:
+        raise SettingsError(f"{where}: field(s) {', '.join(unknown)} unknown to this version")
+    if missing:
+        raise SettingsError(f"{where}: field(s) {', '.join(missing)} missing")
+
+
+def _section_in(name: str, data: Any) -> Any:
+    cls = SECTION_TYPES[name]
+    if not isinstance(data, dict):
+        raise SettingsError(f"pipeline settings {name}: expected an object, got {type(data).__name__}")
+    names = {f.name for f in fields(cls)}
+    _check_keys(f"pipeline settings {name}", set(data), names, names)
+    values = {k: _value_in(k, v) for k, v in data.items()} if cls is Corrections else dict(data)
+    if cls is DetectionSettings and values["extra_cov"] is not None:
+        values["extra_cov"] = np.asarray(values["extra_cov"], dtype=float)
+    try:
+        return cls(**values)
+    except (TypeError, ValueError) as exc:
+        raise SettingsError(f"pipeline settings {name}: {exc}") from None
+
+
+def _value_in(key: str, v: Any) -> Any:
+    """A correction as JSON gave it, typed: arrays of floats, a payload, the model error's spec."""
+    if v is None:
+        return None
+    try:
+        if key == "payload":
+            return Payload(float(v["mass"]), tuple(float(x) for x in v["com"]))
+        if key == "model_error":
+            return ModelErrorSpec(tuple(v["bodies"]), np.asarray(v["cov"], dtype=float), bool(v["gain"]))
+        if key in ("inertials", "joints"):
+            return {k: np.asarray(x, dtype=float) for k, x in v.items()}
+        return np.asarray(v, dtype=float)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise SettingsError(f"pipeline settings corrections.{key}: {exc!r}") from None
