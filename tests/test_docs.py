@@ -297,3 +297,25 @@ def test_the_checker_tells_a_wrong_line(line, wrong):
     """``wrong``: what each problem found says (a part of it: click's wording may change)."""
     found = check_ftc(shlex.split(line))[1]
     assert len(found) == len(wrong) and all(w in f for w, f in zip(wrong, found, strict=True)), found
+
+
+# ---- links -----------------------------------------------------------------------------------------
+
+LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+DOC_PATH = re.compile(r"\bdocs/[\w/-]+\.(?:md|png)")
+
+
+def test_links_between_the_pages_resolve():
+    """Every relative link of a page, and every ``docs/...`` path a page or a source file names, exists."""
+    missing = []
+    for page in PAGES:
+        text = page.read_text()
+        for target in LINK.findall(text):
+            if "://" not in target and not (page.parent / target).exists():
+                missing.append(f"{_rel(page)}: ({target})")
+    sources = [*PAGES, *(ROOT / "ftc_hw").rglob("*.py"), *(ROOT / "tests").rglob("*.py")]
+    for source in sources:
+        for path in set(DOC_PATH.findall(source.read_text())):
+            if not (ROOT / path).exists():
+                missing.append(f"{source.relative_to(ROOT)}: {path}")
+    assert not missing, "\n".join(missing)
