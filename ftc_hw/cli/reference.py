@@ -17,6 +17,8 @@ from typing import Any
 
 import typer
 
+from ftc_hw.cli import app as ftc_app
+
 WIDTH = 10_000  # no wrapping: one line per help text, whatever the terminal
 HEADER = """# `ftc`: command reference
 
@@ -79,10 +81,8 @@ def _section(command: Any, ctx: Any, level: int) -> list[str]:
     return out
 
 
-def render(app: typer.Typer | None = None, name: str = "ftc") -> str:
+def render(app: typer.Typer = ftc_app, name: str = "ftc") -> str:
     """The whole reference as Markdown: the top command, then each command and subcommand in order."""
-    if app is None:
-        from ftc_hw.cli import app
     root = typer.main.get_command(app)
     lines = [*HEADER.splitlines(), "", *_section(root, _context(root, name, None), 2)]
     return "\n".join(line.rstrip() for line in lines).rstrip() + "\n"
