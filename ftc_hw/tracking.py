@@ -22,7 +22,7 @@ the live chain's own (compensation model, clock alignment, the fit's nonlinearit
 taken as ``chain_ratio`` of one frame's variance. They are carried apart from the filter's
 covariance and added to the reported one, so fusing never claims more than they allow: with the
 default 0.1, about a third of one frame's error at best. Measured on 30 s sweep-with-collision
-runs (``docs/monitor.md``): the error per contact falls 3-6 fold against the single frames', and
+runs (``docs/measurements/monitor.md``): the error per contact falls 3-6 fold against the single frames', and
 the RMS of |error| / |point_std| stays below 1 in every contact (0.03-0.72; the single frames
 0.03-1.15): the reported uncertainty errs on the safe side.
 

@@ -82,7 +82,7 @@ def reader_main(scene_ref: str, overrides: tuple[str, ...], rig_file: Path | Non
     sys.setswitchinterval(READER_PROCESS_SWITCH_S)
     # ahead of ordinary processes, behind the devices (ftc_hw.priority), Zenoh's threads too: frames and
     # stop commands must not wait for a core. (The FIFO real-time class, tried for an arm's poll loop,
-    # kept RTDE on a saturated 2-core host but starved the F/T reader and the monitor: docs/bus.md)
+    # kept RTDE on a saturated 2-core host but starved the F/T reader and the monitor: docs/measurements/bus.md)
     prefer_cpu(READER_NICE, exact=True)
     scene = load_rig_scene(scene_ref, overrides, rig_file)
     spec = next(d for d in scene.devices if d.name == device)

@@ -113,7 +113,7 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
                       f"its corrections ({cal_meta['applied']})")
     # readers that poll, and the reflex, while the pipeline computes (the pipeline in the readers' tier even
     # when they run in processes of their own: at ordinary priority it fell behind the world and emulators
-    # on a host with no core to spare, docs/bus.md); vendor C++ lines made readable
+    # on a host with no core to spare, docs/measurements/bus.md); vendor C++ lines made readable
     with responsive_readers(), vendor_stderr() as vendor:
         out.vendor_lines = vendor.counts
         return _run(cfg, console, scene, ft_dev, arm_dev, corrections, cal_meta, out, faults)
@@ -125,7 +125,7 @@ SIM_PROCESS_READERS_MIN_CPUS = 4
 def readers_mode(cfg: MonitorConfig) -> tuple[str, str]:
     """Where this run's readers run, "process" or "thread", and why. ``auto``: in processes of their own,
     except with a simulated world on a host of fewer than 4 cores, where the world and the emulators
-    already take most of the cores: measured on 2 cores (docs/bus.md), reader processes (their own
+    already take most of the cores: measured on 2 cores (docs/measurements/bus.md), reader processes (their own
     interpreters, Zenoh) there left the pipeline seconds behind and RTDE missed as many packets."""
     if cfg.readers != "auto":
         return cfg.readers, f"--readers {cfg.readers}"

@@ -195,7 +195,7 @@ class ContactEvents:
         (:meth:`_systematic`), then its point on the meshes along the recent wrench's line (:meth:`on_meshes`).
         The frame's sensor pose is shared, and the changes go into the stamped event: one new event
         instead of three (an event frame's thread CPU 297 -> 217 us, median, with the pose kept per q;
-        docs/monitor.md)."""
+        docs/measurements/monitor.md)."""
         if "no_estimate" in ev.flags:
             return {}
         b_T_s = self._sensor_pose(q)
