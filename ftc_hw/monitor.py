@@ -35,8 +35,6 @@ reproduces the events exactly.
 """
 from __future__ import annotations
 
-import bisect
-import itertools
 import queue
 import threading
 import time
@@ -51,6 +49,8 @@ from .bus import (
     Bus,
     ClockAligner,
     DeviceEvent,
+    SamplingPolicy,
+    StateHistory,
     WrenchFlag,
     joints_topic,
     wrench_topic,
@@ -104,8 +104,6 @@ class LiveMonitor:
         self.ft_topic = wrench_topic(ft_source)
         self.joint_topic = joints_topic(arm_source)
         self.tare_s = tare_s
-        self.max_gap_ns = int(max_gap_ms * 1e6)
-        self.max_extrapolate_ns = int(max_extrapolate_ms * 1e6)
         # a frame waits for the joint stream to pass it as long as a joint gap may last: on a loaded
         # host the joint reader can be late by several periods, and extrapolating over that span near
         # a reversal of the motion reads as a contact (normally the wait is under a joint period)
@@ -123,13 +121,11 @@ class LiveMonitor:
         self.tared = tare_s is None
         self._ft_clock = ClockAligner()
         self._arm_clock = ClockAligner()
-        self._joint_lock = threading.Lock()
-        self._joint_t: deque[int] = deque(maxlen=4096)
-        self._joint_x: deque[np.ndarray] = deque(maxlen=4096)
+        # the joint state at each F/T sample: interpolated, or extrapolated a little past the newest
+        # joint sample (holding would lag the arm, which the dynamics compensation reads as a contact)
+        self.joints = StateHistory(SamplingPolicy(int(max_gap_ms * 1e6), "linear", int(max_extrapolate_ms * 1e6)),
+                                   maxlen=4096, period_samples=JOINT_PERIOD_SAMPLES)
         self._joint_sub = None
-        self._joint_period_ns: int | None = None  # the joint stream's median spacing (recent samples)
-        self._joint_count = 0
-        self._why_none = ""  # why the last _joints_at gave None: before, old, late, gap
         self._lags: deque[int] = deque(maxlen=20_000)  # ns from a frame's arrival to its judgement
         self.lag_ns = 0  # the newest judged frame's (how far behind its input the monitor is now)
         self._waiting: deque = deque()  # the worker's F/T frames waiting for the joint stream
@@ -203,8 +199,7 @@ class LiveMonitor:
             now = time.monotonic()
             while pending:
                 arrived, t, frame = pending[0]
-                with self._joint_lock:
-                    newest = self._joint_t[-1] if self._joint_t else None
+                newest = self.joints.newest()
                 if newest is not None and newest < t and now - arrived < self.wait_s:
                     break
                 pending.popleft()
@@ -289,63 +284,26 @@ class LiveMonitor:
         t = self._aligned(self._arm_clock, frame)
         if "arm" in self.lost and self._arm_back_t is None:
             self._arm_back_t = t  # back from this sample's time: F/T frames after it are judged with it
-        x = np.concatenate([frame.q, frame.qd, frame.current])
-        with self._joint_lock:
-            if self._joint_t and t <= self._joint_t[-1]:
-                return  # out of order or duplicate: the newer sample is already there
-            self._joint_t.append(t)
-            self._joint_x.append(x)
-            self._joint_count += 1
-            if self._joint_count % JOINT_PERIOD_SAMPLES == 0 and len(self._joint_t) > JOINT_PERIOD_SAMPLES:
-                recent = list(itertools.islice(self._joint_t, len(self._joint_t) - JOINT_PERIOD_SAMPLES - 1, None))
-                self._joint_period_ns = int(np.median(np.diff(recent)))
-
-    def _joints_at(self, t: int) -> tuple[np.ndarray, int] | None:
-        """The joint state at t and the span, ns, between the joint samples it was made from (to t
-        itself when extrapolated); None when there is none to trust."""
-        with self._joint_lock:
-            ts = self._joint_t
-            i = bisect.bisect_right(ts, t)
-            if i == 0:
-                self._why_none = "before" if not ts or self._joint_count == len(ts) else "old"
-                return None
-            t0, x0 = ts[i - 1], self._joint_x[i - 1]
-            if i == len(ts):
-                # Newer than the newest joint sample (the joint stream did not pass it within wait_s):
-                # extrapolate linearly from the last two, at most max_extrapolate ahead. Holding would
-                # lag the arm, which the dynamics compensation would read as a contact.
-                if t - t0 > self.max_extrapolate_ns:
-                    self._why_none = "late"
-                    return None
-                if i < 2 or t0 - ts[i - 2] > self.max_gap_ns:
-                    return x0, t - t0
-                tp, xp = ts[i - 2], self._joint_x[i - 2]
-                return x0 + (t - t0) / (t0 - tp) * (x0 - xp), t - tp
-            t1, x1 = ts[i], self._joint_x[i]
-        if t1 - t0 > self.max_gap_ns:
-            self._why_none = "gap"
-            return None
-        w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
-        return x0 + w * (x1 - x0), t1 - t0
+        self.joints.add(t, np.concatenate([frame.q, frame.qd, frame.current]))  # out of order: dropped
 
     def _gap(self, span_ns: int) -> int:
         """``span_ns`` when it is more than 1.5 joint periods (missed samples), else 0."""
-        period = self._joint_period_ns
+        period = self.joints.period_ns
         return span_ns if period is not None and 2 * span_ns > 3 * period else 0
 
     def handle(self, frame, t: int | None = None) -> MonitoredFrame | None:
         """Process one WrenchFrame; ``t``: its aligned time when already computed."""
         if t is None:
             t = self._aligned(self._ft_clock, frame)
-        joints = self._joints_at(t)
-        if joints is None or "arm" in self.lost:
+        joints = self.joints.at(t)
+        if isinstance(joints, str) or "arm" in self.lost:
             if "arm" in self.lost:
                 self.counters["blind_frames"] += 1
-            elif self._why_none == "before":  # the joint stream has not begun: not a loss
+            elif joints == "before":  # the joint stream has not begun: not a loss
                 self.counters["before_joint_state"] += 1
             else:
                 self.counters["no_joint_state"] += 1
-                self.counters[f"no_joint_state_{self._why_none}"] += 1
+                self.counters[f"no_joint_state_{joints}"] += 1
             return None
         x, span = joints
         gap = self._gap(span)

@@ -21,6 +21,7 @@ from .frames import (
     WrenchFlag,
     WrenchFrame,
 )
+from .history import SamplingPolicy, StateHistory
 from .stats import StatsSnapshot, StreamStats
 from .subscription import Empty, Subscription, SubscriptionClosed
 from .watchdog import Watchdog
@@ -44,7 +45,9 @@ __all__ = [
     "FrameError",
     "JointFlag",
     "JointFrame",
+    "SamplingPolicy",
     "StaleDataError",
+    "StateHistory",
     "StatsSnapshot",
     "StreamStats",
     "Subscription",

@@ -39,6 +39,7 @@ from operator import attrgetter
 from typing import Any, Literal
 
 from .frames import ContactEvent, DeviceEvent, Frame, JointFrame, WrenchFrame
+from .history import SamplingPolicy, bracket
 from .sampling import hold as _hold
 from .sampling import interpolate as _interpolate
 from .stats import StatsSnapshot, StreamStats
@@ -332,49 +333,35 @@ class Bus:
             raise StaleDataError(
                 f"no frame on {topic!r}", topic=topic, t_ns=t_ns, gap_ns=None, limit_ns=limit
             )
+        policy = SamplingPolicy(limit, "hold" if hold else "none", limit)
         with ts.lock:
             ring = ts.ring
-            i = bisect_right(ring, t_ns, key=_T_HOST)
-            n = len(ring)
-            if i == 0:
-                if n == 0:
-                    raise StaleDataError(
-                        f"no frame on {topic!r}", topic=topic, t_ns=t_ns, gap_ns=None, limit_ns=limit
-                    )
-                gap = ring[0].t_host_ns - t_ns
-                raise StaleDataError(
-                    f"{topic}: t_ns is {gap / 1e6:.3f} ms before the oldest retained frame",
-                    topic=topic,
-                    t_ns=t_ns,
-                    gap_ns=gap,
-                    limit_ns=limit,
-                )
-            a = ring[i - 1]
-            b = ring[i] if i < n else None
-        if a.t_host_ns == t_ns:
-            return a
+            where = bracket(ring, t_ns, policy, key=_T_HOST)
+            if isinstance(where, str):
+                raise _stale(topic, t_ns, where, ring, limit, hold)
+            a = ring[where.i]
+            b = None if where.j is None else ring[where.j]
         if b is None:
-            gap = t_ns - a.t_host_ns
-            if hold and gap <= limit:
-                return _hold(a, t_ns)
-            raise StaleDataError(
-                f"{topic}: t_ns is {gap / 1e6:.3f} ms after the newest frame (limit {limit / 1e6:.3f} ms"
-                f"{'' if hold else ', hold disabled'})",
-                topic=topic,
-                t_ns=t_ns,
-                gap_ns=gap,
-                limit_ns=limit,
-            )
-        gap = b.t_host_ns - a.t_host_ns
-        if gap > limit:
-            raise StaleDataError(
-                f"{topic}: bracketing frames are {gap / 1e6:.3f} ms apart (limit {limit / 1e6:.3f} ms)",
-                topic=topic,
-                t_ns=t_ns,
-                gap_ns=gap,
-                limit_ns=limit,
-            )
+            return a if a.t_host_ns == t_ns else _hold(a, t_ns)
         return _interpolate(a, b, t_ns)
+
+
+def _stale(topic: str, t_ns: int, why: str, ring: deque, limit: int, hold: bool) -> StaleDataError:
+    """Why ``sample_at`` has no state for ``t_ns`` (``history.bracket``'s reason), in words and figures."""
+    if not ring:
+        return StaleDataError(f"no frame on {topic!r}", topic=topic, t_ns=t_ns, gap_ns=None, limit_ns=limit)
+    if why == "before":
+        gap = ring[0].t_host_ns - t_ns
+        msg = f"{topic}: t_ns is {gap / 1e6:.3f} ms before the oldest retained frame"
+    elif why == "late":
+        gap = t_ns - ring[-1].t_host_ns
+        msg = (f"{topic}: t_ns is {gap / 1e6:.3f} ms after the newest frame (limit {limit / 1e6:.3f} ms"
+               f"{'' if hold else ', hold disabled'})")
+    else:
+        i = bisect_right(ring, t_ns, key=_T_HOST)
+        gap = ring[i].t_host_ns - ring[i - 1].t_host_ns
+        msg = f"{topic}: bracketing frames are {gap / 1e6:.3f} ms apart (limit {limit / 1e6:.3f} ms)"
+    return StaleDataError(msg, topic=topic, t_ns=t_ns, gap_ns=gap, limit_ns=limit)
 
 
 def _matches(sub: Subscription, topic: str) -> bool:

@@ -12,6 +12,8 @@ DEV0 = 5_000_000_000
 US = 1_000
 
 
+# no deadline: the first example loads the aligner's compiled kernels (about a second on a loaded host)
+@settings(deadline=None)
 @given(
     st.lists(st.tuples(st.integers(1, 4_000_000), st.integers(0, 10**8)), min_size=1, max_size=200),
     st.integers(-(10**12), 10**12),
