@@ -6,6 +6,8 @@ import pytest
 
 from ftc_hw.app.evaluate import evaluate
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 MS = 1_000_000
 T0 = 5_000_000_000  # host ns of the first truth sample
 

@@ -14,7 +14,7 @@ from ftc_hw.model import Contact
 from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 
 
 class Streams:

@@ -15,6 +15,8 @@ from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 SCENE = load_scene("dxl-arm")
 DEVICE = next(d for d in SCENE.devices if d.kind == "dynamixel")
 FAST = {"stale_after": 0.1, "dead_after": 0.5}

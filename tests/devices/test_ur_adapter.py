@@ -14,6 +14,8 @@ from ftc_hw.devices.ur import DashboardLink, URArm, probe_rtde
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 ADDRESS = "127.0.0.43"
 SCENE = load_scene("ur5e")
 DEVICE = next(d for d in SCENE.devices if d.kind == "ur-rtde")

@@ -15,6 +15,8 @@ from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.dxl_protocol import PacketReader, packet, parse_status
 from ftc_hw.sim_devices.host import WorldHost
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 ARM = next(d for d in load_scene("dxl-arm").devices if d.kind == "dynamixel").params
 IDS = ARM["ids"]  # 11-14 the joints, 15 the gripper
 DIRS = ARM["directions"]

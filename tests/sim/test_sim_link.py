@@ -8,6 +8,8 @@ import pytest
 
 from ftc_hw.sim_devices.link import Command, CommandLinkError, EmulatorSide, LinkInfo, WorldLink
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 GOAL = Command("arm", "goal", q=(0.1, -1.05, 0.35 + 1e-12, 0.7), extra={"t_rx_ns": 123})
 
 

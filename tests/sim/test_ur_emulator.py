@@ -20,6 +20,8 @@ from ftc_hw.sim_devices.host import WorldHost
 from ftc_hw.sim_devices.ur import Emulator
 from ftc_hw.sim_devices.ur_model import rotation_vector
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 ADDRESS = "127.0.0.41"
 SCENE = load_scene("ur5e")
 DEVICE = next(d for d in SCENE.devices if d.kind == "ur-rtde")

@@ -13,6 +13,8 @@ from ftc_hw.sim_devices.world import SCENARIOS, World, build_scenario, truth_rec
 from ftc_hw.sim_devices.world.sensor_model import FTSensorModel
 from ftc_hw.sim_devices.world.truth import truth_line
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 
 def _world(scene_name, scenario, duration, seed=3, noise=False):
     scene = load_scene(scene_name)

@@ -10,6 +10,8 @@ from ftc_hw.record.events import read_truth
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost, WorldHostError
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 
 def test_a_long_pre_roll_does_not_use_up_the_scenario(tmp_path):
     # the obstacle is due to go at 4.3 s of a 3 s run: a pre-roll longer than that (a first run
