@@ -213,6 +213,10 @@ class _Child:
 
 def _main(conn: Any, plan: _Plan) -> None:
     """Entry point of the world process."""
+    # Ctrl-C is its host's, which closes the world (quit on the pipe, or the pipe's end); the emulators
+    # it starts inherit the ignored SIGINT (spawn keeps it across exec): the terminal's Ctrl-C reaches
+    # every process of its group, and a world or an emulator cut short by it would leave no report
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     name_process("ftc-world")
     try:
         t0 = time.monotonic()
