@@ -99,7 +99,7 @@ class WorldPort:
         if s is None:
             z = np.zeros(self.n)
             return 0.0, z, z, z
-        return s["t"], s["q"], s["qd"], s["current"]
+        return s.t, s.q, s.qd, s.current
 
     def send(self, cmd: Command) -> None:
         self.sent.append(cmd)
@@ -481,7 +481,7 @@ def serve(device: Any, scene: Any, link: Any, ready: Any, options: dict) -> None
         state = side.joint_state()
         if state is not None:  # the goal registers start where the arm is
             for s in servos:
-                s.refresh(float(state["q"][s.joint]), 0.0, 0.0, 0, 25.0)
+                s.refresh(float(state.q[s.joint]), 0.0, 0.0, 0, 25.0)
                 s.set("Goal Position", s.get("Present Position"))
         bus.flush()  # torque off in the world if no servo starts with torque on
         path = options.get("path") or default_path(scene.name, device.name)

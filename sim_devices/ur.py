@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from . import ur_data as D
-from .link import Command, EmulatorSide
+from .link import Command, EmulatorSide, JointRecord
 from .loopback import check_loopback
 from .thermal import ThermalModel
 from .ur_model import URKinematics
@@ -241,11 +241,10 @@ class Controller:
 
 # -- one stream sample and the value of every output variable ----------------------------------------------
 class Tick:
-    def __init__(self, rec: np.ndarray, n: int, ctl: Controller, kin: URKinematics | None,
+    def __init__(self, joints: JointRecord, ctl: Controller, kin: URKinematics | None,
                  temperatures: np.ndarray, exec_ms: float) -> None:
-        self.t = float(rec[0])
-        self.q, self.qd, self.qdd = rec[1:1 + n], rec[1 + n:1 + 2 * n], rec[1 + 2 * n:1 + 3 * n]
-        self.current, self.tau = rec[1 + 3 * n:1 + 4 * n], rec[1 + 4 * n:1 + 5 * n]
+        self.t, self.q, self.qd, self.qdd = joints.t, joints.q, joints.qd, joints.qdd
+        self.current, self.tau = joints.current, joints.tau
         self.ctl, self.kin, self.temperatures, self.exec_ms = ctl, kin, temperatures, exec_ms
 
     @cached_property
@@ -596,7 +595,7 @@ class Emulator:
     def run(self) -> None:
         reader = self.side.joint_reader()
         latest = reader.latest()  # start at the next grid point, never mid-period
-        last_k = math.floor(float(latest[0]) * self.rate + 1e-6) if latest is not None else None
+        last_k = math.floor(JointRecord.from_row(latest, self.n).t * self.rate + 1e-6) if latest is not None else None
         exec_ms = 0.0
         parent, next_check = os.getppid(), time.monotonic() + 1.0
         t_seen = None  # world time of the newest sample read
@@ -606,16 +605,17 @@ class Emulator:
                 if os.getppid() != parent:  # the world's process is gone: so are we
                     return
             for rec in reader.new():
-                t_seen = float(rec[0])
-                k = math.floor(rec[0] * self.rate + 1e-6)
-                if last_k is None and abs(rec[0] * self.rate - k) > 1e-6:
+                joints = JointRecord.from_row(rec, self.n)
+                t_seen = joints.t
+                k = math.floor(joints.t * self.rate + 1e-6)
+                if last_k is None and abs(joints.t * self.rate - k) > 1e-6:
                     last_k = k  # the first sample is off the grid: wait for the next grid point
                 if last_k is not None and k <= last_k:
                     continue
                 last_k = k
                 t0 = time.perf_counter()
-                temps = self.thermal.update(float(rec[0]), rec[1 + 3 * self.n:1 + 4 * self.n])
-                self.rtde.stream(Tick(rec, self.n, self.controller, self.kin, temps, exec_ms))
+                temps = self.thermal.update(joints.t, joints.current)
+                self.rtde.stream(Tick(joints, self.controller, self.kin, temps, exec_ms))
                 exec_ms = (time.perf_counter() - t0) * 1e3
             time.sleep(self._pause(t_seen, last_k))
 

@@ -102,9 +102,9 @@ def test_sync_read_reports_the_world_joint_state(world, link):
     port, ph = link
     ticks = [signed(v) for v in sync_read(port, ph, 132, 4)]
     js = world.latest_joints()  # holding still: the same angles
-    assert ticks == [2048 + d * round(q / RAD) for q, d in zip(js["q"], DIRS, strict=True)]
+    assert ticks == [2048 + d * round(q / RAD) for q, d in zip(js.q, DIRS, strict=True)]
     current = [signed(v, 16) * 0.00269 for v in sync_read(port, ph, 126, 2)]
-    assert current == pytest.approx([d * c for c, d in zip(world.latest_joints()["current"], DIRS, strict=True)],
+    assert current == pytest.approx([d * c for c, d in zip(world.latest_joints().current, DIRS, strict=True)],
                                     abs=0.0027)
 
 
@@ -211,4 +211,4 @@ def test_hardware_error_alert_bit_after_restart_with_a_fault(world, link):
         port.closePort()
         world.restart("arm", {"reboot_s": 0.5})
         assert port.openPort() and port.setBaudRate(1_000_000)
-    assert np.all(np.isfinite(world.latest_joints()["q"]))
+    assert np.all(np.isfinite(world.latest_joints().q))

@@ -17,6 +17,7 @@ from ftc_hw.model import ArmModel
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices import ur_data as D
 from ftc_hw.sim_devices.host import WorldHost
+from ftc_hw.sim_devices.link import JointRecord
 from ftc_hw.sim_devices.ur import Emulator
 from ftc_hw.sim_devices.ur_model import rotation_vector
 
@@ -59,7 +60,7 @@ def test_default_receive_reads_the_world_joint_angles_exactly(world, receive):
     assert receive.isConnected()
     ring = world.joint_reader()
     ts, qs = collect(receive, 1.0)
-    world_q = {float(rec[0]): rec[1:7] for rec in ring.new()}
+    world_q = {j.t: j.q for j in (JointRecord.from_row(rec, SCENE.n_joints) for rec in ring.new())}
     assert len(ts) > 100
     matched = [np.max(np.abs(np.array(q) - world_q[t])) for t, q in zip(ts, qs, strict=True) if t in world_q]
     assert len(matched) >= 0.9 * len(ts)

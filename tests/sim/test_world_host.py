@@ -41,7 +41,7 @@ def test_the_host_reports_its_end_and_serves_its_samples_and_time():
         ft = world.ft_reader(from_start=True).new()
         assert len(ft) >= 500 and all(r.shape == (13,) for r in ft[:3])  # [t, wrench (6), saturated (6)]
         joints = world.latest_joints()
-        assert joints is not None and joints["q"].shape == (3,)
+        assert joints is not None and joints.q.shape == (3,)
         t0 = world.sim_time()
         time.sleep(0.3)
         assert 0.2 < world.sim_time() - t0 < 0.5  # the post-roll goes on in real time
