@@ -22,13 +22,13 @@ from ftc_hw.codecs.errors import CodecError
 from ftc_hw.codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTCodec
 from ftc_hw.scene import DeviceSpec, Scene
 
-from .emulator import Emulator, Pacer, PtyLink, default_pty_path, serve_with
+from .emulator import FTEmulator, Pacer, PtyLink, default_pty_path, serve_with
 from .link import LinkInfo
 
 _DESTROYS = ("drop", "corrupt", "truncate")
 
 
-class CanFTEmulator(Emulator):
+class CanFTEmulator(FTEmulator):
     def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
         super().__init__(device, scene, link, options)
         p = device.params

@@ -35,8 +35,6 @@ from __future__ import annotations
 import contextlib
 import os
 import select
-import signal
-import sys
 import termios
 import time
 import tty
@@ -74,6 +72,7 @@ from ftc_hw.codecs.dxl_table import (
 
 from .dxl_protocol import Instruction, PacketReader, fast_status, status
 from .dxl_servo import Servo
+from .emulator import Emulator, serve_with
 from .link import Command, EmulatorSide
 from .thermal import ThermalModel
 
@@ -99,7 +98,7 @@ class WorldPort:
         if s is None:
             z = np.zeros(self.n)
             return 0.0, z, z, z
-        return s["t"], s["q"], s["qd"], s["current"]
+        return s.t, s.q, s.qd, s.current
 
     def send(self, cmd: Command) -> None:
         self.sent.append(cmd)
@@ -394,16 +393,17 @@ class PtyTransport:
     def line_baud(self) -> int | None:
         return _TERMIOS_BAUD.get(termios.tcgetattr(self.slave)[5])
 
-    def serve(self, bus: DxlBus) -> None:
+    def serve(self, bus: DxlBus, heartbeat: Callable[[], None]) -> None:
+        """Answer the instructions on the line; ``heartbeat()`` whenever it is quiet (it ends the
+        process once the world's is gone)."""
         reader = PacketReader()
-        parent = os.getppid()
         while True:
             ready, _, _ = select.select([self.master], [], [], PACKET_GAP_S if reader.pending else 0.5)
             if not ready:
                 if reader.pending:
                     reader.expire()
-                elif os.getppid() != parent:  # the world's process is gone: so are we
-                    return
+                else:
+                    heartbeat()
                 continue
             data = os.read(self.master, 4096)
             t_rx = time.perf_counter()
@@ -469,30 +469,38 @@ def default_path(scene_name: str, device_name: str) -> str:
     return f"/tmp/ftc-{scene_name}-{device_name}-{os.getppid()}.tty"
 
 
-def serve(device: Any, scene: Any, link: Any, ready: Any, options: dict) -> None:
-    """The emulator process: bind the pty, report the endpoint on ``ready``, serve until terminated."""
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
-    transport = None
-    try:
+class DynamixelEmulator(Emulator):
+    """A chain of servos on a pty (``options``: the module's)."""
+
+    def __init__(self, device: Any, scene: Any, link: Any, options: dict) -> None:
         servos = build_servos(device, scene.n_joints, options)
-        side = EmulatorSide(link)
-        world = WorldPort(side, scene.n_joints, device.name)
-        bus = DxlBus(servos, world, reboot_s=float(options.get("reboot_s", 0.1)))
-        state = side.joint_state()
+        super().__init__(device, scene, link, options)
+        self.servos = servos
+        world = WorldPort(self.side, scene.n_joints, device.name)
+        self.bus = DxlBus(servos, world, reboot_s=float(self.options.get("reboot_s", 0.1)))
+        state = self.side.joint_state()
         if state is not None:  # the goal registers start where the arm is
             for s in servos:
-                s.refresh(float(state["q"][s.joint]), 0.0, 0.0, 0, 25.0)
+                s.refresh(float(state.q[s.joint]), 0.0, 0.0, 0, 25.0)
                 s.set("Goal Position", s.get("Present Position"))
-        bus.flush()  # torque off in the world if no servo starts with torque on
-        path = options.get("path") or default_path(scene.name, device.name)
-        transport = PtyTransport(path, wire_time=bool(options.get("wire_time", False)))
-    except Exception as exc:  # noqa: BLE001 - reported to the parent
-        ready.put({"error": f"{type(exc).__name__}: {exc}"})
-        return
-    ready.put({"name": device.name, "kind": device.kind, "transport": "serial", "endpoint": transport.path,
-               "pty": transport.slave_name, "protocol": 2.0, "baudrate": int(device.params.get("baudrate", 57600)),
-               "ids": [s.id for s in servos], "model": servos[0].model.name})
-    try:
-        transport.serve(bus)
-    finally:
-        transport.close()
+        self.bus.flush()  # torque off in the world if no servo starts with torque on
+        self.transport: PtyTransport | None = None
+
+    def bind(self) -> dict[str, Any]:
+        path = self.options.get("path") or default_path(self.scene.name, self.device.name)
+        self.transport = PtyTransport(path, wire_time=bool(self.options.get("wire_time", False)))
+        return {**self.endpoint_base("serial", self.transport.path), "pty": self.transport.slave_name,
+                "protocol": 2.0, "baudrate": int(self.device.params.get("baudrate", 57600)),
+                "ids": [s.id for s in self.servos], "model": self.servos[0].model.name}
+
+    def loop(self) -> None:
+        self.transport.serve(self.bus, self.heartbeat)
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+
+
+def serve(device: Any, scene: Any, link: Any, ready: Any, options: dict) -> None:
+    """The emulator process: bind the pty, report the endpoint on ``ready``, serve until terminated."""
+    serve_with(DynamixelEmulator, device, scene, link, ready, options)

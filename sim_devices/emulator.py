@@ -1,5 +1,8 @@
-"""What every F/T emulator process shares: the world feed, a pty endpoint with a stable path, absolute
-deadline pacing, a stats file, fault injection, and a clean exit on SIGTERM.
+"""What every emulator process shares (:class:`Emulator`: the world link, the endpoint's lifecycle, a
+stats file, fault injection, an exit with the world's process and a clean one on SIGTERM), what every
+F/T emulator adds (:class:`FTEmulator`: the world's F/T samples, their numbering and accounting), and
+their helpers: a pty endpoint with a stable path, absolute deadline pacing. The arm emulators
+(``dynamixel``, ``ur``) are emulators of the first kind.
 
 Endpoint of a pty device: the emulator owns the pty master; clients open ``path``
 (``/tmp/ftc-<scene>-<device>-<runner pid>.tty`` unless ``options["path"]``), a symlink replaced
@@ -10,9 +13,10 @@ by the client's input flush on open), and the symlink points at that descriptor,
 ``/proc/<emulator pid>/fd/<n>``, not at ``/dev/pts/<n>``: when the emulator dies the path stops
 resolving, where a ``/dev/pts`` name would soon be reused by another process's pty.
 
-Options every emulator understands: ``faults``, ``seed`` (see :mod:`ftc_hw.sim_devices.faults`),
-``stats_path`` (JSON file with the emulator's counters, rewritten at most every 0.1 s and at exit),
-``max_frames`` (stop sending after this many samples; the stats then say ``"done": true``).
+Options every emulator understands: ``faults`` (those its transport supports, none for the arms),
+``seed`` (see :mod:`ftc_hw.sim_devices.faults`), ``stats_path`` (JSON file with the emulator's
+counters, rewritten at most every 0.1 s and at exit); every F/T emulator: ``max_frames`` (stop sending
+after this many samples; the stats then say ``"done": true``).
 """
 from __future__ import annotations
 
@@ -162,9 +166,10 @@ def _raise_exit(signum: int, frame: object) -> None:
 
 
 class Emulator:
-    """Base of the F/T emulators: ``bind()`` returns the endpoint dict, ``loop()`` serves forever."""
+    """Base of every emulator process: ``bind()`` returns the endpoint dict, ``loop()`` serves until the
+    process ends (``heartbeat()`` in it), ``close()`` releases the endpoint; ``run()`` does the three."""
 
-    SUPPORTED_FAULTS: frozenset[str] = ALL_FAULTS - {"reorder"}  # a byte stream keeps its order
+    SUPPORTED_FAULTS: frozenset[str] = frozenset()  # none unless the transport says
 
     def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
         self.device = device
@@ -172,16 +177,75 @@ class Emulator:
         self.options = dict(options or {})
         self.faults = FaultInjector(FaultConfig.from_options(self.options, self.SUPPORTED_FAULTS))
         self.side = EmulatorSide(link)
-        self.reader = self.side.ft_reader()
         self.stats_file = StatsFile(self.options.get("stats_path"))
+        self._ppid = os.getppid()
+        self.extra_stats: dict[str, Any] = {}
+
+    # -- stats -----------------------------------------------------------------------------------------
+    def stats(self) -> dict[str, Any]:
+        return {"name": self.device.name, **self.faults.snapshot(), **self.extra_stats}
+
+    def write_stats(self, force: bool = False) -> None:
+        self.stats_file.write(self.stats(), force)
+
+    def parent_gone(self) -> bool:
+        """The process that started this one (the world's) is gone."""
+        return os.getppid() != self._ppid
+
+    def heartbeat(self) -> None:
+        """Called by the serving loops: stats to disk, and an exit once the parent (the runner) is gone,
+        so that a runner killed without its cleanup leaves no emulator behind."""
+        if self.parent_gone():
+            raise SystemExit(0)
+        self.write_stats()
+
+    # -- process ---------------------------------------------------------------------------------------
+    def bind(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def loop(self) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release the endpoint (remove a pty symlink); must not raise."""
+
+    def endpoint_base(self, transport: str, endpoint: str) -> dict[str, Any]:
+        return {"name": self.device.name, "kind": self.device.kind, "transport": transport, "endpoint": endpoint}
+
+    def run(self, ready) -> None:
+        signal.signal(signal.SIGTERM, _raise_exit)
+        try:
+            endpoint = self.bind()
+        except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
+            self.close()
+            ready.put({"error": f"{type(exc).__name__}: {exc}"})
+            return
+        self.faults.start()
+        endpoint["ready_ns"] = time.monotonic_ns()  # CLOCK_MONOTONIC is shared by the host's processes
+        ready.put(endpoint)
+        try:
+            self.loop()
+        finally:
+            self.close()
+            with contextlib.suppress(Exception):
+                self.write_stats(force=True)
+
+
+class FTEmulator(Emulator):
+    """Base of the F/T emulators: the world's F/T samples, their numbers at the sensor's rate, what was
+    sent and what was not."""
+
+    SUPPORTED_FAULTS: frozenset[str] = ALL_FAULTS - {"reorder"}  # a byte stream keeps its order
+
+    def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
+        super().__init__(device, scene, link, options)
+        self.reader = self.side.ft_reader()
         mf = self.options.get("max_frames")
         self.max_frames = None if mf is None else int(mf)
         self.rate_hz = float(scene.sensor.rate_hz)
-        self._ppid = os.getppid()
         self.samples = 0  # samples sent (or attempted: faults included)
         self._last_n: int | None = None
         self.done = False
-        self.extra_stats: dict[str, Any] = {}
 
     # -- world -----------------------------------------------------------------------------------------
     def new_samples(self) -> list[np.ndarray]:
@@ -221,51 +285,9 @@ class Emulator:
         self.samples += 1
         return True
 
-    # -- stats -----------------------------------------------------------------------------------------
     def stats(self) -> dict[str, Any]:
         return {"name": self.device.name, "samples": self.samples, "done": self.done,
                 "ring_lost": self.reader.lost, **self.faults.snapshot(), **self.extra_stats}
-
-    def write_stats(self, force: bool = False) -> None:
-        self.stats_file.write(self.stats(), force)
-
-    def heartbeat(self) -> None:
-        """Called by the serving loops: stats to disk, and an exit once the parent (the runner) is gone,
-        so that a runner killed without its cleanup leaves no emulator behind."""
-        if os.getppid() != self._ppid:
-            raise SystemExit(0)
-        self.write_stats()
-
-    # -- process ---------------------------------------------------------------------------------------
-    def bind(self) -> dict[str, Any]:
-        raise NotImplementedError
-
-    def loop(self) -> None:
-        raise NotImplementedError
-
-    def close(self) -> None:
-        """Release the endpoint (remove a pty symlink); must not raise."""
-
-    def endpoint_base(self, transport: str, endpoint: str) -> dict[str, Any]:
-        return {"name": self.device.name, "kind": self.device.kind, "transport": transport, "endpoint": endpoint}
-
-    def run(self, ready) -> None:
-        signal.signal(signal.SIGTERM, _raise_exit)
-        try:
-            endpoint = self.bind()
-        except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises
-            self.close()
-            ready.put({"error": f"{type(exc).__name__}: {exc}"})
-            return
-        self.faults.start()
-        endpoint["ready_ns"] = time.monotonic_ns()  # CLOCK_MONOTONIC is shared by the host's processes
-        ready.put(endpoint)
-        try:
-            self.loop()
-        finally:
-            self.close()
-            with contextlib.suppress(Exception):
-                self.write_stats(force=True)
 
 
 def serve_with(cls: type[Emulator], device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:

@@ -46,7 +46,7 @@ from ftc_hw.model.true_arm import true_arm_spec
 from ftc_hw.priority import name_process
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
-from .link import Command, Ring, RingReader, joint_width
+from .link import Command, JointRecord, Ring, RingReader
 from .runner import AppliedCommand, SimRunner
 from .world import Hold, Reality, with_reality
 from .world.truth import truth_line
@@ -213,6 +213,10 @@ class _Child:
 
 def _main(conn: Any, plan: _Plan) -> None:
     """Entry point of the world process."""
+    # Ctrl-C is its host's, which closes the world (quit on the pipe, or the pipe's end); the emulators
+    # it starts inherit the ignored SIGINT (spawn keeps it across exec): the terminal's Ctrl-C reaches
+    # every process of its group, and a world or an emulator cut short by it would leave no report
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     name_process("ftc-world")
     try:
         t0 = time.monotonic()
@@ -310,7 +314,7 @@ class WorldHost:
             raise WorldHostError(f"the simulated world failed to start: {info}")
         self.endpoints = {e["name"]: e for e in info["endpoints"]}
         n = info["n_joints"]
-        self._rings = {"joints": Ring(joint_width(n), name=info["joint_ring"], create=False),
+        self._rings = {"joints": Ring(JointRecord.width(n), name=info["joint_ring"], create=False),
                        "ft": Ring(12, name=info["ft_ring"], create=False)}
         self.sample_period_s = info["sample_period_s"]
         self.startup_s = info["startup_s"]
@@ -459,7 +463,7 @@ class WorldHost:
 
     # -- the world's samples -----------------------------------------------------------------------------------
     def joint_reader(self, from_start: bool = False) -> RingReader:
-        """Records ``[t, q..., qd..., qdd..., current..., tau...]`` (world time, SI units)."""
+        """The joint ring's records, each read by ``JointRecord.from_row(record, scene.n_joints)``."""
         return RingReader(self._ring("joints"), from_start=from_start)
 
     def ft_reader(self, from_start: bool = False) -> RingReader:
@@ -471,10 +475,7 @@ class WorldHost:
             raise WorldHostError("the world is not running (start() first)")
         return self._rings[which]
 
-    def latest_joints(self) -> dict[str, np.ndarray | float] | None:
+    def latest_joints(self) -> JointRecord | None:
+        """The world's newest joint sample (None before the first)."""
         rec = self.joint_reader().latest()
-        if rec is None:
-            return None
-        n = self.scene.n_joints
-        return {"t": float(rec[0]), "q": rec[1:1 + n], "qd": rec[1 + n:1 + 2 * n], "qdd": rec[1 + 2 * n:1 + 3 * n],
-                "current": rec[1 + 3 * n:1 + 4 * n], "tau": rec[1 + 4 * n:1 + 5 * n]}
+        return None if rec is None else JointRecord.from_row(rec, self.scene.n_joints)

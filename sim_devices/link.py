@@ -183,8 +183,30 @@ class LinkInfo:
 FT_WIDTH = 12  # wrench (6, sensor frame, scene convention, as the device reports it), saturated (6, 0/1)
 
 
-def joint_width(n: int) -> int:
-    return 5 * n  # q, qd, qdd, current, tau
+@dataclass(frozen=True, slots=True)
+class JointRecord:
+    """One sample of the world's joint ring, by name. The one place that says its layout: a record
+    (what a :class:`RingReader` returns) is ``[t, q (n), qd (n), qdd (n), current (n), tau (n)]`` --
+    the world's time (s), then for each of the ``n`` joints, in the scene's order, its angle (rad),
+    velocity (rad/s), acceleration (rad/s^2), motor current (A) and motor torque (N m). The world
+    writes it (:meth:`WorldLink.publish_joints`); ``from_row`` reads it, its arrays views of the row."""
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    current: np.ndarray
+    tau: np.ndarray
+
+    @staticmethod
+    def width(n: int) -> int:
+        """The ring's payload width for ``n`` joints (the record without its time)."""
+        return 5 * n
+
+    @classmethod
+    def from_row(cls, row: np.ndarray, n: int) -> JointRecord:
+        return cls(float(row[0]), row[1:1 + n], row[1 + n:1 + 2 * n], row[1 + 2 * n:1 + 3 * n],
+                   row[1 + 3 * n:1 + 4 * n], row[1 + 4 * n:1 + 5 * n])
 
 
 MAX_COMMAND_BYTES = 65536
@@ -198,7 +220,7 @@ class WorldLink:
         # ctx: accepted for compatibility; nothing here needs a multiprocessing context any more
         self.n_joints = n_joints
         self.ft = Ring(FT_WIDTH)
-        self.joints = Ring(joint_width(n_joints))
+        self.joints = Ring(JointRecord.width(n_joints))
         self._dir = tempfile.mkdtemp(prefix="ftc-link-")  # 0700: only this user's processes can send
         self.command_path = os.path.join(self._dir, "commands")
         self._commands = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
@@ -213,6 +235,7 @@ class WorldLink:
         self.ft.append_parts(t, (wrench, saturated))  # bools stored as 0.0 / 1.0
 
     def publish_joints(self, t: float, q, qd, qdd, current, tau) -> None:
+        """Append one :class:`JointRecord` (its fields in its order)."""
         self.joints.append_parts(t, (q, qd, qdd, current, tau))
 
     def drain_commands(self, limit: int = 100) -> list[Command]:
@@ -248,7 +271,7 @@ class EmulatorSide:
     def __init__(self, info: LinkInfo) -> None:
         self.info = info
         self.ft = Ring(FT_WIDTH, name=info.ft_ring, create=False)
-        self.joints = Ring(joint_width(info.n_joints), name=info.joint_ring, create=False)
+        self.joints = Ring(JointRecord.width(info.n_joints), name=info.joint_ring, create=False)
         self._commands = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self._commands.settimeout(SEND_TIMEOUT_S)
 
@@ -258,14 +281,10 @@ class EmulatorSide:
     def joint_reader(self) -> RingReader:
         return RingReader(self.joints)
 
-    def joint_state(self) -> dict[str, Any] | None:
-        """The newest joint sample: t (s), q, qd, qdd, current, tau."""
+    def joint_state(self) -> JointRecord | None:
+        """The newest joint sample (None before the first)."""
         rec = RingReader(self.joints).latest()
-        if rec is None:
-            return None
-        n = self.info.n_joints
-        return {"t": float(rec[0]), "q": rec[1:1 + n], "qd": rec[1 + n:1 + 2 * n], "qdd": rec[1 + 2 * n:1 + 3 * n],
-                "current": rec[1 + 3 * n:1 + 4 * n], "tau": rec[1 + 4 * n:1 + 5 * n]}
+        return None if rec is None else JointRecord.from_row(rec, self.info.n_joints)
 
     def send(self, command: Command) -> None:
         """Hand ``command`` to the world; raises CommandLinkError when the world cannot take it."""

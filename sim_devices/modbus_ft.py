@@ -28,7 +28,7 @@ from ftc_hw.codecs.registers import RegisterMap, encode_identity, register_map
 from ftc_hw.codecs.stream import StreamFormat
 from ftc_hw.scene import DeviceSpec, Scene
 
-from .emulator import Emulator, Pacer, PtyLink, default_pty_path, serve_with
+from .emulator import FTEmulator, Pacer, PtyLink, default_pty_path, serve_with
 from .link import LinkInfo
 from .loopback import check_loopback
 from .modbus_slave import ModbusSlave
@@ -38,7 +38,7 @@ JAM_BYTES = 10  # consecutive 0xFF bytes that stop the FT 300 stream (Robotiq's 
 SILENCE_S = 0.05  # a request older than this is stale: start a new frame (RTU inter-frame silence)
 
 
-class ModbusFTEmulator(Emulator):
+class ModbusFTEmulator(FTEmulator):
     default_map: str | None = None
     default_identity: dict[str, str] = {}
     stream_format: StreamFormat | None = None  # a stream mode started through the map's stream_register

@@ -53,7 +53,7 @@ from ftc_hw.codecs.netft_rdt import (
 )
 from ftc_hw.scene import DeviceSpec, Scene
 
-from .emulator import Emulator, Pacer, serve_with
+from .emulator import FTEmulator, Pacer, serve_with
 from .link import LinkInfo
 from .loopback import check_loopback
 
@@ -61,7 +61,7 @@ LATE_S = 0.3e-3  # how much later than one sample period a record may leave (the
 UDP_FAULTS = frozenset(("drop", "duplicate", "reorder", "truncate", "delay", "stall_s", "disconnect_at_s"))
 
 
-class RdtEmulator(Emulator):
+class RdtEmulator(FTEmulator):
     SUPPORTED_FAULTS = UDP_FAULTS
 
     def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:

@@ -15,13 +15,13 @@ from typing import Any
 from ftc_hw.codecs.stream import stream_format
 from ftc_hw.scene import DeviceSpec, Scene
 
-from .emulator import Emulator, Pacer, PtyLink, default_pty_path, serve_with
+from .emulator import FTEmulator, Pacer, PtyLink, default_pty_path, serve_with
 from .link import LinkInfo
 
 _DESTROYS = ("drop", "corrupt", "truncate")
 
 
-class SerialStreamEmulator(Emulator):
+class SerialStreamEmulator(FTEmulator):
     def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
         super().__init__(device, scene, link, options)
         self.fmt = stream_format(device.params.get("format", "ftc-1k"))

@@ -39,11 +39,8 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
-import signal
 import socket
 import struct
-import sys
 import threading
 import time
 from functools import cached_property
@@ -52,7 +49,8 @@ from typing import Any
 import numpy as np
 
 from . import ur_data as D
-from .link import Command, EmulatorSide
+from .emulator import Emulator, serve_with
+from .link import Command, JointRecord
 from .loopback import check_loopback
 from .thermal import ThermalModel
 from .ur_model import URKinematics
@@ -241,11 +239,10 @@ class Controller:
 
 # -- one stream sample and the value of every output variable ----------------------------------------------
 class Tick:
-    def __init__(self, rec: np.ndarray, n: int, ctl: Controller, kin: URKinematics | None,
+    def __init__(self, joints: JointRecord, ctl: Controller, kin: URKinematics | None,
                  temperatures: np.ndarray, exec_ms: float) -> None:
-        self.t = float(rec[0])
-        self.q, self.qd, self.qdd = rec[1:1 + n], rec[1 + n:1 + 2 * n], rec[1 + 2 * n:1 + 3 * n]
-        self.current, self.tau = rec[1 + 3 * n:1 + 4 * n], rec[1 + 4 * n:1 + 5 * n]
+        self.t, self.q, self.qd, self.qdd = joints.t, joints.q, joints.qd, joints.qdd
+        self.current, self.tau = joints.current, joints.tau
         self.ctl, self.kin, self.temperatures, self.exec_ms = ctl, kin, temperatures, exec_ms
 
     @cached_property
@@ -559,7 +556,7 @@ _MARGIN_S = 0.0006  # ... which starts this long before the grid point's world t
 DEFAULT_ADDRESS = "127.0.0.2"  # where an emulated controller listens unless told (scenes name no address)
 
 
-class Emulator:
+class UREmulator(Emulator):
     """Servers, controller state and the stream loop, for one UR device."""
 
     def __init__(self, device: Any, scene: Any, link: Any, options: dict) -> None:
@@ -573,49 +570,49 @@ class Emulator:
         if not 0.0 < self.rate <= version_max:
             raise ValueError(f"frequency {self.rate:g} Hz: a {'e-Series' if version_max > 125 else 'CB3'} "
                              f"controller streams at most {version_max:g} Hz")
-        self.side = EmulatorSide(link)
-        self.n = scene.n_joints
         resume = options.get("resume_after_s")
         if resume is not None and not 0.0 <= float(resume) <= 3600.0:
             raise ValueError(f"resume_after_s {resume!r}: expected seconds in [0, 3600]")
+        super().__init__(device, scene, link, options)
+        self.n = scene.n_joints
         self.controller = Controller(self.version, self.side, device.name, str(p.get("serial", "20205500001")),
                                      str(p.get("robot_model", "UR5")),
                                      resume_after_s=None if resume is None else float(resume))
         self.kin = URKinematics(scene)
         self.thermal = ThermalModel(self.n, ambient_c=25.0, gain_c_per_a2=0.5, tau_s=900.0)
-        self.rtde_port = int(options.get("rtde_port", D.RTDE_PORT))
-        self.dashboard_port = int(options.get("dashboard_port", D.DASHBOARD_PORT))
+        self.rtde_port = int(self.options.get("rtde_port", D.RTDE_PORT))
+        self.dashboard_port = int(self.options.get("dashboard_port", D.DASHBOARD_PORT))
+
+    def bind(self) -> dict[str, Any]:
         self.rtde = RtdeServer(self.controller, self.address, self.rtde_port, self.rate)
         self.dashboard = DashboardServer(self.controller, self.address, self.dashboard_port)
+        return {**self.endpoint_base("tcp", self.address), "address": self.address, "rtde_port": self.rtde_port,
+                "dashboard_port": self.dashboard_port, "frequency": self.rate,
+                "controller_version": ".".join(map(str, self.version))}
 
-    def endpoint(self, device: Any) -> dict[str, Any]:
-        return {"name": device.name, "kind": device.kind, "transport": "tcp", "endpoint": self.address,
-                "address": self.address, "rtde_port": self.rtde_port, "dashboard_port": self.dashboard_port,
-                "frequency": self.rate, "controller_version": ".".join(map(str, self.version))}
-
-    def run(self) -> None:
+    def loop(self) -> None:
         reader = self.side.joint_reader()
         latest = reader.latest()  # start at the next grid point, never mid-period
-        last_k = math.floor(float(latest[0]) * self.rate + 1e-6) if latest is not None else None
+        last_k = math.floor(JointRecord.from_row(latest, self.n).t * self.rate + 1e-6) if latest is not None else None
         exec_ms = 0.0
-        parent, next_check = os.getppid(), time.monotonic() + 1.0
+        next_check = time.monotonic() + 1.0
         t_seen = None  # world time of the newest sample read
         while True:
             if time.monotonic() > next_check:
                 next_check += 1.0
-                if os.getppid() != parent:  # the world's process is gone: so are we
-                    return
+                self.heartbeat()  # the world's process is gone: so are we
             for rec in reader.new():
-                t_seen = float(rec[0])
-                k = math.floor(rec[0] * self.rate + 1e-6)
-                if last_k is None and abs(rec[0] * self.rate - k) > 1e-6:
+                joints = JointRecord.from_row(rec, self.n)
+                t_seen = joints.t
+                k = math.floor(joints.t * self.rate + 1e-6)
+                if last_k is None and abs(joints.t * self.rate - k) > 1e-6:
                     last_k = k  # the first sample is off the grid: wait for the next grid point
                 if last_k is not None and k <= last_k:
                     continue
                 last_k = k
                 t0 = time.perf_counter()
-                temps = self.thermal.update(float(rec[0]), rec[1 + 3 * self.n:1 + 4 * self.n])
-                self.rtde.stream(Tick(rec, self.n, self.controller, self.kin, temps, exec_ms))
+                temps = self.thermal.update(joints.t, joints.current)
+                self.rtde.stream(Tick(joints, self.controller, self.kin, temps, exec_ms))
                 exec_ms = (time.perf_counter() - t0) * 1e3
             time.sleep(self._pause(t_seen, last_k))
 
@@ -632,11 +629,4 @@ class Emulator:
 
 def serve(device: Any, scene: Any, link: Any, ready: Any, options: dict) -> None:
     """The emulator process: bind, report the endpoint on ``ready``, stream until terminated."""
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
-    try:
-        emu = Emulator(device, scene, link, options)
-    except Exception as exc:  # noqa: BLE001 - reported to the parent
-        ready.put({"error": f"{type(exc).__name__}: {exc}"})
-        return
-    ready.put(emu.endpoint(device))
-    emu.run()
+    serve_with(UREmulator, device, scene, link, ready, options)

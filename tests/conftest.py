@@ -1,6 +1,15 @@
 """Fixtures that several layers' tests use: sampled contacts (core, app), small custom scenes
 (core, model) and what a monitor run's exit code may say (app, record). Each layer's own fixtures
-are in its folder's ``conftest.py``."""
+are in its folder's ``conftest.py``.
+
+Real-time tests are marked where they are defined. A test whose world, emulators or streams run
+against the wall clock is marked ``realtime`` (``pytestmark = pytest.mark.realtime`` at a module's
+top, or ``@pytest.mark.realtime`` on the test): ``./run-tests`` runs those one at a time, after the
+others, which it runs on every core (``-m "not realtime"`` with pytest-xdist). A test that uses the
+``world_feeder`` fixture is real-time without saying so (the hook below). In the folders where most
+tests are real-time (``app``, ``devices``, ``sim``, ``cli``, ``record``) every test says which it is:
+``realtime``, or ``compute`` (it only computes: worlds stepped as fast as they go, files, codecs,
+refusals); ``tests/test_markers.py`` fails on a test there that says neither."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -12,15 +21,6 @@ from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import SECTION_TYPES, PipelineSettings
 from ftc_hw.scene import Scene, load_scene
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
-
-# Tests whose worlds, emulators or streams run against the wall clock: ./run-tests runs them one at a
-# time, after the others (which it runs on every core: they compute, nothing in them is timed).
-REALTIME_DIRS = {"app", "devices", "sim", "cli", "record"}
-REALTIME_MODULES = {"test_bus_remote.py", "test_monitor.py", "test_stream_loss.py", "test_pipeline_events.py"}
-# in those folders, modules that only compute (worlds stepped as fast as they go, files, codecs)
-COMPUTE_MODULES = {"test_monitor_eval.py", "test_device_params.py", "test_dxl_protocol.py", "test_shells.py",
-                   "test_world.py", "test_solve_cli.py", "test_warm.py", "test_vendor_output.py", "test_cli.py",
-                   "test_reality.py", "test_sim_link.py", "test_record.py"}
 
 
 def settings(**values) -> PipelineSettings:
@@ -35,11 +35,8 @@ def settings(**values) -> PipelineSettings:
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        path = Path(str(item.fspath))
-        if item.get_closest_marker("compute"):  # no assertion against the wall clock: may share the cores
-            continue
-        if ((path.parent.name in REALTIME_DIRS and path.name not in COMPUTE_MODULES) or path.name in REALTIME_MODULES
-                or "world_feeder" in getattr(item, "fixturenames", ())):
+        # a test fed by a real-time world is real-time wherever it is (tests/core/conftest.py's fixture)
+        if "world_feeder" in getattr(item, "fixturenames", ()) and not item.get_closest_marker("realtime"):
             item.add_marker(pytest.mark.realtime)
 
 

@@ -407,7 +407,7 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
     if world is not None and world.done and "error" not in (world.result or {}):
         out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s,
                                   crlb=crlb_of_truth(scene), solver_rms=solver_rms_of_truth(scene))
-    elif world is not None:
+    elif world is not None and "interrupted" not in out.problems:  # Ctrl-C: the world was stopped, not failed
         out.problems.append(f"the simulated world did not finish: {world.result}")
     if recorder is not None:
         final = {"events": {"count": str(len(out.events)),

@@ -9,7 +9,7 @@ import numpy as np
 from ftc_hw.bus import Bus, JointFrame, joints_topic
 from ftc_hw.devices.base import Adapter
 from ftc_hw.sim_devices.host import WorldHost
-from ftc_hw.sim_devices.link import RingReader
+from ftc_hw.sim_devices.link import JointRecord, RingReader
 
 
 class SimJointSource(Adapter):
@@ -36,12 +36,12 @@ class SimJointSource(Adapter):
         recs = self._reader.new()
         n = self.n
         for rec in recs:
-            t = float(rec[0])
+            j = JointRecord.from_row(rec, n)
+            t = j.t
             if t + 1e-9 < self._next_t:
                 continue
             self._next_t = (np.floor(t / self.period + 1e-6) + 1) * self.period
-            self.bus.publish(self.topic, JointFrame.make(time.monotonic_ns(), rec[1:1 + n], rec[1 + n:1 + 2 * n],
-                                                         rec[1 + 3 * n:1 + 4 * n], rec[1 + 4 * n:1 + 5 * n],
+            self.bus.publish(self.topic, JointFrame.make(time.monotonic_ns(), j.q, j.qd, j.current, j.tau,
                                                          source=self.name, seq=self._seq,
                                                          t_device_ns=round(t * 1e9)))
             self._seq += 1

@@ -7,6 +7,7 @@ from collections import deque
 from collections.abc import Callable
 
 import numpy as np
+from rich import box
 from rich.console import Console, Group
 from rich.table import Table
 from rich.text import Text
@@ -132,35 +133,48 @@ class LiveView:
                      Text("\n".join(self.log) or "(no events yet)"), Text(f"monitor: {counters}\n", style="dim"))
 
 
-def evaluation_table(ev: Evaluation, title: str = "contacts: detected against ground truth") -> Table:
-    t = Table(title=title, title_justify="left")
-    for c in ("#", "start s", "true link", "detected", "delay ms", "from due", "est. link", "link ok", "err mm med",
-              "rms", "CRLB rms", "err/CRLB", "err/solver", "err/std", "max", "rms all", "|dF| N", "estimates"):
-        t.add_column(c, justify="left" if c in ("true link", "detected", "est. link") else "right")
+def evaluation_table(ev: Evaluation, title: str = "contacts: detected against ground truth") -> Group:
+    """Two tables, each whole at 100 columns and in a file (no cell cut): when and on which link each
+    contact was detected, then how far its estimates were from the truth; the legend under them."""
+    def table(title: str, columns: tuple[str, ...]) -> Table:
+        # two spaces between columns, no outer border: 8 and 11 columns fit in 100 with 4-digit values
+        t = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD, show_edge=False, collapse_padding=True,
+                  pad_edge=False)
+        for c in columns:
+            text = c in ("true link", "detected", "est. link")
+            # a link name is never wrapped, and nothing is ever cut to an ellipsis (folded at worst)
+            t.add_column(c, justify="left" if text else "right", no_wrap=c.endswith("link"), overflow="fold")
+        return t
+
+    def f(x, fmt="{:.1f}"):
+        return "-" if x is None else fmt.format(x)
+
+    when = table(title, ("#", "start s", "true link", "detected", "delay ms", "from due", "est. link", "link ok"))
+    where = table("contacts: point errors against ground truth (mm)",
+                  ("#", "err mm med", "rms", "CRLB rms", "err/CRLB", "err/solver", "err/std", "max", "rms all",
+                   "|dF| N", "estimates"))
     for c in ev.contacts:
-        late = f"[yellow]late (> {ev.delay_limit_ms:g} ms)[/]"
-        det = ("yes" if c.delay_ok else late) if c.detected else "[red]no[/]"
-
-        def f(x, fmt="{:.1f}"):
-            return "-" if x is None else fmt.format(x)
-
+        det = ("yes" if c.delay_ok else "[yellow]late[/]") if c.detected else "[red]no[/]"
         start = f"{c.start_s:.3f}" + (" cut" if c.cut else "")
-        t.add_row(str(c.index), start, c.link, det, f(c.onset_delay_ms, "{:.2f}"),
-                  f(c.onset_delay_due_ms, "{:.2f}"), c.est_link,
-                  f"{c.link_right * 100:.0f} %", f(c.err_median_mm), f(c.err_rms_mm), f(c.crlb_rms_mm),
-                  f(c.err_over_crlb_rms, "{:.2f}"), f(c.err_over_solver, "{:.2f}"),
-                  f(c.err_over_std_rms, "{:.2f}"), f(c.err_max_mm),
-                  f(c.err_rms_all_mm), f(c.force_err_median_n, "{:.2f}"), f"{c.trusted}/{c.estimates}")
-    t.caption = (f"{len(ev.contacts)} true contacts, {ev.detected} detected, "
-                 f"{sum(c.detected and c.delay_ok for c in ev.contacts)} within {ev.delay_limit_ms:g} ms, "
-                 f"false alarms {len(ev.false_alarms)}"
-                 + (f" at {ev.false_alarms} s" if ev.false_alarms else "") + f", split detections {ev.splits}. "
-                 "Delay: from the first contact sample's publication (from due: from when it was due). "
-                 "Point errors (mm) over the estimates without a solver flag (rms all: with the flagged ones); "
-                 "CRLB rms: the Cramer-Rao bound of the same samples (what the sensor noise allows); "
-                 "err/CRLB: RMS of each estimate's error over its own bound (about 1 at the limit); "
-                 "err/solver: RMS error over the solver's own from one frame of the same samples' true wrench plus "
-                 "sensor noise (the events' points are fused over the contact's frames: below 1 by what that gains); "
-                 "err/std: RMS of each error over the uncertainty the event reports (about 1 when honest); "
-                 "estimates: unflagged/all; cut: the run ended during the contact")
-    return t
+        when.add_row(str(c.index), start, c.link, det, f(c.onset_delay_ms, "{:.2f}"), f(c.onset_delay_due_ms, "{:.2f}"),
+                     c.est_link, f"{c.link_right * 100:.0f} %")
+        where.add_row(str(c.index), f(c.err_median_mm), f(c.err_rms_mm), f(c.crlb_rms_mm),
+                      f(c.err_over_crlb_rms, "{:.2f}"), f(c.err_over_solver, "{:.2f}"), f(c.err_over_std_rms, "{:.2f}"),
+                      f(c.err_max_mm), f(c.err_rms_all_mm), f(c.force_err_median_n, "{:.2f}"),
+                      f"{c.trusted}/{c.estimates}")
+    when.caption = (f"{len(ev.contacts)} true contacts, {ev.detected} detected, "
+                    f"{sum(c.detected and c.delay_ok for c in ev.contacts)} within {ev.delay_limit_ms:g} ms "
+                    f"(late: after that), false alarms {len(ev.false_alarms)}"
+                    + (f" at {ev.false_alarms} s" if ev.false_alarms else "") + f", split detections {ev.splits}. "
+                    "Delay: from the first contact sample's publication (from due: from when it was due). "
+                    "Link ok: the estimates on the true link. Cut: the run ended during the contact.")
+    where.caption = ("Over the estimates without a solver flag (rms all: with the flagged ones); "
+                     "CRLB rms: the Cramer-Rao bound of the same samples (what the sensor noise allows); "
+                     "err/CRLB: RMS of each estimate's error over its own bound (about 1 at the limit); "
+                     "err/solver: RMS error over the solver's own from one frame of the same samples' true wrench "
+                     "plus sensor noise (the events' points are fused over the contact's frames: below 1 by what "
+                     "that gains); err/std: RMS of each error over the uncertainty the event reports (about 1 when "
+                     "honest); |dF| N: the median force error; estimates: unflagged/all.")
+    for t in (when, where):
+        t.caption_justify = "left"
+    return Group(when, Text(""), where)

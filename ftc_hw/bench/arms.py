@@ -33,6 +33,7 @@ from ftc_hw.bus import Bus
 from ftc_hw.devices.base import DeviceError, frozen_heap, responsive_readers
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost
+from ftc_hw.sim_devices.link import JointRecord
 
 UR_ADDRESS = "127.0.0.61"
 
@@ -99,7 +100,8 @@ def _stop_latencies(world: WorldHost, adapter: Any, n: int, between: Any = None,
             recs = ring.new()
             if recs:
                 rec = min(recs, key=lambda r: abs(r[0] - halt.t_sim))
-                gap, qd = np.asarray(halt.q) - rec[1:1 + n_q], rec[1 + n_q:1 + 2 * n_q]
+                joints = JointRecord.from_row(rec, n_q)
+                gap, qd = np.asarray(halt.q) - joints.q, joints.qd
                 held.append(float(np.max(np.abs(gap))))
                 j = int(np.argmax(np.abs(qd)))
                 if abs(qd[j]) > 0.05:  # moving: how long ago the arm was at the held position
@@ -162,6 +164,7 @@ def bench_ur(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any
     with WorldHost(scene, "sweep", devices=[device.name], options={device.name: {"address": UR_ADDRESS}},
                    noise=False) as w:
         ring = w.joint_reader()
+        n_q = scene.n_joints  # a UR arm's 6
         world_q: dict[float, np.ndarray] = {}
         r = rtde_receive.RTDEReceiveInterface(UR_ADDRESS)  # default arguments
         ts, qs = [], []
@@ -179,13 +182,15 @@ def bench_ur(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any
             if now >= next_drain:  # the ring holds ~2 s of world samples
                 next_drain = now + 0.1
                 for rec in ring.new():
-                    world_q[float(rec[0])] = rec[1:7]
+                    joints = JointRecord.from_row(rec, n_q)
+                    world_q[joints.t] = joints.q
             time.sleep(0.00005)
         wall = time.monotonic() - t0
         connected = r.isConnected()
         r.disconnect()
         for rec in ring.new():
-            world_q[float(rec[0])] = rec[1:7]
+            joints = JointRecord.from_row(rec, n_q)
+            world_q[joints.t] = joints.q
         errs = [float(np.max(np.abs(np.asarray(q) - world_q[t]))) for t, q in zip(ts, qs, strict=True) if t in world_q]
         ticks = round((ts[-1] - ts[0]) / 0.002) + 1 if ts else 0
         out["receive"] = {"duration_s": wall, "stream_rate_hz": ticks / wall, "packets_read": len(ts),

@@ -166,7 +166,7 @@ def sim(
         "Modbus TCP device (host[:port]), a pty path for a serial or CAN device; repeatable.")] = None,
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal)] = RealityChoice.ideal,
 ) -> None:
-    """Run the physics world of a scene: device signals and ground truth."""
+    """Run the physics world of a scene: device signals and ground truth. Ctrl-C stops it (exit code 130)."""
     from ftc_hw.cli.sim import list_scenarios, run_sim  # lazy: CLI start-up
 
     if list_:

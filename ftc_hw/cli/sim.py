@@ -1,6 +1,10 @@
-"""``ftc sim``: run a scene's physics world and its device emulators, optionally writing ground truth."""
+"""``ftc sim``: run a scene's physics world and its device emulators, optionally writing ground truth.
+
+Ctrl-C (SIGINT) or SIGTERM stops it cleanly: the world and its emulators are shut down, one line on
+stderr says so, and the exit code is the shell's for the signal (130 for SIGINT, 143 for SIGTERM)."""
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import sys
@@ -33,30 +37,50 @@ def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: P
     except ValueError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
-    # SIGTERM stops like Ctrl-C: the world and its emulators are shut down, never orphaned
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    # Ctrl-C and SIGTERM stop the run: the world and its emulators are shut down, never orphaned (the
+    # world's process ignores the terminal's SIGINT: its host, this process, closes it)
+    stopped_by: list[int] = []
+
+    def stop(signum: int, _frame: object) -> None:
+        stopped_by.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGTERM, stop)
     try:
         world = WorldHost(scene, scenario, devices=None if devices else [], options=options, duration=duration,
                           seed=seed, noise=noise, realtime=realtime, truth=truth, reality=reality)
     except SceneError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
+    started, ran_s = False, None
     try:
         endpoints = world.start()
-    except WorldHostError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(1) from None
-    try:
+        started = True
         # The first stdout line tells clients what to connect to.
         print(json.dumps({"scene": scene.name, "scenario": scenario, "reality": reality, "seed": seed,
                           "devices": list(endpoints.values())}),
               flush=True)
         while not world.wait_done(1.0):
             pass
+    except WorldHostError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        stopped_by = stopped_by or [signal.SIGINT]
+        if started:
+            with contextlib.suppress(WorldHostError):
+                ran_s = world.scenario_time()
     finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):  # a second Ctrl-C does not cut the shutdown short
+            signal.signal(sig, signal.SIG_IGN)
         world.close()
+    if stopped_by:
+        ran = f" after {ran_s:.3f} simulated s" if ran_s is not None else ""
+        print(f"interrupted ({signal.Signals(stopped_by[0]).name}){ran} of {scene.name}/{scenario}: the world and "
+              "its emulators are stopped" + (f", truth so far -> {truth}" if truth and started else ""),
+              file=sys.stderr)
+        raise typer.Exit(128 + stopped_by[0])
     report = world.result or {}
     if "error" in report:
         print(f"error: {report['error']}", file=sys.stderr)

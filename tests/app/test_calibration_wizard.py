@@ -16,9 +16,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from ftc_hw.calibration import load_calibration
 from tests.app.test_fit_plots import CALIBRATE_PX, check_png
+
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
 

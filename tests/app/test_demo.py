@@ -12,6 +12,10 @@ import subprocess
 import sys
 import time
 
+import pytest
+
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 
 def run_in_pty(args: list[str], timeout: float = 180) -> tuple[int, str]:
     master, slave = pty.openpty()

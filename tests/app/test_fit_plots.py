@@ -23,6 +23,8 @@ from ftc_hw.calibration.regressor import predict
 from ftc_hw.model import ArmModel
 from ftc_hw.scene import load_scene
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 SCENE = load_scene("dxl-arm")
 
 CALIBRATE_PX = (int(calibrate_plot.HEIGHT_IN * DPI), int(calibrate_plot.WIDTH_IN * DPI))

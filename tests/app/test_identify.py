@@ -28,6 +28,8 @@ from ftc_hw.record.writer import McapRecorder
 from ftc_hw.scene import load_scene
 from tests.app.test_fit_plots import IDENTIFY_PX, axes_titled, check_png, error_bars, flagged_ticks
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 SCENE = load_scene("dxl-arm")
 
 

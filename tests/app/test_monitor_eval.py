@@ -2,9 +2,17 @@
 end-to-end tests): detection, delay, false alarms, splits and localization on hand-made timelines."""
 from __future__ import annotations
 
-import pytest
+import io
+import sys
 
-from ftc_hw.app.evaluate import evaluate
+import pytest
+from rich.console import Console
+
+from ftc_hw.app.evaluate import ContactResult, Evaluation, evaluate
+from ftc_hw.app.view import evaluation_table, make_console
+from ftc_hw.scene import builtin_names, load_scene
+
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
 MS = 1_000_000
 T0 = 5_000_000_000  # host ns of the first truth sample
@@ -182,3 +190,45 @@ def test_a_contact_the_run_ends_in_is_marked_cut_and_can_be_left_out_of_the_wors
     assert ev.worst_rms_mm() == pytest.approx(9.0)
     assert ev.worst_rms_mm(whole=True) == pytest.approx(2 ** 0.5, abs=0.01)  # errors 0 and 2 mm
     assert [c.index for c in ev.judged(whole=True)] == [1] and len(ev.judged()) == 2
+
+
+def _worst_case_evaluation() -> Evaluation:
+    """Every column at its widest: the longest link names of the built-in scenes, 4-digit errors, a cut,
+    a late, a missed contact and false alarms."""
+    def contact(i, link, est_link, detected=True, delay_ok=True, cut=False):
+        return ContactResult(i, 1234.567, 1235.0, link, 123.45 if detected else None, 123.45 if detected else None,
+                             delay_ok, 3, 1234, 1234, est_link, 1.0, 1234.5, 1234.5, 1234.5, 1234.5, 123.45,
+                             crlb_rms_mm=1234.5, err_over_crlb_rms=12.34, solver_rms_mm=123.4, err_over_solver=12.34,
+                             err_over_std_rms=12.34, cut=cut)
+    links = sorted({t.link for name in builtin_names() for t in load_scene(name).touchable}, key=len)[::-1]
+    contacts = [contact(10, links[0], links[1], cut=True), contact(11, links[1], links[0], delay_ok=False),
+                contact(12, links[2], "-", detected=False)]
+    return Evaluation(contacts, [1.234, 5.678], 2, 0.001, 40.0, 99, 5000)
+
+
+def _headers_and_links_whole(text: str, ev: Evaluation) -> None:
+    assert "…" not in text and "..." not in text, text
+    for column in ("#", "start s", "true link", "detected", "delay ms", "from due", "est. link", "link ok",
+                   "err mm med", "rms", "CRLB rms", "err/CRLB", "err/solver", "err/std", "max", "rms all", "|dF| N",
+                   "estimates"):
+        assert column in text, (column, text)
+    for c in ev.contacts:  # each row's link names on one line, whole
+        row = next(line for line in text.splitlines() if line.split()[:1] == [str(c.index)] and c.link in line)
+        assert c.est_link in row and "1234.567" in row, (row, text)
+    assert "late" in text and "cut" in text
+
+
+def test_the_ground_truth_table_reads_whole_at_100_columns_and_in_a_file(monkeypatch):
+    ev = _worst_case_evaluation()
+    terminal = Console(width=100, record=True, file=io.StringIO(), force_terminal=True)
+    terminal.print(evaluation_table(ev))
+    text = terminal.export_text()
+    assert max(len(line.rstrip()) for line in text.splitlines()) <= 100
+    _headers_and_links_whole(text, ev)
+    # written to a file or a pipe: the console the monitor's report prints with
+    out = io.StringIO()
+    monkeypatch.setattr(sys, "stdout", out)
+    console = make_console()
+    assert not console.is_terminal
+    console.print(evaluation_table(ev))
+    _headers_and_links_whole(out.getvalue(), ev)

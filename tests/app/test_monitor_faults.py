@@ -19,7 +19,7 @@ import pytest
 from ftc_hw.record.events import read_events
 from ftc_hw.record.reader import read_recording
 
-pytestmark = pytest.mark.timeout(240)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
 
 DEGRADED_EXIT = 3
 

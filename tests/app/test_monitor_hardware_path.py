@@ -16,6 +16,7 @@ from ftc_hw.record.reader import read_recording
 from ftc_hw.sim_devices.host import free_loopback
 
 
+@pytest.mark.realtime
 def test_monitor_connects_to_the_devices_at_the_scene_addresses(tmp_path, clean_or_loaded):
     builtin = resources.files("ftc_hw") / "scene" / "builtin"
     sim = subprocess.Popen([sys.executable, "-m", "ftc_hw", "sim", "dxl-arm", "--scenario", "hold", "--duration", "60"],
@@ -56,6 +57,7 @@ def test_a_scene_without_an_arm_device_needs_sim():
     assert truth.returncode == 2 and "--truth needs --sim" in truth.stderr
 
 
+@pytest.mark.realtime
 def test_monitor_reaches_emulators_placed_by_sim_address(tmp_path, clean_or_loaded):
     """``ftc sim --address arm=...`` puts the UR emulator there; ``ftc monitor --device`` points the scene at
     it and at the CAN emulator's channel: the override path, each in its own process."""

@@ -57,6 +57,7 @@ def _counters(out: str, device: str) -> dict[str, float]:
     return ast.literal_eval(said.group(1).replace("\n", ""))
 
 
+@pytest.mark.realtime
 def test_a_killed_reader_process_is_restarted_and_the_run_says_so():
     proc = _monitor("--duration", "6")
     lines: list[str] = []

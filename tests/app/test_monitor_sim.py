@@ -20,6 +20,8 @@ from ftc_hw.record.events import read_events, read_truth
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import sweep_trajectory
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 # Per-contact median point error of the unflagged estimates, mm: the solver's noisy static accuracy
 # (RMS: ur5e 5.6, dxl-arm 0.7, leng2016 0.7) grows while the arm moves (joint state interpolated
 # between device samples, the acceleration estimate's lag); these bounds are about twice the medians

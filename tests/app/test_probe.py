@@ -10,7 +10,7 @@ from ftc_hw.app.probe import ProbePlan, plan_probe, probe
 from ftc_hw.scene import load_rig_scene, load_scene
 from ftc_hw.sim_devices.host import WorldHost
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(120)]
 
 
 def test_a_plan_tries_where_the_scene_and_the_options_say():

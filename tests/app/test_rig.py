@@ -25,6 +25,7 @@ def _addressed(spec: DeviceSpec) -> DeviceSpec:
     return replace(spec, address=address)
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize(("scene_name", "ft_class", "arm_class"), [
     ("ur5e", CanFTAdapter, URArm), ("dxl-arm", FT300Adapter, DynamixelArm)])
 def test_a_scene_rig_is_its_f_t_sensor_and_its_arm(scene_name, ft_class, arm_class):
@@ -64,6 +65,7 @@ def test_an_unknown_kind_is_a_rig_error():
         build_rig(scene, devices=[DeviceSpec("x", "laser", "serial", "/dev/null")])
 
 
+@pytest.mark.realtime
 def test_a_device_that_does_not_answer_is_named_with_its_counters(tmp_path):
     scene = load_scene("leng2016")
     spec = DeviceSpec("ft", "ft-serial-stream", "serial", str(tmp_path / "no-such-port"), {"format": "ftc-1k"})
@@ -74,6 +76,7 @@ def test_a_device_that_does_not_answer_is_named_with_its_counters(tmp_path):
     assert not rig.ft.connected.is_set()  # closed on the way out
 
 
+@pytest.mark.realtime
 def test_a_rig_on_a_hosted_world_streams_the_world_samples():
     with WorldHost("leng2016", "hold", devices=["ft"], noise=False) as world:
         rig = build_rig(world.scene, endpoints=world.endpoints, roles=("ft",), timeout=20.0)

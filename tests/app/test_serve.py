@@ -41,6 +41,7 @@ def credentials(tmp_path: Path) -> tuple[Path, Path, Path]:
     return files[0], files[1], files[2]
 
 
+@pytest.mark.realtime
 def test_a_killed_reader_process_is_stale_at_once_and_streams_again_within_a_second(tmp_path):
     """With user-password credentials (docs/bus.md): a session with the wrong ones or none gets nothing."""
     endpoint = free_endpoint()
@@ -93,6 +94,7 @@ def test_a_killed_reader_process_is_stale_at_once_and_streams_again_within_a_sec
             serve.wait(5)
 
 
+@pytest.mark.realtime
 def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_back(tmp_path, clean_or_loaded):
     """Two hosts, simulated: the devices served on 127.0.0.2, the monitor (recording) connecting with only
     --remote; a third session sees the monitor's contact events; the recording replays bit for bit."""
@@ -190,6 +192,7 @@ def test_served_over_tls_only_a_client_that_trusts_the_cell_s_ca_gets_frames(tmp
         serve.wait(5)
 
 
+@pytest.mark.realtime
 def test_a_killed_monitor_leaves_the_devices_and_the_recorder_running_and_nothing_is_lost(tmp_path):
     endpoint = free_endpoint()
     serve = subprocess.Popen([sys.executable, "-m", "ftc_hw", "serve", "--scene", "dxl-arm", "--sim", "--duration",

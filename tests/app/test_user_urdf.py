@@ -9,6 +9,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from ftc_hw.app.evaluate import evaluate
 from ftc_hw.calibration.file import load_calibration
 from ftc_hw.record.events import read_events, read_truth
@@ -16,6 +18,8 @@ from ftc_hw.scene import load_scene
 from tests.app.test_fit_plots import CALIBRATE_PX, IDENTIFY_PX, check_png
 from tests.app.test_monitor_sim import MEDIAN_ERR_MM, check_pairs
 from tests.urdf_arm import write_ur5e_urdf
+
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
 
 def ftc(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:

@@ -4,7 +4,11 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from ftc_hw.app.vendor_output import translate
+
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
 RAW = "RTDEReceiveInterface boost system Exception: (asio.misc:2) End of file"
 

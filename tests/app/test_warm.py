@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from ftc_hw.app.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.bus import Bus
@@ -20,6 +21,8 @@ from ftc_hw.pipeline import PipelineSettings
 from ftc_hw.record.events import event_record
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import World, build_scenario, truth_record
+
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
 ROOT = Path(__file__).resolve().parents[2]
 PROBE = """

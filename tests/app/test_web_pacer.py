@@ -6,6 +6,8 @@ import pytest
 
 from ftc_hw.app.web_feed import BEHIND_MS, SLOWEST_HZ, RatePacer
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 
 def test_the_rate_halves_while_behind_down_to_the_slowest_and_comes_back():
     pacer = RatePacer(10.0)

@@ -13,6 +13,8 @@ from typer.testing import CliRunner
 from ftc_hw import __version__
 from ftc_hw.cli import app
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 runner = CliRunner()
 
 

@@ -7,9 +7,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import load_scene
+
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
 FTC = [str(Path(sys.executable).parent / "ftc")]
 

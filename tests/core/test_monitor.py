@@ -4,12 +4,15 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 
 from ftc_hw.bus import EVENTS_CONTACT, Bus
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world import World, build_scenario
+
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
 
 def test_monitor_detects_the_collision_and_nothing_else(world_feeder):

@@ -15,7 +15,7 @@ from ftc_hw.monitor import LiveMonitor
 from ftc_hw.scene import load_scene
 from tests.conftest import settings
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 
 
 class Streams:

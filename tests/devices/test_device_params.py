@@ -10,6 +10,8 @@ from ftc_hw.devices.registry import ADAPTERS, make_adapter
 from ftc_hw.scene import DeviceSpec
 from ftc_hw.scene.device_params import KINDS
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 
 def test_the_schema_has_exactly_the_registry_kinds():
     assert list(KINDS) == list(ADAPTERS)

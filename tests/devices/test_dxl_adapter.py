@@ -15,6 +15,8 @@ from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 SCENE = load_scene("dxl-arm")
 DEVICE = next(d for d in SCENE.devices if d.kind == "dynamixel")
 FAST = {"stale_after": 0.1, "dead_after": 0.5}
@@ -55,9 +57,9 @@ def test_frames_are_si_and_match_the_world(world, arm):
     assert [g.seq for g in got] == list(range(got[0].seq, got[0].seq + len(got)))
     js = world.latest_joints()
     # the arm sweeps joints 1-2 at up to ~0.6 rad/s: allow a few ms of motion plus one tick
-    assert f.q == pytest.approx(js["q"], abs=0.02)
+    assert f.q == pytest.approx(js.q, abs=0.02)
     assert f.tau == pytest.approx(f.current * 4.1 / 2.3)
-    assert f.current == pytest.approx(js["current"], abs=0.05)
+    assert f.current == pytest.approx(js.current, abs=0.05)
     assert np.all(np.abs(f.q - np.round(f.q / (2 * math.pi / 4096)) * (2 * math.pi / 4096)) < 1e-12)
 
 
@@ -75,7 +77,7 @@ def test_fast_sync_read_and_hardware_error_events(world, wait_event):
                 time.sleep(0.05)
             assert adapter.counters["frames"] >= 50
             assert adapter.hardware_errors == {11: 0, 12: 0, 13: 32, 14: 0, 15: 0}
-            assert bus.latest("joints/arm").q == pytest.approx(world.latest_joints()["q"], abs=0.03)
+            assert bus.latest("joints/arm").q == pytest.approx(world.latest_joints().q, abs=0.03)
     finally:
         world.restart("arm", {})
 

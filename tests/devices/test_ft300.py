@@ -13,7 +13,7 @@ from pymodbus.framer.rtu import FramerRTU
 from ftc_hw.bus import Bus, WrenchFlag
 from ftc_hw.devices.registry import make_adapter
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 CONSTANT = np.array([12.34, -56.78, 299.99, 1.234, -2.345, 0.012])
 
 

@@ -11,7 +11,7 @@ from ftc_hw.codecs.netft_can import OP_START, NetFTCodec
 from ftc_hw.devices.can_ft import CanFTAdapter
 from ftc_hw.devices.registry import make_adapter
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 
 
 def _run(ft_sim, frames: int, *, saturated=None, **options):

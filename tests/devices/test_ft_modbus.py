@@ -12,7 +12,7 @@ from ftc_hw.devices.modbus_ft import ModbusFTAdapter
 from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import DeviceSpec, load_scene
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 
 INT32_LITTLE = {
     "name": "test-int32", "function": 4, "word_order": "little",

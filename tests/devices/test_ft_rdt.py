@@ -16,7 +16,7 @@ from ftc_hw.bus import EVENTS_DEVICE, Bus, WrenchFlag
 from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import DeviceSpec
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 RATE = 7000.0
 PERIOD_NS = round(1e9 / RATE)
 

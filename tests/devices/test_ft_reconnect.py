@@ -10,7 +10,7 @@ import pytest
 from ftc_hw.bus import EVENTS_DEVICE, Bus
 from ftc_hw.devices.registry import make_adapter
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 
 CASES = {
     "ft-serial-stream": ("leng2016", "ft-serial-stream", None, 1000.0, 3),

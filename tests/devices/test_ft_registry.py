@@ -24,7 +24,7 @@ from ftc_hw.scene import DeviceSpec, load_scene
 from ftc_hw.sim_devices.faults import FaultConfig, FaultInjector
 from ftc_hw.sim_devices.registry import EMULATORS
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 ROOT = Path(__file__).resolve().parents[2]
 
 

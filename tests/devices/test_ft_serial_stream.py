@@ -13,7 +13,7 @@ from ftc_hw.codecs import FTC_1K, StreamParser
 from ftc_hw.devices.registry import make_adapter
 from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 
 
 def _run(ft_sim, frames: int, *, saturated=None, **options):

@@ -14,6 +14,8 @@ from hypothesis import strategies as st
 
 from ftc_hw.devices import serial_urls
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 
 @pytest.fixture
 def pty_port():

@@ -13,6 +13,9 @@ from ftc_hw.devices.registry import make_adapter
 from ftc_hw.devices.ur import DashboardLink, URArm, probe_rtde
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost
+from ftc_hw.sim_devices.link import JointRecord
+
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
 ADDRESS = "127.0.0.43"
 SCENE = load_scene("ur5e")
@@ -45,11 +48,11 @@ def test_frames_carry_the_controller_timestamp_and_the_world_values(world, arm):
     while len(got) < 200 and time.monotonic() < end:
         time.sleep(0.1)
         got += frames.drain()
-    world_state = {round(float(r[0]) * 1e9): r for r in ring.new()}
+    world_state = {round(j.t * 1e9): j for j in (JointRecord.from_row(r, SCENE.n_joints) for r in ring.new())}
     assert len(got) >= 200
     for f in got[-20:]:
-        rec = world_state[f.t_device_ns]
-        assert np.array_equal(f.q, rec[1:7]) and np.array_equal(f.current, rec[19:25])
+        joints = world_state[f.t_device_ns]
+        assert np.array_equal(f.q, joints.q) and np.array_equal(f.current, joints.current)
         assert f.seq == round(f.t_device_ns * 500 / 1e9)
         assert f.tau == pytest.approx(SCENE.robot.torque_constant * f.current)
     assert all(b.seq > a.seq for a, b in zip(got, got[1:], strict=False))

@@ -16,7 +16,7 @@ from ftc_hw.bus import EVENTS_DEVICE, Bus, ContactEvent, Watchdog, WrenchFlag
 from ftc_hw.bus.remote import RemoteError, RemotePublisher, RemoteSubscriber, key_expr, open_session, topic_of
 from tests.foundation.remote_peer import frame
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(60)]
 
 
 def free_endpoint() -> str:

@@ -19,6 +19,8 @@ import pytest
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import replay
 
+pytestmark = pytest.mark.compute  # replays as fast as it goes: nothing against the wall clock
+
 DATA = Path(__file__).parent.parent / "data" / "recordings"
 RECORDINGS = {"ur5e-typical-identified.mcap": (1, 50), "dxl-arm-ideal.mcap": (2, 109)}  # onsets, events
 

@@ -21,6 +21,8 @@ from ftc_hw.record.writer import McapRecorder
 
 from .killing import kill_when_ready
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 RNG = np.random.default_rng(3)
 
 

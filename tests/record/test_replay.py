@@ -18,6 +18,8 @@ from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import replay
 from tests.record.foxglove_check import contact_markers_in_base, read_foxglove
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 
 def ftc(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "ftc_hw", *args], capture_output=True, text=True, timeout=timeout)

@@ -19,6 +19,8 @@ from ftc_hw.record.writer_process import RecorderProcess, pack, unpack
 
 from .killing import kill_when_ready
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 
 def _frames(n: int, rng: np.random.Generator) -> list:
     out: list = []

@@ -7,6 +7,8 @@ import pytest
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.addresses import emulator_address, parse_addresses
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 
 def test_each_kind_gets_its_own_kind_of_address():
     scene = load_scene("ur5e")

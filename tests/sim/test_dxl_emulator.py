@@ -15,6 +15,8 @@ from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.dxl_protocol import PacketReader, packet, parse_status
 from ftc_hw.sim_devices.host import WorldHost
 
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
+
 ARM = next(d for d in load_scene("dxl-arm").devices if d.kind == "dynamixel").params
 IDS = ARM["ids"]  # 11-14 the joints, 15 the gripper
 DIRS = ARM["directions"]
@@ -100,9 +102,9 @@ def test_sync_read_reports_the_world_joint_state(world, link):
     port, ph = link
     ticks = [signed(v) for v in sync_read(port, ph, 132, 4)]
     js = world.latest_joints()  # holding still: the same angles
-    assert ticks == [2048 + d * round(q / RAD) for q, d in zip(js["q"], DIRS, strict=True)]
+    assert ticks == [2048 + d * round(q / RAD) for q, d in zip(js.q, DIRS, strict=True)]
     current = [signed(v, 16) * 0.00269 for v in sync_read(port, ph, 126, 2)]
-    assert current == pytest.approx([d * c for c, d in zip(world.latest_joints()["current"], DIRS, strict=True)],
+    assert current == pytest.approx([d * c for c, d in zip(world.latest_joints().current, DIRS, strict=True)],
                                     abs=0.0027)
 
 
@@ -209,4 +211,4 @@ def test_hardware_error_alert_bit_after_restart_with_a_fault(world, link):
         port.closePort()
         world.restart("arm", {"reboot_s": 0.5})
         assert port.openPort() and port.setBaudRate(1_000_000)
-    assert np.all(np.isfinite(world.latest_joints()["q"]))
+    assert np.all(np.isfinite(world.latest_joints().q))

@@ -16,6 +16,8 @@ from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.dxl_protocol import PacketReader, crc16, fast_status, packet, parse_status, status, unstuff
 from ftc_hw.sim_devices.dynamixel import DxlBus, WorldPort, build_servos
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 # -- framing -------------------------------------------------------------------------------------------
 
 

@@ -24,6 +24,8 @@ from ftc_hw.sim_devices.world import (
 )
 from ftc_hw.sim_devices.world.reality import TOLERANCES
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 UR5E = load_scene("ur5e")
 HOME = np.array(UR5E.robot.home)
 

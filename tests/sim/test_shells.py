@@ -19,6 +19,8 @@ from ftc_hw.sim_devices.world import World, build_scenario, with_reality
 from ftc_hw.sim_devices.world.true_shell import shell_meshes
 from tests.urdf_arm import write_ur5e_urdf
 
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
+
 UR5E = load_scene("ur5e")
 
 

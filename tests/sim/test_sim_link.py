@@ -1,12 +1,16 @@
-"""The world's command link: JSON datagrams from emulator processes, woken on, bad input counted."""
+"""The world's link: commands as JSON datagrams from emulator processes, woken on, bad input counted; the
+joint ring's records read by name."""
 from __future__ import annotations
 
 import multiprocessing as mp
 import socket
 
+import numpy as np
 import pytest
 
-from ftc_hw.sim_devices.link import Command, CommandLinkError, EmulatorSide, LinkInfo, WorldLink
+from ftc_hw.sim_devices.link import Command, CommandLinkError, EmulatorSide, JointRecord, LinkInfo, WorldLink
+
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
 GOAL = Command("arm", "goal", q=(0.1, -1.05, 0.35 + 1e-12, 0.7), extra={"t_rx_ns": 123})
 
@@ -61,3 +65,21 @@ def test_a_closed_world_is_a_typed_error():
     with pytest.raises(CommandLinkError):
         side.send(GOAL)
     side.close()
+
+
+def test_a_joint_record_reads_back_by_name_what_the_world_wrote():
+    link = WorldLink(3)
+    side = EmulatorSide(link.info)
+    try:
+        assert side.joint_state() is None
+        q, qd, qdd, current, tau = (np.arange(3) + 10.0 * k for k in range(1, 6))
+        link.publish_joints(1.25, q, qd, qdd, current, tau)
+        rec = side.joint_reader().ring.read(0)
+        assert rec.shape == (1 + JointRecord.width(3),)
+        for got in (JointRecord.from_row(rec, 3), side.joint_state()):
+            assert got.t == 1.25 and isinstance(got.t, float)
+            for name, want in zip(("q", "qd", "qdd", "current", "tau"), (q, qd, qdd, current, tau), strict=True):
+                assert np.array_equal(getattr(got, name), want), name
+    finally:
+        side.close()
+        link.close()

@@ -16,9 +16,14 @@ import rtde_receive
 from ftc_hw.model import ArmModel
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices import ur_data as D
+from ftc_hw.sim_devices.dynamixel import DynamixelEmulator
+from ftc_hw.sim_devices.emulator import Emulator
 from ftc_hw.sim_devices.host import WorldHost
-from ftc_hw.sim_devices.ur import Emulator
+from ftc_hw.sim_devices.link import JointRecord
+from ftc_hw.sim_devices.ur import UREmulator
 from ftc_hw.sim_devices.ur_model import rotation_vector
+
+pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
 ADDRESS = "127.0.0.41"
 SCENE = load_scene("ur5e")
@@ -57,7 +62,7 @@ def test_default_receive_reads_the_world_joint_angles_exactly(world, receive):
     assert receive.isConnected()
     ring = world.joint_reader()
     ts, qs = collect(receive, 1.0)
-    world_q = {float(rec[0]): rec[1:7] for rec in ring.new()}
+    world_q = {j.t: j.q for j in (JointRecord.from_row(rec, SCENE.n_joints) for rec in ring.new())}
     assert len(ts) > 100
     matched = [np.max(np.abs(np.array(q) - world_q[t])) for t, q in zip(ts, qs, strict=True) if t in world_q]
     assert len(matched) >= 0.9 * len(ts)
@@ -218,6 +223,17 @@ def test_cb3_controller_streams_at_125_hz(world):
 
 def test_refuses_non_loopback_addresses():
     with pytest.raises(ValueError, match="loopback"):
-        Emulator(DEVICE, SCENE, None, {"address": "192.0.2.7"})
+        UREmulator(DEVICE, SCENE, None, {"address": "192.0.2.7"})
     with pytest.raises(ValueError, match="at most 125 Hz"):
-        Emulator(DEVICE, SCENE, None, {"address": ADDRESS, "controller_version": "3.15"})
+        UREmulator(DEVICE, SCENE, None, {"address": ADDRESS, "controller_version": "3.15"})
+
+
+def test_an_arm_emulator_refuses_faults_it_cannot_inject():
+    # the arms are emulators on the common base: its options, and no fault injection on their wire
+    assert issubclass(UREmulator, Emulator) and issubclass(DynamixelEmulator, Emulator)
+    with pytest.raises(ValueError, match="not supported"):
+        UREmulator(DEVICE, SCENE, None, {"address": ADDRESS, "faults": {"drop": 0.1}})
+    dxl = load_scene("dxl-arm")
+    arm = next(d for d in dxl.devices if d.kind == "dynamixel")
+    with pytest.raises(ValueError, match="not supported"):
+        DynamixelEmulator(arm, dxl, None, {"faults": {"drop": 0.1}})

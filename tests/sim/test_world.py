@@ -10,8 +10,11 @@ import pytest
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.scene import builtin_names, load_scene
 from ftc_hw.sim_devices.world import SCENARIOS, World, build_scenario, truth_record
+from ftc_hw.sim_devices.world.scenarios import SWEEP_REST_S
 from ftc_hw.sim_devices.world.sensor_model import FTSensorModel
 from ftc_hw.sim_devices.world.truth import truth_line
+
+pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
 
 def _world(scene_name, scenario, duration, seed=3, noise=False):
@@ -127,13 +130,59 @@ def test_halt_stops_the_arm():
     assert np.abs(world.state.qd).max() < 1e-3
 
 
-def test_every_scenario_builds_for_every_scene():
-    for scene_name in builtin_names():
-        scene = load_scene(scene_name)
-        model = ArmModel(scene)
-        for name in SCENARIOS:
-            setup = build_scenario(name, scene, model, 0, 5.0)
-            World(scene, setup, seed=0)
+# what each scenario puts in the world besides its motion (its description says so)
+SCRIPTED = {"hold": (), "static-pokes": ("probes",), "sweep": (), "sweep-with-collision": ("obstacles",),
+            "excitation": (), "payload-poses": ("payload",)}
+
+
+@pytest.mark.parametrize("scene_name", builtin_names())
+def test_every_scenario_builds_for_every_scene(scene_name):
+    """Each scenario's world starts where its trajectory says, within the joint limits, holds what its
+    description says (probes, an obstacle, a payload) and nothing else, steps to finite states with no
+    contact before its first scripted one, and a probe presses where and as hard as it is scripted."""
+    assert set(SCRIPTED) == set(SCENARIOS)
+    scene = load_scene(scene_name)
+    model = ArmModel(scene)
+    lo, hi = model.joint_limits()
+    touchable = {t.link for t in scene.touchable}
+    period = 1.0 / scene.sensor.rate_hz
+    for name in SCENARIOS:
+        duration = 5.0
+        setup = build_scenario(name, scene, model, 0, duration)
+        held = {"probes": bool(setup.probes), "obstacles": bool(setup.obstacles), "payload": setup.payload is not None}
+        assert {k for k, v in held.items() if v} == set(SCRIPTED[name]), (name, held)
+        for t in np.linspace(0.0, duration, 51):
+            q_ref = np.asarray(setup.trajectory.reference(t)[0])
+            assert q_ref.shape == (scene.n_joints,) and np.all((q_ref >= lo - 1e-9) & (q_ref <= hi + 1e-9)), (name, t)
+        for probe in setup.probes:  # on a touchable link, pushing, and over before the run ends
+            assert probe.link in touchable and probe.magnitude > 0.0, (name, probe)
+            assert np.linalg.norm(probe.direction) == pytest.approx(1.0), (name, probe)
+            assert 0.0 < probe.t_start < probe.t_end < duration, (name, probe)
+        for obstacle in setup.obstacles:
+            assert obstacle.radius > 0.0 and obstacle.stiffness > 0.0 and obstacle.until_s < duration, (name, obstacle)
+        if setup.payload is not None:
+            assert setup.payload.mass == pytest.approx(0.5), name
+        world = World(scene, setup, seed=0)
+        q0 = np.asarray(setup.trajectory.reference(0.0)[0])
+        assert np.abs(world.state.q - q0).max() < 1e-3, name  # it starts where the scenario does
+        first = min([p.t_start for p in setup.probes] + [SWEEP_REST_S if setup.obstacles else duration])
+        probe = setup.probes[0] if setup.probes else None
+        plateau = None if probe is None else probe.t_start + probe.ramp_s + 0.5 * probe.hold_s
+        seen = False
+        t_prev = world.state.t
+        for state, reading in world.run(plateau + 2 * period if plateau is not None else 0.2):
+            assert state.t == pytest.approx(t_prev + period), name
+            t_prev = state.t
+            for v in (state.q, state.qd, state.qdd, state.tau, state.current, state.wrench, reading.wrench):
+                assert np.all(np.isfinite(v)), (name, state.t)
+            if state.t < first:
+                assert not state.contacts, (name, state.t, state.contacts)
+            if plateau is not None and abs(state.t - plateau) < 0.5 * period:
+                pressed = [c for c in state.contacts if c.source == "probe"]
+                assert len(pressed) == 1 and pressed[0].link == probe.link, (name, state.contacts)
+                assert pressed[0].force == pytest.approx(probe.magnitude * probe.direction), name
+                seen = True
+        assert seen or probe is None, name
 
 
 def _contact_spans(world, seconds, merge_gap_s=0.05):
