@@ -1,7 +1,7 @@
 """The per-frame contact pipeline: raw wrench and joint state in; external wrench, detection,
 estimate and contact events out. The live monitor, replay and the benchmarks all run this.
 
-Four stages, each owning its state and its warm-up:
+Four stages, each owning its state and its warm-up (their roles: :mod:`.stages`):
 
     raw, q, qd, current
       -> MotionStage         compensation with the lag model        -> external wrench, error rows
@@ -26,6 +26,7 @@ from .events import ContactEvents, PreviousFrame
 from .localization import LocalizationStage
 from .motion import MotionStage
 from .settings import PipelineSettings
+from .stages import Compensation, Detector, Events, Localization
 from .timing import NO_CLOCK, StageClock
 
 
@@ -59,12 +60,13 @@ class ContactPipeline:
         self.settings = settings = settings or PipelineSettings()
         model_scene = corrected_scene(scene, settings)
         model = ArmModel(model_scene, settings.corrections.payload, settings.corrections.inertials)
-        self.motion = MotionStage(scene, model, settings)
+        self.motion: Compensation = MotionStage(scene, model, settings)
         d = settings.detection
         cov = scene.sensor.noise_cov + (np.zeros((6, 6)) if d.extra_cov is None else np.reshape(d.extra_cov, (6, 6)))
-        self.detector = ContactDetector(cov, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off)
-        self.localization = LocalizationStage(scene, model_scene, model, settings)
-        self.events = ContactEvents(scene, model, self.localization.solver.body_poses, settings)
+        self.detector: Detector = ContactDetector(cov, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off)
+        localization = LocalizationStage(scene, model_scene, model, settings)
+        self.localization: Localization = localization
+        self.events: Events = ContactEvents(scene, model, localization.solver.body_poses, settings)
         self.clock = clock
         self.warm_up()
 
