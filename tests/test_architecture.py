@@ -56,13 +56,13 @@ def test_the_code_keeps_every_contract():
 
 CASES = [  # (module, an import it must not make, the contract that forbids it)
     ("ftc_hw/bench/report.py", "import ftc_hw.cli", LAYERS),
-    ("ftc_hw/app/view.py", "import ftc_hw.bench.report", LAYERS),
-    ("ftc_hw/devices/base.py", "import ftc_hw.app.rig", LAYERS),
+    ("ftc_hw/app/monitor/view.py", "import ftc_hw.bench.report", LAYERS),
+    ("ftc_hw/devices/base.py", "import ftc_hw.app.setup.rig", LAYERS),
     ("ftc_hw/devices/base.py", "import ftc_hw.sim_devices.link", LAYERS),  # siblings, independent
     ("ftc_hw/sim_devices/link.py", "import ftc_hw.devices.base", LAYERS),
     ("ftc_hw/calibration/file.py", "import ftc_hw.devices.base", LAYERS),
     ("ftc_hw/calibration/file.py", "import ftc_hw.record.events", LAYERS),
-    ("ftc_hw/record/events.py", "import ftc_hw.app.view", LAYERS),
+    ("ftc_hw/record/events.py", "import ftc_hw.app.monitor.view", LAYERS),
     ("ftc_hw/monitor.py", "import ftc_hw.record.writer", LAYERS),
     ("ftc_hw/pipeline.py", "import ftc_hw.monitor", LAYERS),
     ("ftc_hw/tracking.py", "import ftc_hw.pipeline", LAYERS),

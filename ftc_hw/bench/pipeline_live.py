@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from ftc_hw.app.monitor_config import MonitorConfig
-from ftc_hw.app.session import resumable, run_monitor
+from ftc_hw.app.monitor.config import MonitorConfig
+from ftc_hw.app.monitor.session import resumable, run_monitor
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import replay

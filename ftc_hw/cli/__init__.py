@@ -490,7 +490,7 @@ def identify(
     rig: RigOption = None,
 ) -> None:
     """Identify the arm's inertial parameters and the sensor's errors from free motion, into the calibration."""
-    from ftc_hw.app.identify import IdentifyOptions  # lazy: CLI start-up
+    from ftc_hw.app.calibration.identify import IdentifyOptions  # lazy: CLI start-up
     from ftc_hw.cli.identify import run_identify_command  # lazy: CLI start-up
 
     opts = IdentifyOptions(out=out, calibration=calibration, json_path=json_path, keep_contacts=keep_contacts,
@@ -610,7 +610,7 @@ def warm(
 ) -> None:
     """Compile the numba kernels of ftc demo and ftc monitor --sim into numba's cache (scripts/bootstrap.sh runs it)."""
     typer.echo("[warm] loading MuJoCo and numba ...", err=True)
-    from ftc_hw.app.warm import warm as run_warm  # lazy: CLI start-up
+    from ftc_hw.app.setup.warm import warm as run_warm  # lazy: CLI start-up
 
     from .common import scene_or_exit  # lazy: CLI start-up
 

@@ -1,11 +1,11 @@
-"""``ftc calibrate``: arguments to the bench wizard (:mod:`ftc_hw.app.calibrate`)."""
+"""``ftc calibrate``: arguments to the bench wizard (:mod:`ftc_hw.app.calibration.calibrate`)."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import typer
 
-from ftc_hw.app.calibrate import run_calibrate
+from ftc_hw.app.calibration.calibrate import run_calibrate
 from ftc_hw.model import Payload
 
 from .common import scene_or_exit

@@ -12,11 +12,11 @@ from pathlib import Path
 
 from rich.console import Console
 
-from ftc_hw.app.calibration_session import SessionError
-from ftc_hw.app.identify import IdentifyOptions, run_planned_identify
-from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome
-from ftc_hw.app.view import make_console
-from ftc_hw.app.web_feed import RATE_HZ
+from ftc_hw.app.calibration.device_session import SessionError
+from ftc_hw.app.calibration.identify import IdentifyOptions, run_planned_identify
+from ftc_hw.app.monitor.config import MonitorConfig, MonitorOutcome
+from ftc_hw.app.monitor.view import make_console
+from ftc_hw.app.web.feed import RATE_HZ
 from ftc_hw.scene import SceneError, load_scene
 
 from .monitor import run_guarded, web_options

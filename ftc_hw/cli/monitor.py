@@ -5,10 +5,10 @@ from pathlib import Path
 
 import typer
 
-from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome, MonitorSetupError
-from ftc_hw.app.session import run_monitor
-from ftc_hw.app.view import make_console
-from ftc_hw.app.web_feed import RATE_HZ, WebOptions
+from ftc_hw.app.monitor.config import MonitorConfig, MonitorOutcome, MonitorSetupError
+from ftc_hw.app.monitor.session import run_monitor
+from ftc_hw.app.monitor.view import make_console
+from ftc_hw.app.web.feed import RATE_HZ, WebOptions
 from ftc_hw.sim_devices.world import SCENARIOS
 
 

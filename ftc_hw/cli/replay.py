@@ -6,11 +6,11 @@ from pathlib import Path
 import typer
 from rich.live import Live
 
-from ftc_hw.app.monitor_config import MonitorSetupError
-from ftc_hw.app.session import load_pipeline_calibration
-from ftc_hw.app.view import LiveView, make_console
-from ftc_hw.app.web_feed import RATE_HZ, WebOptions
-from ftc_hw.app.web_replay import ReplayTimeline, serve_until_interrupted
+from ftc_hw.app.monitor.config import MonitorSetupError
+from ftc_hw.app.monitor.session import load_pipeline_calibration
+from ftc_hw.app.monitor.view import LiveView, make_console
+from ftc_hw.app.web.feed import RATE_HZ, WebOptions
+from ftc_hw.app.web.replay import ReplayTimeline, serve_until_interrupted
 from ftc_hw.bus import Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import event_line

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from ftc_hw.app.evaluate import evaluate
+from ftc_hw.app.monitor.evaluate import evaluate
 
 MS = 1_000_000
 T0 = 5_000_000_000  # host ns of the first truth sample
@@ -102,7 +102,7 @@ def test_the_cramer_rao_bound_of_a_truth_record(contacts):
 
     import numpy as np
 
-    from ftc_hw.app.evaluate import crlb_of_truth
+    from ftc_hw.app.monitor.evaluate import crlb_of_truth
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
     from ftc_hw.sim_devices.world.truth import truth_record
@@ -141,7 +141,7 @@ def test_the_solvers_own_error_at_a_truth_record(contacts):
 
     import numpy as np
 
-    from ftc_hw.app.evaluate import crlb_of_truth, solver_rms_of_truth
+    from ftc_hw.app.monitor.evaluate import crlb_of_truth, solver_rms_of_truth
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
     from ftc_hw.sim_devices.world.truth import truth_record

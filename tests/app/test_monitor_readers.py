@@ -16,9 +16,9 @@ import time
 
 import pytest
 
-from ftc_hw.app.monitor_config import MonitorConfig
-from ftc_hw.app.monitor_report import DEGRADED_EXIT
-from ftc_hw.app.session import readers_mode
+from ftc_hw.app.monitor.config import MonitorConfig
+from ftc_hw.app.monitor.report import DEGRADED_EXIT
+from ftc_hw.app.monitor.session import readers_mode
 
 pytestmark = pytest.mark.timeout(120)
 READERS = re.compile(r"readers in processes of their own: (.*), over Zenoh on (tcp/127\.0\.0\.1:\d+)")

@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from ftc_hw.app.monitor_config import MonitorConfig, MonitorSetupError
-from ftc_hw.app.remote_rig import RemoteRig
-from ftc_hw.app.rig import RigError
-from ftc_hw.app.serve import ServeConfig, ServeError, run_serve
-from ftc_hw.app.session import run_monitor
+from ftc_hw.app.monitor.config import MonitorConfig, MonitorSetupError
+from ftc_hw.app.monitor.session import run_monitor
+from ftc_hw.app.serving.remote_rig import RemoteRig
+from ftc_hw.app.serving.serve import ServeConfig, ServeError, run_serve
+from ftc_hw.app.setup.rig import RigError
 from ftc_hw.bus import EVENTS_DEVICE, Bus, Watchdog
 from ftc_hw.bus.remote import RemoteError, RemoteSubscriber, open_session
 from ftc_hw.record.reader import read_recording

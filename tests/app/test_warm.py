@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ftc_hw.app.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
+from ftc_hw.app.monitor.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.bus import Bus
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor, PipelineInput
@@ -23,7 +23,7 @@ from ftc_hw.sim_devices.world import World, build_scenario, truth_record
 ROOT = Path(__file__).resolve().parents[2]
 PROBE = """
 import json
-from ftc_hw.app import warm as W
+from ftc_hw.app.setup import warm as W
 from ftc_hw.scene import load_scene
 from tests.app.test_warm import demo_path
 W.warm([load_scene('ur5e')])

@@ -1,10 +1,10 @@
 """The live page's feed slows down while the monitor falls behind, and comes back as it catches up
-(``ftc_hw.app.web_feed.RatePacer``): the view degrades before the pipeline does."""
+(``ftc_hw.app.web.feed.RatePacer``): the view degrades before the pipeline does."""
 from __future__ import annotations
 
 import pytest
 
-from ftc_hw.app.web_feed import BEHIND_MS, SLOWEST_HZ, RatePacer
+from ftc_hw.app.web.feed import BEHIND_MS, SLOWEST_HZ, RatePacer
 
 
 def test_the_rate_halves_while_behind_down_to_the_slowest_and_comes_back():

@@ -101,7 +101,7 @@ def test_the_live_session_freezes_its_heap_against_collector_pauses():
     import gc
     import inspect
 
-    from ftc_hw.app import session
+    from ftc_hw.app.monitor import session
     from ftc_hw.devices.base import frozen_heap
 
     before = gc.get_freeze_count()

@@ -19,8 +19,11 @@ from rich.console import Console
 from rich.live import Live
 
 from ftc_hw import __version__
-from ftc_hw.app.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
-from ftc_hw.app.view import LiveView
+from ftc_hw.app.serving.remote_rig import RemoteRig
+from ftc_hw.app.serving.serve import ServedReaders
+from ftc_hw.app.setup.rig import Rig, RigError, build_rig, check_located, pick_device, require_device
+from ftc_hw.app.setup.vendor_output import vendor_stderr
+from ftc_hw.app.web.feed import WebFeed, WebViewError
 from ftc_hw.bus import (
     EVENTS_DEVICE,
     STREAM_EVENT_KINDS,
@@ -41,16 +44,13 @@ from ftc_hw.record.writer_process import RecorderProcess
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
+from .config import MonitorConfig, MonitorOutcome, MonitorSetupError
+from .evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
 from .faults import Fault, FaultError, FaultPlan
-from .monitor_config import MonitorConfig, MonitorOutcome, MonitorSetupError
-from .monitor_report import judge_degraded, print_summary
 from .reflex import StopReflex
-from .remote_rig import RemoteRig
-from .rig import Rig, RigError, build_rig, check_located, pick_device, require_device
-from .serve import ServedReaders
+from .report import judge_degraded, print_summary
 from .sim_joints import SimJointSource
-from .vendor_output import vendor_stderr
-from .web_feed import WebFeed, WebViewError
+from .view import LiveView
 
 SETTLE_S = 0.5
 

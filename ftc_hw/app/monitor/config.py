@@ -7,8 +7,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ftc_hw.app.evaluate import Evaluation
 from ftc_hw.compensation import Drift
+
+from .evaluate import Evaluation
 
 
 class MonitorSetupError(Exception):
@@ -30,11 +31,11 @@ class MonitorConfig:
     truth: Path | None = None
     noise: bool = True
     view: bool = True  # the live view in the terminal
-    web: Any = None  # a WebOptions (ftc_hw.app.web_feed): the live page in the browser (--view web)
+    web: Any = None  # a WebOptions (ftc_hw.app.web.feed): the live page in the browser (--view web)
     level: str | None = "dynamics"  # compensation level; None: the scene's
     title: str = "ftc monitor"
     connect_timeout_s: float = 20.0
-    faults: tuple[str, ...] = ()  # with sim: a fault plan (ftc_hw.app.faults), e.g. ("ft:kill@onset+0.1",)
+    faults: tuple[str, ...] = ()  # with sim: a fault plan (ftc_hw.app.monitor.faults), e.g. ("ft:kill@onset+0.1",)
     device_overrides: tuple[str, ...] = ()  # NAME.KEY=VALUE (--device), applied after the rig file
     rig: Path | None = None  # a rig file (--rig): a table of keys per device name
     reality: str = "ideal"  # with sim: how the world's arm differs from the model (ideal, typical, harsh)

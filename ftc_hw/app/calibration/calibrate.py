@@ -37,7 +37,7 @@ from ftc_hw.model import ArmModel, Payload
 from ftc_hw.scene import Scene, SceneError
 
 from .calibrate_plot import draw_calibration
-from .calibration_session import DeviceSession, SessionError
+from .device_session import DeviceSession, SessionError
 from .fit_figure import plot_beside
 
 JOG_TOLERANCE = 0.01  # rad: how close a jogged UR must be to the planned pose

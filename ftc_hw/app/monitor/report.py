@@ -6,11 +6,11 @@ import time
 
 from rich.console import Console
 
-from ftc_hw.app.view import evaluation_table, stream_table
 from ftc_hw.bus import Bus
 from ftc_hw.monitor import LiveMonitor
 
-from .monitor_config import MonitorConfig, MonitorOutcome
+from .config import MonitorConfig, MonitorOutcome
+from .view import evaluation_table, stream_table
 
 DEGRADED_EXIT = 3  # the run went to its end, but was blind or dropped frames for a while (see degraded)
 DROPPED_SHARE = 0.05  # above this share of F/T frames not judged (or late), a run is degraded
