@@ -225,10 +225,16 @@ def demo(
     if 0 < identify_seconds < 5:
         raise typer.BadParameter("0 (no identification) or at least 5", param_hint="--identify-seconds")
     typer.echo(LOADING, err=True)
-    from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
+    from ftc_hw.app.demo import run_demo  # lazy: CLI start-up
+    from ftc_hw.app.monitor.config import DemoOptions, MonitorOptions, SimOptions  # lazy: CLI start-up
+    from ftc_hw.app.monitor.view import make_console  # lazy: CLI start-up
+    from ftc_hw.cli.monitor import outcome_or_exit, view_options  # lazy: CLI start-up
 
-    raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value, identify_seconds,
-                              view=view.value, web_page=(host, port, view_hz)))
+    options = DemoOptions(MonitorOptions(scene, sim=True, world=SimOptions(scenario, seed, reality.value),
+                                         duration=duration, record=record,
+                                         view=view_options(view.value, host, port, view_hz), title="ftc demo"),
+                          identify_s=identify_seconds)
+    raise typer.Exit(outcome_or_exit(lambda: run_demo(options, make_console())).exit_code)
 
 
 @app.command()
@@ -281,17 +287,22 @@ def monitor(
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
-    from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
+    from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, SimOptions  # lazy: CLI start-up
+    from ftc_hw.app.monitor.session import run_monitor  # lazy: CLI start-up
+    from ftc_hw.app.monitor.view import make_console  # lazy: CLI start-up
+    from ftc_hw.cli.monitor import check_monitor, outcome_or_exit, view_options  # lazy: CLI start-up
 
-    view = View.none if no_view else view
-    raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
-                                         reflex.value if reflex else None, events, truth, noise,
-                                         view.value, level.value,
-                                         tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
-                                         reality=reality.value, refine=refine, remote=remote,
-                                         remote_name=remote_name, zenoh_config=zenoh_config,
-                                         readers=readers.value, web_page=(host, port, view_hz),
-                                         resume_after=resume_after))
+    world = SimOptions(scenario=scenario, seed=seed, reality=reality.value, noise=noise, truth=truth,
+                       faults=tuple(fault or ()), resume_after_s=resume_after)
+    devices = DeviceOptions(overrides=tuple(device or ()), rig=rig, remote=remote, remote_rig=remote_name,
+                            zenoh_config=zenoh_config, readers=readers.value)
+    options = MonitorOptions(scene, sim=sim, world=world, duration=duration, calibration=calibration,
+                             level=None if level is Level.scene else level.value, refine=refine, record=record,
+                             events=events, reflex=reflex.value if reflex else None,
+                             view=view_options((View.none if no_view else view).value, host, port, view_hz),
+                             devices=devices)
+    check_monitor(options)
+    raise typer.Exit(outcome_or_exit(lambda: run_monitor(options, make_console())).exit_code)
 
 
 @app.command()

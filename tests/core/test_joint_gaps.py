@@ -108,4 +108,4 @@ def test_the_live_session_freezes_its_heap_against_collector_pauses():
     with frozen_heap():
         assert gc.get_freeze_count() > before + 10_000  # this test process's modules and more
     assert gc.get_freeze_count() == before
-    assert "frozen_heap()" in inspect.getsource(session._run)
+    assert "frozen_heap()" in inspect.getsource(session._go)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from ftc_hw.app.monitor.config import MonitorConfig, MonitorSetupError
+from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, SimOptions, ViewOptions
 from ftc_hw.app.monitor.session import run_monitor
 from ftc_hw.app.setup.rig import RigError
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE
@@ -262,8 +262,8 @@ def _record_sim(scene: Scene, scenario: str, duration: float, seed: int, reality
         raise IdentificationError(f"--scenario {scenario}: identification needs free motion "
                                   f"({', '.join(FREE_SCENARIOS)})")
     console.print(f"recording {duration:g} s of [cyan]{scenario}[/] on the emulated devices (reality {reality}) ...")
-    cfg = MonitorConfig(str(scene.path), sim=True, scenario=scenario, seed=seed, duration=duration, record=path,
-                        view=False, reality=reality, title="ftc identify", judged=False)
+    cfg = MonitorOptions(str(scene.path), sim=True, world=SimOptions(scenario, seed, reality), duration=duration,
+                         record=path, view=ViewOptions("none"), title="ftc identify", judged=False)
     run_monitor(cfg, console)  # its alarms are the untrained model's: the scenario has no contact
     return path
 

@@ -11,7 +11,7 @@ import os
 import signal
 import tempfile
 import time
-from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +44,7 @@ from ftc_hw.record.writer_process import RecorderProcess
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
-from .config import MonitorConfig, MonitorOutcome, MonitorSetupError
+from .config import MonitorOptions, MonitorOutcome, MonitorSetupError
 from .evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
 from .faults import Fault, FaultError, FaultPlan
 from .reflex import StopReflex
@@ -88,21 +88,21 @@ def _devices(scene: Scene, sim: bool, remote: bool = False) -> tuple[DeviceSpec,
 
 def _wait_idle(monitor: LiveMonitor, timeout: float = 5.0) -> None:
     end = time.monotonic() + timeout
-    while time.monotonic() < end and monitor._sub is not None and monitor._sub.pending:
+    while time.monotonic() < end and monitor.backlog():
         time.sleep(0.01)
     time.sleep(0.05)
 
 
-def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOutcome:
+def run_monitor(cfg: MonitorOptions, console: Console | None = None) -> MonitorOutcome:
     console = console or Console()
     try:
-        scene = load_rig_scene(cfg.scene, cfg.device_overrides, cfg.rig)
+        scene = load_rig_scene(cfg.scene, cfg.devices.overrides, cfg.devices.rig)
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
     _check_remote(cfg)
-    ft_dev, arm_dev = _devices(scene, cfg.sim, cfg.remote is not None)
+    ft_dev, arm_dev = _devices(scene, cfg.sim, cfg.devices.remote is not None)
     try:
-        faults = [Fault.parse(f) for f in cfg.faults]
+        faults = [Fault.parse(f) for f in cfg.world.faults]
     except FaultError as exc:
         raise MonitorSetupError(str(exc)) from None
     cal_kwargs, cal_meta = load_pipeline_calibration(cfg.calibration, scene) if cfg.calibration else ({}, None)
@@ -121,13 +121,13 @@ def run_monitor(cfg: MonitorConfig, console: Console | None = None) -> MonitorOu
 SIM_PROCESS_READERS_MIN_CPUS = 4
 
 
-def readers_mode(cfg: MonitorConfig) -> tuple[str, str]:
+def readers_mode(cfg: MonitorOptions) -> tuple[str, str]:
     """Where this run's readers run, "process" or "thread", and why. ``auto``: in processes of their own,
     except with a simulated world on a host of fewer than 4 cores, where the world and the emulators
     already take most of the cores: measured on 2 cores (docs/bus.md), reader processes (their own
     interpreters, Zenoh) there left the pipeline seconds behind and RTDE missed as many packets."""
-    if cfg.readers != "auto":
-        return cfg.readers, f"--readers {cfg.readers}"
+    if cfg.devices.readers != "auto":
+        return cfg.devices.readers, f"--readers {cfg.devices.readers}"
     cpus = os.cpu_count() or 1
     if cfg.sim and cpus < SIM_PROCESS_READERS_MIN_CPUS:
         return "thread", (f"the simulated world and its emulators share this host's {cpus} cores: readers in "
@@ -135,15 +135,15 @@ def readers_mode(cfg: MonitorConfig) -> tuple[str, str]:
     return "process", "readers in processes of their own (--readers thread to keep them here)"
 
 
-def _served(cfg: MonitorConfig) -> bool:
+def _served(cfg: MonitorOptions) -> bool:
     """Whether the devices' readers run in processes of their own (ftc serve's, or this run's)."""
-    return bool(cfg.remote) or readers_mode(cfg)[0] == "process"
+    return bool(cfg.devices.remote) or readers_mode(cfg)[0] == "process"
 
 
-def _check_remote(cfg: MonitorConfig) -> None:
-    if cfg.remote is None:
+def _check_remote(cfg: MonitorOptions) -> None:
+    if cfg.devices.remote is None:
         return
-    clash = [what for what, on in (("--sim", cfg.sim), ("--fault", cfg.faults)) if on]
+    clash = [what for what, on in (("--sim", cfg.sim), ("--fault", cfg.world.faults)) if on]
     if clash:  # the faults act on emulators this process starts
         raise MonitorSetupError(f"--remote takes the devices' frames from ftc serve: not with {', '.join(clash)} "
                                 "(start the world with ftc serve --sim)")
@@ -156,18 +156,20 @@ def _stop_on_sigterm(stack: contextlib.ExitStack) -> None:
         stack.callback(signal.signal, signal.SIGTERM, previous)
 
 
-def _start_world(cfg: MonitorConfig, console: Console, scene: Scene, stack: contextlib.ExitStack
+def _start_world(cfg: MonitorOptions, console: Console, scene: Scene, stack: contextlib.ExitStack
                  ) -> tuple[WorldHost, Path]:
     """The scene's world and emulators, holding the scenario's start pose until ``go()``; the truth file."""
-    truth_path = cfg.truth
+    world_options = cfg.world
+    truth_path = world_options.truth
     if truth_path is None:
         truth_path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ftc-monitor-"))) / "truth.jsonl"
     try:
-        world = WorldHost(scene, cfg.scenario, duration=cfg.duration, seed=cfg.seed, noise=cfg.noise, preroll=True,
-                          truth=truth_path, reality=cfg.reality, options=_resume_options(cfg, scene))
+        world = WorldHost(scene, world_options.scenario, duration=cfg.duration, seed=world_options.seed,
+                          noise=world_options.noise, preroll=True, truth=truth_path, reality=world_options.reality,
+                          options=_resume_options(cfg, scene))
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
-    console.print(f"starting the world (MuJoCo, reality [cyan]{cfg.reality}[/]) and the emulated devices of "
+    console.print(f"starting the world (MuJoCo, reality [cyan]{world_options.reality}[/]) and the emulated devices of "
                   f"[cyan]{scene.name}[/] "
                   f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)}) ...")
     t0 = time.monotonic()
@@ -192,17 +194,17 @@ def resumable(scene: Scene) -> bool:
     return bool(arms) and all(d.kind == "ur-rtde" for d in arms)
 
 
-def _resume_options(cfg: MonitorConfig, scene: Scene) -> dict[str, dict]:
+def _resume_options(cfg: MonitorOptions, scene: Scene) -> dict[str, dict]:
     """The emulators' options for ``--resume-after``: the UR controller's operator."""
-    if cfg.resume_after_s is None:
+    if cfg.world.resume_after_s is None:
         return {}
     if not resumable(scene):
         raise MonitorSetupError(f"--resume-after: only an emulated UR controller resumes its program; {scene.name}'s "
                                 f"arm is {', '.join(d.kind for d in _arms(scene)) or 'missing'}")
-    return {d.name: {"resume_after_s": cfg.resume_after_s} for d in _arms(scene)}
+    return {d.name: {"resume_after_s": cfg.world.resume_after_s} for d in _arms(scene)}
 
 
-def _start_recorder(cfg: MonitorConfig, scene: Scene, bus: Bus, monitor_meta: dict[str, str],
+def _start_recorder(cfg: MonitorOptions, scene: Scene, bus: Bus, monitor_meta: dict[str, str],
                     cal_meta: dict[str, str] | None) -> RecorderProcess:
     toml = Path(scene.path).read_text(encoding="utf-8")
     meta = {"scene": {"name": scene.name, "path": str(scene.path), "toml": toml}, "monitor": monitor_meta}
@@ -214,7 +216,7 @@ def _start_recorder(cfg: MonitorConfig, scene: Scene, bus: Bus, monitor_meta: di
         raise MonitorSetupError(f"--record {cfg.record}: {exc}") from None
 
 
-def _tare_then_go(cfg: MonitorConfig, monitor: LiveMonitor, world: WorldHost) -> None:
+def _tare_then_go(cfg: MonitorOptions, monitor: LiveMonitor, world: WorldHost) -> None:
     """The world's pre-roll starts from a posed state: let the arm settle, tare at rest, start the scenario."""
     time.sleep(SETTLE_S)
     monitor.start()
@@ -226,123 +228,181 @@ def _tare_then_go(cfg: MonitorConfig, monitor: LiveMonitor, world: WorldHost) ->
     world.go()
 
 
-def _run(cfg: MonitorConfig, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
+@dataclass
+class _Live:
+    """What a run started, for its live view, its stop and its summary."""
+
+    bus: Bus
+    topics: list[str]
+    monitor: LiveMonitor
+    rig: Rig | RemoteRig
+    world: WorldHost | None
+    truth_path: Path | None
+    plan: FaultPlan | None
+    web: WebFeed | None
+    recorder: RecorderProcess | None
+    view: LiveView
+    pump: _EventPump
+    reflex: StopReflex | None = None
+
+
+class _EventPump:
+    """The bus's events, as they come (each call): into the live view, the outcome and the events file."""
+
+    def __init__(self, sub, view: LiveView, out: MonitorOutcome, writer: EventWriter | None) -> None:
+        self._sub, self._view, self._out, self._writer = sub, view, out, writer
+
+    def __call__(self) -> None:
+        for ev in self._sub.drain():
+            if isinstance(ev, DeviceEvent) and ev.kind == "counters":
+                continue  # a reader's counters, each second: the summary's
+            self._view.add(ev)
+            stream = isinstance(ev, DeviceEvent) and ev.kind in STREAM_EVENT_KINDS
+            if isinstance(ev, ContactEvent) or stream:
+                (self._out.stream_events if stream else self._out.events).append(event_record(ev))
+                if self._writer is not None:
+                    self._writer.write(ev)
+
+
+def _run(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
          cal_kwargs: dict[str, Any], cal_meta: dict[str, str] | None, out: MonitorOutcome,
          faults: list[Fault]) -> MonitorOutcome:
     with contextlib.ExitStack() as stack:
         _stop_on_sigterm(stack)
-        web = _serve_page(cfg, console, scene, stack) if cfg.web is not None else None
-        world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.truth)
-        bus = Bus()
+        live = _start(cfg, console, scene, ft_dev, arm_dev, cal_kwargs, cal_meta, out, faults, stack)
         try:
-            plan = FaultPlan(faults, world, bus) if faults and world is not None else None
-        except FaultError as exc:
-            raise MonitorSetupError(str(exc)) from None
-        ft_name, arm_name = ft_dev.name, arm_dev.name if arm_dev is not None else "arm"
-        topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]
-        ev_sub = bus.subscribe("events/", maxsize=None)
-        tare_s = None if cal_kwargs else 0.1
-        pipeline_kwargs = {**cal_kwargs, **({"level": cfg.level} if cfg.level else {})}
-        if cfg.refine and "model_error" in cal_kwargs:
-            pipeline_kwargs["refine"] = True
-        elif cfg.refine:
-            console.print("[yellow]--refine: the calibration holds no identification (ftc identify): nothing to "
-                          "refine[/]")
-        console.print("loading the pipeline (its compiled kernels) ...")
-        monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
-        console.print(f"contact points on the scene's {monitor.pipeline.surface_source}"
-                      + (" (its vendor meshes are not fetched: ftc scenes --fetch-meshes)"
-                         if scene.robot.vendor_shell and monitor.pipeline.surface_source == "primitives" else ""))
-        recorder = None
-        if cfg.record:
-            recorder = _start_recorder(cfg, scene, bus, {
-                "ft_source": ft_name, "arm_source": arm_name, "tare_s": str(tare_s),
-                "pipeline": pipeline_kwargs_to_json(pipeline_kwargs), "ftc_hw": __version__, "sim": str(cfg.sim),
-                "scenario": cfg.scenario if cfg.sim else "", "seed": str(cfg.seed),
-                "started_host_ns": str(time.monotonic_ns())}, cal_meta)
-            stack.callback(recorder.stop)  # on a failed start; a no-op after the final stop below
-        events_file = stack.enter_context(open(cfg.events, "w", encoding="utf-8")) if cfg.events else None
-        writer = EventWriter(events_file) if events_file is not None else None
-        if world is None:
-            monitor.start()  # on hardware the arm must be still now: the tare takes the first 0.1 s
-        console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "")
-                      + (f" served at {cfg.remote}" if cfg.remote else "") + " ...")
-        try:
-            rig = _make_rig(cfg, scene, bus, [d for d in (ft_dev, arm_dev) if d is not None], topics[:2], world)
-        except RigError as exc:
-            raise MonitorSetupError(str(exc)) from None
-        if arm_dev is None:
-            rig.add(SimJointSource(arm_name, bus, world))
-        reflex = None
-
-        def pump() -> None:
-            for ev in ev_sub.drain():
-                if isinstance(ev, DeviceEvent) and ev.kind == "counters":
-                    continue  # a reader's counters, each second: the summary's
-                view.add(ev)
-                stream = isinstance(ev, DeviceEvent) and ev.kind in STREAM_EVENT_KINDS
-                if isinstance(ev, ContactEvent) or stream:
-                    (out.stream_events if stream else out.events).append(event_record(ev))
-                    if writer is not None:
-                        writer.write(ev)
-
-        view = LiveView(bus, monitor, topics, ft_topic=topics[0], title=cfg.title)
-        try:
-            try:
-                rig.open().wait()
-            except RigError as exc:
-                raise MonitorSetupError(str(exc)) from None
-            if isinstance(rig, RemoteRig) and rig.readers is not None:
-                console.print(f"readers in processes of their own: {rig.readers.describe()}, over Zenoh on "
-                              f"{rig.endpoint}")
-            elif not cfg.remote:
-                console.print(readers_mode(cfg)[1])
-            if cfg.reflex == "stop":
-                reflex = (StopReflex(bus, rig.stop_arm, inline=True) if isinstance(rig, RemoteRig) else
-                          StopReflex(bus, lambda _ev: rig.arm.stop()))
-            if world is not None:
-                console.print("waiting for the first frames (the sensor is tared at rest) ...")
-                _tare_then_go(cfg, monitor, world)
-                if plan is not None:
-                    plan.start()
-            if web is not None:
-                web.feed(bus, monitor, topics, ft_topic=topics[0], truth_path=truth_path if cfg.sim else None)
-            stack.enter_context(frozen_heap())  # set up: no collector pause may stall the readers now
-            view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
-                           + (f", scenario {cfg.scenario} (emulated devices)" if cfg.sim else ""))
-            _watch(cfg, console, view, monitor, world, pump, out)
+            _go(cfg, console, scene, live, stack)
+            _watch(cfg, console, live, out)
         finally:
-            out.t_closed_ns = time.monotonic_ns()
-            if plan is not None:
-                plan.close()
-                out.faults = list(plan.done)
-                if plan.error:
-                    out.problems.append(f"fault plan stopped: {plan.error}")
-            monitor.stop()  # first: the streams end with the adapters, and that is no loss
-            rig.close()
-            if reflex is not None:
-                reflex.close()
-            if web is not None:
-                web.close()
-                out.web = web.summary
-        pump()
-        _finish(cfg, scene, monitor, reflex, world, truth_path, recorder, out)
-        if monitor.pipeline.refiner is not None:
-            out.drift = monitor.pipeline.refiner.drift()
-            console.print(out.drift.summary())
-        if isinstance(rig, RemoteRig):
-            out.remote = rig.counts
-            if rig.readers is not None and rig.readers.restarts:
-                out.degraded.append(f"reader processes restarted {rig.readers.restarts}x (crashed or killed)")
-        judge_degraded(monitor, rig.adapters, out, cfg.sim)
-        out.device_counters = {a.name: dict(a.counters) for a in rig.adapters}
-        print_summary(console, cfg, _served(cfg), bus, topics, out, rig.adapters, recorder)
+            _stop(live, out)
+        live.pump()
+        _conclude(cfg, console, scene, live, out)
     return out
 
 
-def _serve_page(cfg: MonitorConfig, console: Console, scene: Scene, stack: contextlib.ExitStack) -> WebFeed:
+def _start(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
+           cal_kwargs: dict[str, Any], cal_meta: dict[str, str] | None, out: MonitorOutcome, faults: list[Fault],
+           stack: contextlib.ExitStack) -> _Live:
+    """The page, the world, the bus, the monitor, the recorder, the events file and the rig (not opened yet)."""
+    web = _serve_page(cfg, console, scene, stack) if cfg.view.web is not None else None
+    world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.world.truth)
+    bus = Bus()
+    try:
+        plan = FaultPlan(faults, world, bus) if faults and world is not None else None
+    except FaultError as exc:
+        raise MonitorSetupError(str(exc)) from None
+    ft_name, arm_name = ft_dev.name, arm_dev.name if arm_dev is not None else "arm"
+    topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]
+    ev_sub = bus.subscribe("events/", maxsize=None)
+    monitor, recorder = _start_monitor(cfg, console, scene, bus, ft_name, arm_name, cal_kwargs, cal_meta, stack)
+    events_file = stack.enter_context(open(cfg.events, "w", encoding="utf-8")) if cfg.events else None  # noqa: SIM115 - the stack closes it
+    writer = EventWriter(events_file) if events_file is not None else None
+    if world is None:
+        monitor.start()  # on hardware the arm must be still now: the tare takes the first 0.1 s
+    console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "")
+                  + (f" served at {cfg.devices.remote}" if cfg.devices.remote else "") + " ...")
+    try:
+        rig = _make_rig(cfg, scene, bus, [d for d in (ft_dev, arm_dev) if d is not None], topics[:2], world)
+    except RigError as exc:
+        raise MonitorSetupError(str(exc)) from None
+    if arm_dev is None:
+        rig.add(SimJointSource(arm_name, bus, world))
+    view = LiveView(bus, monitor, topics, ft_topic=topics[0], title=cfg.title)
+    return _Live(bus, topics, monitor, rig, world, truth_path, plan, web, recorder, view,
+                 _EventPump(ev_sub, view, out, writer))
+
+
+def _start_monitor(cfg: MonitorOptions, console: Console, scene: Scene, bus: Bus, ft_name: str, arm_name: str,
+                   cal_kwargs: dict[str, Any], cal_meta: dict[str, str] | None, stack: contextlib.ExitStack
+                   ) -> tuple[LiveMonitor, RecorderProcess | None]:
+    """The monitor with the calibration's pipeline options (not started), and the recorder of its bus."""
+    tare_s = None if cal_kwargs else 0.1
+    pipeline_kwargs = {**cal_kwargs, **({"level": cfg.level} if cfg.level else {})}
+    if cfg.refine and "model_error" in cal_kwargs:
+        pipeline_kwargs["refine"] = True
+    elif cfg.refine:
+        console.print("[yellow]--refine: the calibration holds no identification (ftc identify): nothing to "
+                      "refine[/]")
+    console.print("loading the pipeline (its compiled kernels) ...")
+    monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, **pipeline_kwargs)
+    console.print(f"contact points on the scene's {monitor.pipeline.surface_source}"
+                  + (" (its vendor meshes are not fetched: ftc scenes --fetch-meshes)"
+                     if scene.robot.vendor_shell and monitor.pipeline.surface_source == "primitives" else ""))
+    recorder = None
+    if cfg.record:
+        recorder = _start_recorder(cfg, scene, bus, {
+            "ft_source": ft_name, "arm_source": arm_name, "tare_s": str(tare_s),
+            "pipeline": pipeline_kwargs_to_json(pipeline_kwargs), "ftc_hw": __version__, "sim": str(cfg.sim),
+            "scenario": cfg.world.scenario if cfg.sim else "", "seed": str(cfg.world.seed),
+            "started_host_ns": str(time.monotonic_ns())}, cal_meta)
+        stack.callback(recorder.stop)  # on a failed start; a no-op after the final stop below
+    return monitor, recorder
+
+
+def _go(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, stack: contextlib.ExitStack) -> None:
+    """The devices opened, the reflex armed, the sensor tared and the world's scenario started, the page fed."""
+    rig, monitor, world = live.rig, live.monitor, live.world
+    try:
+        rig.open().wait()
+    except RigError as exc:
+        raise MonitorSetupError(str(exc)) from None
+    if isinstance(rig, RemoteRig) and rig.readers is not None:
+        console.print(f"readers in processes of their own: {rig.readers.describe()}, over Zenoh on "
+                      f"{rig.endpoint}")
+    elif not cfg.devices.remote:
+        console.print(readers_mode(cfg)[1])
+    if cfg.reflex == "stop":
+        live.reflex = (StopReflex(live.bus, rig.stop_arm, inline=True) if isinstance(rig, RemoteRig) else
+                       StopReflex(live.bus, lambda _ev: rig.arm.stop()))
+    if world is not None:
+        console.print("waiting for the first frames (the sensor is tared at rest) ...")
+        _tare_then_go(cfg, monitor, world)
+        if live.plan is not None:
+            live.plan.start()
+    if live.web is not None:
+        live.web.feed(live.bus, monitor, live.topics, ft_topic=live.topics[0],
+                      truth_path=live.truth_path if cfg.sim else None)
+    stack.enter_context(frozen_heap())  # set up: no collector pause may stall the readers now
+    live.view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
+                        + (f", scenario {cfg.world.scenario} (emulated devices)" if cfg.sim else ""))
+
+
+def _stop(live: _Live, out: MonitorOutcome) -> None:
+    """The fault plan, the monitor, the devices, the reflex and the page stopped, in that order."""
+    out.t_closed_ns = time.monotonic_ns()
+    if live.plan is not None:
+        live.plan.close()
+        out.faults = list(live.plan.done)
+        if live.plan.error:
+            out.problems.append(f"fault plan stopped: {live.plan.error}")
+    live.monitor.stop()  # first: the streams end with the adapters, and that is no loss
+    live.rig.close()
+    if live.reflex is not None:
+        live.reflex.close()
+    if live.web is not None:
+        live.web.close()
+        out.web = live.web.summary
+
+
+def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, out: MonitorOutcome) -> None:
+    """The outcome's figures and judgements, and the summary printed."""
+    monitor, rig = live.monitor, live.rig
+    _finish(cfg, scene, live, out)
+    if monitor.pipeline.refiner is not None:
+        out.drift = monitor.pipeline.refiner.drift()
+        console.print(out.drift.summary())
+    if isinstance(rig, RemoteRig):
+        out.remote = rig.counts
+        if rig.readers is not None and rig.readers.restarts:
+            out.degraded.append(f"reader processes restarted {rig.readers.restarts}x (crashed or killed)")
+    judge_degraded(monitor, rig.adapters, out, cfg.sim)
+    out.device_counters = {a.name: dict(a.counters) for a in rig.adapters}
+    print_summary(console, cfg, _served(cfg), live.bus, live.topics, out, rig.adapters, live.recorder)
+
+
+def _serve_page(cfg: MonitorOptions, console: Console, scene: Scene, stack: contextlib.ExitStack) -> WebFeed:
     """The page, served before the world starts (it loads meanwhile); its URL printed."""
-    web = WebFeed(scene, cfg.title, cfg.web)
+    web = WebFeed(scene, cfg.title, cfg.view.web)
     try:
         url = web.serve()
     except WebViewError as exc:
@@ -352,50 +412,51 @@ def _serve_page(cfg: MonitorConfig, console: Console, scene: Scene, stack: conte
     return web
 
 
-def _make_rig(cfg: MonitorConfig, scene: Scene, bus: Bus, devices: list[DeviceSpec], topics: list[str],
+def _make_rig(cfg: MonitorOptions, scene: Scene, bus: Bus, devices: list[DeviceSpec], topics: list[str],
               world: WorldHost | None) -> Rig | RemoteRig:
-    """The devices' frames onto ``bus``: from ftc serve at ``cfg.remote``; from reader processes of our own
-    (the default: nothing this process computes can make a reader miss a packet); or from adapters here."""
+    """The devices' frames onto ``bus``: from ftc serve at ``cfg.devices.remote``; from reader processes of our
+    own (the default: nothing this process computes can make a reader miss a packet); or from adapters here."""
     endpoints = world.endpoints if world is not None else None
-    if cfg.remote:
-        return RemoteRig(bus, cfg.remote, cfg.remote_rig or scene.name, topics, cfg.connect_timeout_s, cfg.zenoh_config)
+    at = cfg.devices
+    if at.remote:
+        return RemoteRig(bus, at.remote, at.remote_rig or scene.name, topics, cfg.connect_timeout_s, at.zenoh_config)
     if readers_mode(cfg)[0] == "process":
         listen = free_loopback_endpoint()
         readers = ServedReaders(scene, devices, scene.name, [listen], endpoints=endpoints,
-                                device_overrides=cfg.device_overrides, rig_file=cfg.rig)
+                                device_overrides=at.overrides, rig_file=at.rig)
         return RemoteRig(bus, listen, scene.name, topics, cfg.connect_timeout_s, readers=readers)
     return build_rig(scene, bus=bus, devices=devices, endpoints=endpoints, timeout=cfg.connect_timeout_s)
 
 
-def _watch(cfg: MonitorConfig, console: Console, view: LiveView, monitor: LiveMonitor, world: WorldHost | None,
-           pump: Callable[[], None], out: MonitorOutcome) -> None:
+def _watch(cfg: MonitorOptions, console: Console, live: _Live, out: MonitorOutcome) -> None:
     """The live view until the world's run ends, the duration is up, or Ctrl-C."""
     t_end = None if (cfg.sim or not cfg.duration) else time.monotonic() + cfg.duration
-    live = Live(console=console, refresh_per_second=4, transient=False, auto_refresh=False) \
-        if cfg.view else contextlib.nullcontext()
+    shown = cfg.view.terminal
+    screen = Live(console=console, refresh_per_second=4, transient=False, auto_refresh=False) \
+        if shown else contextlib.nullcontext()
+    world, pump, view = live.world, live.pump, live.view
     try:
-        with live:
+        with screen:
             while True:
                 pump()
-                if cfg.view:
-                    live.update(view.render(), refresh=True)
+                if shown:
+                    screen.update(view.render(), refresh=True)
                 if world is not None and world.done:
                     break
                 if t_end is not None and time.monotonic() >= t_end:
                     break
-                time.sleep(0.25 if cfg.view else 0.05)
-            _wait_idle(monitor)
+                time.sleep(0.25 if shown else 0.05)
+            _wait_idle(live.monitor)
             pump()
-            if cfg.view:
-                live.update(view.render(), refresh=True)
+            if shown:
+                screen.update(view.render(), refresh=True)
     except KeyboardInterrupt:
         out.problems.append("interrupted")
 
 
-def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: StopReflex | None,
-            world: WorldHost | None, truth_path: Path | None, recorder: RecorderProcess | None,
-            out: MonitorOutcome) -> None:
+def _finish(cfg: MonitorOptions, scene: Scene, live: _Live, out: MonitorOutcome) -> None:
     """Counters, the evaluation against the world's truth, the recording's final metadata, problems."""
+    monitor, reflex, world, recorder = live.monitor, live.reflex, live.world, live.recorder
     out.counters = dict(monitor.counters)
     if reflex is not None:
         out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
@@ -403,7 +464,7 @@ def _finish(cfg: MonitorConfig, scene: Scene, monitor: LiveMonitor, reflex: Stop
             out.reflex["stopped_by_reader"] = [dict(e.counters) for e in monitor.bus.history(EVENTS_DEVICE)
                                                if e.kind == "stopped"]
     if world is not None and world.done and "error" not in (world.result or {}):
-        out.evaluation = evaluate(out.events, read_truth(truth_path), world.sample_period_s,
+        out.evaluation = evaluate(out.events, read_truth(live.truth_path), world.sample_period_s,
                                   crlb=crlb_of_truth(scene), solver_rms=solver_rms_of_truth(scene))
     elif world is not None:
         out.problems.append(f"the simulated world did not finish: {world.result}")
