@@ -324,10 +324,11 @@ def replay(
         "text once a second)."))] = 10.0,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
-    from ftc_hw.cli.replay import run_replay  # lazy: CLI start-up
+    from ftc_hw.app.monitor.config import ReplayOptions  # lazy: CLI start-up
+    from ftc_hw.cli.monitor import replay_exit_code, view_options  # lazy: CLI start-up
 
-    view = View.none if no_view else view
-    raise typer.Exit(run_replay(path, speed, events, calibration, check, view.value, web_page=(host, port, view_hz)))
+    shown = view_options((View.none if no_view else view).value, host, port, view_hz)
+    raise typer.Exit(replay_exit_code(ReplayOptions(path, speed, events, calibration, shown), check))
 
 
 @bench_app.command("solver")

@@ -1,5 +1,6 @@
-"""``ftc monitor`` and ``ftc demo``: the options' checks, the view's options, a run's outcome as an exit
-code. The runs are the app's (:mod:`ftc_hw.app.monitor.session`, :mod:`ftc_hw.app.demo`)."""
+"""``ftc monitor``, ``ftc demo`` and ``ftc replay``: the options' checks, the view's options, a run's outcome
+as an exit code. The runs are the app's (:mod:`ftc_hw.app.monitor.session`, :mod:`ftc_hw.app.demo`,
+:mod:`ftc_hw.app.monitor.replay`)."""
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -7,8 +8,11 @@ from typing import TypeVar
 
 import typer
 
-from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, ViewOptions
+from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, ReplayOptions, ViewOptions
+from ftc_hw.app.monitor.replay import run_replay
+from ftc_hw.app.monitor.view import make_console
 from ftc_hw.app.web.feed import WebOptions
+from ftc_hw.record.replay import ReplayError
 from ftc_hw.sim_devices.world import SCENARIOS
 
 T = TypeVar("T")
@@ -48,3 +52,12 @@ def outcome_or_exit(run: Callable[[], T]) -> T:
         typer.echo("interrupted", err=True)
         raise typer.Exit(130) from None
 
+
+def replay_exit_code(options: ReplayOptions, check: bool) -> int:
+    """``ftc replay``: 1 when it cannot read or replay, and with ``check`` when the events differ; else 0."""
+    try:
+        result = run_replay(options, make_console())
+    except (MonitorSetupError, ReplayError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        return 1
+    return 1 if check and not result.identical else 0
