@@ -582,13 +582,19 @@ def calibrate(
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
 ) -> None:
     """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
-    from .calibrate import run_calibrate_command  # lazy: CLI start-up
+    from ftc_hw.app.calibration.calibrate import CalibrateOptions, run_calibrate  # lazy: CLI start-up
+    from ftc_hw.calibration import FitOptions  # lazy: CLI start-up
 
-    raise typer.Exit(run_calibrate_command(scene, tuple(device or ()), rig, sim=sim, sim_payload=sim_payload,
-                                           interactive=not non_interactive, poses=poses, out=out,
-                                           json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw, tilt=tilt,
-                                           arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed,
-                                           reality=reality.value, plot=plot))
+    from .calibrate import sim_payload_or_exit  # lazy: CLI start-up
+    from .common import scene_or_exit  # lazy: CLI start-up
+
+    spec = scene_or_exit(scene, tuple(device or ()), rig)
+    options = CalibrateOptions(sim=sim, sim_payload=sim_payload_or_exit(sim_payload, sim), reality=reality.value,
+                               interactive=not non_interactive, poses=poses, sample_s=sample_s, seed=seed,
+                               expected_mass=expected_mass, speed=speed,
+                               fit=FitOptions(yaw=yaw, tilt=tilt, arm_gravity=arm_gravity), out=out,
+                               json_path=json_path, plot=plot)
+    raise typer.Exit(run_calibrate(spec, options))
 
 
 @devices_app.command("probe")
