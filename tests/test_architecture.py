@@ -75,6 +75,7 @@ CASES = [  # (module, an import it must not make, the contract that forbids it)
     ("ftc_hw/scene/errors.py", "import ftc_hw.priority", LAYERS),
     ("ftc_hw/sim_devices/ft300.py", "import ftc_hw.sim_devices.world", EMULATORS),
     ("ftc_hw/bus/frames.py", "import devices.base", NAMESPACE),
+    ("ftc_hw/app/calibration/identify.py", "import ftc_hw.app.demo", APP),
     ("ftc_hw/app/monitor/session.py", "import ftc_hw.app.calibration.identify", APP),
     ("ftc_hw/app/web/page.py", "import ftc_hw.app.calibration.identify", APP),
     ("ftc_hw/app/web/feed.py", "import ftc_hw.app.monitor.view", APP),
