@@ -1,6 +1,6 @@
 """Calibration of the sensor bias and the payload (mass, centre of mass) from planned static poses:
 identification with uncertainty and a verdict, D-optimal pose planning, stillness gating, the
-calibration file, re-zero. ``ftc calibrate`` is the bench wizard on top (ftc_hw/app/calibrate.py)."""
+calibration file, re-zero. ``ftc calibrate`` is the bench wizard on top (ftc_hw/app/calibration/calibrate.py)."""
 from .acquire import PoseResult, take_sample, wait_still
 from .file import Calibration, CalibrationError, calibration_from_fit, load_calibration, save_calibration
 from .identify import Fit, FitOptions, Identifier

@@ -136,6 +136,8 @@ class LiveMonitor:
         self.losses: list[list] = []  # [stream, t_lost_ns, t_back_ns or None]
         self._source = {"sensor": ft_source, "arm": arm_source}
 
+    def backlog(self) -> int: return self._sub.pending if self._sub is not None else 0  # F/T frames to take
+
     def start(self) -> LiveMonitor:
         if self._thread is None:
             self._joint_sub = self.bus.subscribe(self.joint_topic, callback=self.on_joints)

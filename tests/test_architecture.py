@@ -19,6 +19,7 @@ LINT = Path(sys.executable).parent / "lint-imports"
 LAYERS = "Layers: each imports only from the layers below it"
 EMULATORS = "Emulators see the world only through the link"
 NAMESPACE = "Namespace: devices, calibration, sim_devices only as ftc_hw.<folder>"
+APP = "App: its packages import only from those below them"
 
 
 def _lint(root: Path) -> subprocess.CompletedProcess:
@@ -56,13 +57,13 @@ def test_the_code_keeps_every_contract():
 
 CASES = [  # (module, an import it must not make, the contract that forbids it)
     ("ftc_hw/bench/report.py", "import ftc_hw.cli", LAYERS),
-    ("ftc_hw/app/view.py", "import ftc_hw.bench.report", LAYERS),
-    ("ftc_hw/devices/base.py", "import ftc_hw.app.rig", LAYERS),
+    ("ftc_hw/app/monitor/view.py", "import ftc_hw.bench.report", LAYERS),
+    ("ftc_hw/devices/base.py", "import ftc_hw.app.setup.rig", LAYERS),
     ("ftc_hw/devices/base.py", "import ftc_hw.sim_devices.link", LAYERS),  # siblings, independent
     ("ftc_hw/sim_devices/link.py", "import ftc_hw.devices.base", LAYERS),
     ("ftc_hw/calibration/file.py", "import ftc_hw.devices.base", LAYERS),
     ("ftc_hw/calibration/file.py", "import ftc_hw.record.events", LAYERS),
-    ("ftc_hw/record/events.py", "import ftc_hw.app.view", LAYERS),
+    ("ftc_hw/record/events.py", "import ftc_hw.app.monitor.view", LAYERS),
     ("ftc_hw/monitor.py", "import ftc_hw.record.writer", LAYERS),
     ("ftc_hw/pipeline.py", "import ftc_hw.monitor", LAYERS),
     ("ftc_hw/tracking.py", "import ftc_hw.pipeline", LAYERS),
@@ -74,6 +75,13 @@ CASES = [  # (module, an import it must not make, the contract that forbids it)
     ("ftc_hw/scene/errors.py", "import ftc_hw.priority", LAYERS),
     ("ftc_hw/sim_devices/ft300.py", "import ftc_hw.sim_devices.world", EMULATORS),
     ("ftc_hw/bus/frames.py", "import devices.base", NAMESPACE),
+    ("ftc_hw/app/calibration/identify.py", "import ftc_hw.app.demo", APP),
+    ("ftc_hw/app/monitor/session.py", "import ftc_hw.app.calibration.identify", APP),
+    ("ftc_hw/app/web/page.py", "import ftc_hw.app.calibration.identify", APP),
+    ("ftc_hw/app/web/feed.py", "import ftc_hw.app.monitor.view", APP),
+    ("ftc_hw/app/web/feed.py", "import ftc_hw.app.serving.serve", APP),  # siblings, independent
+    ("ftc_hw/app/serving/serve.py", "import ftc_hw.app.web.feed", APP),
+    ("ftc_hw/app/setup/rig.py", "import ftc_hw.app.serving.remote_rig", APP),
 ]
 
 
@@ -90,13 +98,15 @@ def test_a_forbidden_import_breaks_its_contract(pristine, tmp_path, module, line
     assert contract in broken and f"{source} -> " in broken, r.stdout
 
 
-def test_a_new_package_must_be_given_a_layer(pristine, tmp_path):
+@pytest.mark.parametrize("parent", ["ftc_hw", "ftc_hw.app"])
+def test_a_new_package_must_be_given_a_layer(pristine, tmp_path, parent):
     root = tmp_path / "tree"
     shutil.copytree(pristine, root)
-    (root / "ftc_hw" / "newcomer").mkdir()
-    (root / "ftc_hw" / "newcomer" / "__init__.py").write_text('"""Not in any layer yet."""\n')
+    package = root.joinpath(*parent.split("."), "newcomer")
+    package.mkdir()
+    (package / "__init__.py").write_text('"""Not in any layer yet."""\n')
     r = _lint(root)
-    assert r.returncode == 1 and "ftc_hw.newcomer" in r.stdout, r.stdout
+    assert r.returncode == 1 and f"{parent}.newcomer" in r.stdout, r.stdout
 
 
 def _function_local_imports(path: Path) -> list[tuple[int, str]]:

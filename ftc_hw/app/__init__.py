@@ -1,2 +1,5 @@
-"""The application: rig start-up, the monitor session, the calibration wizard, evaluation against
-ground truth, the live view."""
+"""The application, by concern: ``ftc demo`` (``demo``), the monitor session and ``ftc replay``
+(``monitor``), the live page (``web``), calibration and identification (``calibration``), the devices
+served on Zenoh and read from there (``serving``), and what they share or set up (``setup``: the rig
+builder, the device probe, the kernels' warm-up, vendor meshes and vendor libraries' output). Their
+layers: docs/architecture.md."""

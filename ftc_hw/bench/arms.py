@@ -27,7 +27,7 @@ import numpy as np
 import rtde_receive
 from rich.table import Table
 
-from ftc_hw.app.rig import build_rig
+from ftc_hw.app.setup.rig import build_rig
 from ftc_hw.bench.report import table_console
 from ftc_hw.bus import Bus
 from ftc_hw.devices.base import DeviceError, frozen_heap, responsive_readers

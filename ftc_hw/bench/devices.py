@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from rich.table import Table
 
-from ftc_hw.app.rig import Rig, build_rig
+from ftc_hw.app.setup.rig import Rig, build_rig
 from ftc_hw.bench.report import table_console
 from ftc_hw.bus import EVENTS_DEVICE, Bus, WrenchFlag
 from ftc_hw.scene import DeviceSpec, Scene, load_scene

@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from ftc_hw.app.monitor_config import MonitorConfig
-from ftc_hw.app.session import resumable, run_monitor
+from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, SimOptions, ViewOptions
+from ftc_hw.app.monitor.session import resumable, run_monitor
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import replay
@@ -78,8 +78,9 @@ def live(scene: str, seconds: float, seed: int) -> dict[str, Any]:
     ur = resumable(load_scene(scene))
     with tempfile.TemporaryDirectory(prefix="ftc-bench-") as tmp:
         path = Path(tmp) / "run.mcap"
-        cfg = MonitorConfig(scene, sim=True, duration=seconds, seed=seed, view=False, reflex="stop", readers="thread",
-                            title="ftc bench pipeline", record=path, resume_after_s=RESUME_AFTER_S if ur else None)
+        world = SimOptions(seed=seed, resume_after_s=RESUME_AFTER_S if ur else None)
+        cfg = MonitorOptions(scene, sim=True, world=world, duration=seconds, view=ViewOptions("none"), reflex="stop",
+                             devices=DeviceOptions(readers="thread"), title="ftc bench pipeline", record=path)
         load = os.getloadavg()[0]
         with CpuSampler() as cpu:
             out = run_monitor(cfg, Console(file=io.StringIO(), width=200))

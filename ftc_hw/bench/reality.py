@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from rich.table import Table
 
-from ftc_hw.app.identify import identify
+from ftc_hw.app.calibration.identify import identify
 from ftc_hw.bench.compensation import Recording, record
 from ftc_hw.bench.report import table_console
 from ftc_hw.calibration.free_motion import MotionData

@@ -1,10 +1,10 @@
 """``ftc bench reflex``: the stop reflex across the process boundary, ``stops`` onsets per arm.
 
 Each arm's device (ur5e's UR over RTDE + dashboard, dxl-arm's DYNAMIXEL bus) is emulated in its world
-and read by a reader process of its own (:class:`~ftc_hw.app.serve.ServedReaders`, as ``ftc monitor``
+and read by a reader process of its own (:class:`~ftc_hw.app.serving.serve.ServedReaders`, as ``ftc monitor``
 and ``ftc serve`` run it); this process stands where the monitor stands. Per stop, an onset event is
 made (its ``t_host_ns`` now: the onset sample's time, as if the detector had judged it at once) and
-sent as the monitor's :class:`~ftc_hw.app.reflex.StopReflex` sends it (``RemoteRig.stop_arm``: Zenoh,
+sent as the monitor's :class:`~ftc_hw.app.monitor.reflex.StopReflex` sends it (``RemoteRig.stop_arm``: Zenoh,
 express); the arm's reader stops the arm and says when on the bus (a ``stopped`` event, one host's
 monotonic clock):
 
@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 from rich.table import Table
 
-from ftc_hw.app.reflex import StopReflex
-from ftc_hw.app.remote_rig import RemoteRig
-from ftc_hw.app.rig import build_rig
-from ftc_hw.app.serve import ServedReaders
+from ftc_hw.app.monitor.reflex import StopReflex
+from ftc_hw.app.serving.remote_rig import RemoteRig
+from ftc_hw.app.serving.serve import ServedReaders
+from ftc_hw.app.setup.rig import build_rig
 from ftc_hw.bench.report import table_console
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, joints_topic
 from ftc_hw.bus.remote import free_loopback_endpoint

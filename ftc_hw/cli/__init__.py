@@ -225,10 +225,16 @@ def demo(
     if 0 < identify_seconds < 5:
         raise typer.BadParameter("0 (no identification) or at least 5", param_hint="--identify-seconds")
     typer.echo(LOADING, err=True)
-    from ftc_hw.cli.demo import run_demo  # lazy: CLI start-up
+    from ftc_hw.app.demo import run_demo  # lazy: CLI start-up
+    from ftc_hw.app.monitor.config import DemoOptions, MonitorOptions, SimOptions  # lazy: CLI start-up
+    from ftc_hw.app.monitor.view import make_console  # lazy: CLI start-up
+    from ftc_hw.cli.monitor import outcome_or_exit, view_options  # lazy: CLI start-up
 
-    raise typer.Exit(run_demo(scene, scenario, duration, seed, record, reality.value, identify_seconds,
-                              view=view.value, web_page=(host, port, view_hz)))
+    options = DemoOptions(MonitorOptions(scene, sim=True, world=SimOptions(scenario, seed, reality.value),
+                                         duration=duration, record=record,
+                                         view=view_options(view.value, host, port, view_hz), title="ftc demo"),
+                          identify_s=identify_seconds)
+    raise typer.Exit(outcome_or_exit(lambda: run_demo(options, make_console())).exit_code)
 
 
 @app.command()
@@ -281,17 +287,22 @@ def monitor(
 ) -> None:
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
-    from ftc_hw.cli.monitor import run_monitor_command  # lazy: CLI start-up
+    from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, SimOptions  # lazy: CLI start-up
+    from ftc_hw.app.monitor.session import run_monitor  # lazy: CLI start-up
+    from ftc_hw.app.monitor.view import make_console  # lazy: CLI start-up
+    from ftc_hw.cli.monitor import check_monitor, outcome_or_exit, view_options  # lazy: CLI start-up
 
-    view = View.none if no_view else view
-    raise typer.Exit(run_monitor_command(scene, sim, scenario, seed, duration, calibration, record,
-                                         reflex.value if reflex else None, events, truth, noise,
-                                         view.value, level.value,
-                                         tuple(fault or ()), device_overrides=tuple(device or ()), rig=rig,
-                                         reality=reality.value, refine=refine, remote=remote,
-                                         remote_name=remote_name, zenoh_config=zenoh_config,
-                                         readers=readers.value, web_page=(host, port, view_hz),
-                                         resume_after=resume_after))
+    world = SimOptions(scenario=scenario, seed=seed, reality=reality.value, noise=noise, truth=truth,
+                       faults=tuple(fault or ()), resume_after_s=resume_after)
+    devices = DeviceOptions(overrides=tuple(device or ()), rig=rig, remote=remote, remote_rig=remote_name,
+                            zenoh_config=zenoh_config, readers=readers.value)
+    options = MonitorOptions(scene, sim=sim, world=world, duration=duration, calibration=calibration,
+                             level=None if level is Level.scene else level.value, refine=refine, record=record,
+                             events=events, reflex=reflex.value if reflex else None,
+                             view=view_options((View.none if no_view else view).value, host, port, view_hz),
+                             devices=devices)
+    check_monitor(options)
+    raise typer.Exit(outcome_or_exit(lambda: run_monitor(options, make_console())).exit_code)
 
 
 @app.command()
@@ -313,10 +324,11 @@ def replay(
         "text once a second)."))] = 10.0,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
-    from ftc_hw.cli.replay import run_replay  # lazy: CLI start-up
+    from ftc_hw.app.monitor.config import ReplayOptions  # lazy: CLI start-up
+    from ftc_hw.cli.monitor import replay_exit_code, view_options  # lazy: CLI start-up
 
-    view = View.none if no_view else view
-    raise typer.Exit(run_replay(path, speed, events, calibration, check, view.value, web_page=(host, port, view_hz)))
+    shown = view_options((View.none if no_view else view).value, host, port, view_hz)
+    raise typer.Exit(replay_exit_code(ReplayOptions(path, speed, events, calibration, shown), check))
 
 
 @bench_app.command("solver")
@@ -490,7 +502,7 @@ def identify(
     rig: RigOption = None,
 ) -> None:
     """Identify the arm's inertial parameters and the sensor's errors from free motion, into the calibration."""
-    from ftc_hw.app.identify import IdentifyOptions  # lazy: CLI start-up
+    from ftc_hw.app.calibration.identify import IdentifyOptions  # lazy: CLI start-up
     from ftc_hw.cli.identify import run_identify_command  # lazy: CLI start-up
 
     opts = IdentifyOptions(out=out, calibration=calibration, json_path=json_path, keep_contacts=keep_contacts,
@@ -570,13 +582,19 @@ def calibrate(
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
 ) -> None:
     """Calibrate the sensor bias and the payload from planned poses: the bench wizard."""
-    from .calibrate import run_calibrate_command  # lazy: CLI start-up
+    from ftc_hw.app.calibration.calibrate import CalibrateOptions, run_calibrate  # lazy: CLI start-up
+    from ftc_hw.calibration import FitOptions  # lazy: CLI start-up
 
-    raise typer.Exit(run_calibrate_command(scene, tuple(device or ()), rig, sim=sim, sim_payload=sim_payload,
-                                           interactive=not non_interactive, poses=poses, out=out,
-                                           json_path=json_path, sample_s=sample_s, seed=seed, yaw=yaw, tilt=tilt,
-                                           arm_gravity=arm_gravity, expected_mass=expected_mass, speed=speed,
-                                           reality=reality.value, plot=plot))
+    from .calibrate import sim_payload_or_exit  # lazy: CLI start-up
+    from .common import scene_or_exit  # lazy: CLI start-up
+
+    spec = scene_or_exit(scene, tuple(device or ()), rig)
+    options = CalibrateOptions(sim=sim, sim_payload=sim_payload_or_exit(sim_payload, sim), reality=reality.value,
+                               interactive=not non_interactive, poses=poses, sample_s=sample_s, seed=seed,
+                               expected_mass=expected_mass, speed=speed,
+                               fit=FitOptions(yaw=yaw, tilt=tilt, arm_gravity=arm_gravity), out=out,
+                               json_path=json_path, plot=plot)
+    raise typer.Exit(run_calibrate(spec, options))
 
 
 @devices_app.command("probe")
@@ -610,7 +628,7 @@ def warm(
 ) -> None:
     """Compile the numba kernels of ftc demo and ftc monitor --sim into numba's cache (scripts/bootstrap.sh runs it)."""
     typer.echo("[warm] loading MuJoCo and numba ...", err=True)
-    from ftc_hw.app.warm import warm as run_warm  # lazy: CLI start-up
+    from ftc_hw.app.setup.warm import warm as run_warm  # lazy: CLI start-up
 
     from .common import scene_or_exit  # lazy: CLI start-up
 

@@ -1,14 +1,9 @@
-"""``ftc calibrate``: arguments to the bench wizard (:mod:`ftc_hw.app.calibrate`)."""
+"""``ftc calibrate``: its ``--sim-payload`` parsed for the bench wizard (:mod:`ftc_hw.app.calibration.calibrate`)."""
 from __future__ import annotations
-
-from pathlib import Path
 
 import typer
 
-from ftc_hw.app.calibrate import run_calibrate
 from ftc_hw.model import Payload
-
-from .common import scene_or_exit
 
 
 def parse_sim_payload(text: str) -> Payload:
@@ -27,10 +22,9 @@ def parse_sim_payload(text: str) -> Payload:
                                  + (f": {exc}" if str(exc) else ""), param_hint="--sim-payload") from None
 
 
-def run_calibrate_command(scene_name: str, device_overrides: tuple[str, ...] = (), rig: Path | None = None, *,
-                          sim: bool, sim_payload: str | None, **options) -> int:
-    scene = scene_or_exit(scene_name, device_overrides, rig)
-    payload = parse_sim_payload(sim_payload) if sim_payload else None
+def sim_payload_or_exit(text: str | None, sim: bool) -> Payload | None:
+    """``--sim-payload``, which needs ``--sim``."""
+    payload = parse_sim_payload(text) if text else None
     if payload is not None and not sim:
         raise typer.BadParameter("--sim-payload needs --sim", param_hint="--sim-payload")
-    return run_calibrate(scene, sim=sim, sim_payload=payload, **options)
+    return payload

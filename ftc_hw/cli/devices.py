@@ -1,12 +1,12 @@
-"""``ftc devices probe``: arguments to the probe (:mod:`ftc_hw.app.probe`)."""
+"""``ftc devices probe``: arguments to the probe (:mod:`ftc_hw.app.setup.probe`)."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import typer
 
-from ftc_hw.app.probe import plan_probe, run_probe
-from ftc_hw.app.view import make_console
+from ftc_hw.app.monitor.view import make_console
+from ftc_hw.app.setup.probe import plan_probe, run_probe
 
 from .common import scene_or_exit
 

@@ -1,4 +1,4 @@
-"""``ftc identify``: arguments to :mod:`ftc_hw.app.identify`."""
+"""``ftc identify``: arguments to :mod:`ftc_hw.app.calibration.identify`."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from ftc_hw.app.calibration_session import SessionError
-from ftc_hw.app.identify import IdentifyOptions, run_identify, run_planned_identify
-from ftc_hw.app.view import make_console
+from ftc_hw.app.calibration.device_session import SessionError
+from ftc_hw.app.calibration.identify import IdentifyOptions, run_identify, run_planned_identify
+from ftc_hw.app.monitor.view import make_console
 from ftc_hw.calibration.excitation import plan_excitation
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.replay import ReplayError, recorded_scene

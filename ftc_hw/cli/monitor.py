@@ -1,64 +1,63 @@
-"""``ftc monitor``: the scene's devices (or their emulators), the live contact monitor, events, recording."""
+"""``ftc monitor``, ``ftc demo`` and ``ftc replay``: the options' checks, the view's options, a run's outcome
+as an exit code. The runs are the app's (:mod:`ftc_hw.app.monitor.session`, :mod:`ftc_hw.app.demo`,
+:mod:`ftc_hw.app.monitor.replay`)."""
 from __future__ import annotations
 
-from pathlib import Path
+from collections.abc import Callable
+from typing import TypeVar
 
 import typer
 
-from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome, MonitorSetupError
-from ftc_hw.app.session import run_monitor
-from ftc_hw.app.view import make_console
-from ftc_hw.app.web_feed import RATE_HZ, WebOptions
+from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, ReplayOptions, ViewOptions
+from ftc_hw.app.monitor.replay import run_replay
+from ftc_hw.app.monitor.view import make_console
+from ftc_hw.app.web.feed import WebOptions
+from ftc_hw.record.replay import ReplayError
 from ftc_hw.sim_devices.world import SCENARIOS
 
-
-def run_monitor_command(scene: str, sim: bool, scenario: str, seed: int, duration: float | None,
-                        calibration: Path | None, record: Path | None, reflex: str | None, events: Path | None,
-                        truth: Path | None, noise: bool, view: str | bool, level: str = "dynamics",
-                        faults: tuple[str, ...] = (), *, device_overrides: tuple[str, ...] = (),
-                        rig: Path | None = None, reality: str = "ideal", refine: bool = False,
-                        remote: str | None = None, remote_name: str | None = None,
-                        zenoh_config: Path | None = None, readers: str = "auto",
-                        web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ),
-                        resume_after: float | None = None) -> int:
-    if truth is not None and not sim:
-        typer.echo("error: --truth needs --sim (the ground truth comes from the simulated world)", err=True)
-        return 2
-    if refine and calibration is None:
-        typer.echo("error: --refine needs --calibration (a file with an identification: ftc identify)", err=True)
-        return 2
-    if resume_after is not None and not sim:
-        typer.echo("error: --resume-after needs --sim (the emulated controller's operator resumes the arm)", err=True)
-        return 2
-    if faults and not sim:
-        typer.echo("error: --fault needs --sim (faults are played on the emulated devices)", err=True)
-        return 2
-    if sim and scenario not in SCENARIOS:
-        typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
-        return 2
-    cfg = MonitorConfig(scene, sim=sim, scenario=scenario, seed=seed, duration=duration, calibration=calibration,
-                        record=record, reflex=reflex, events=events, truth=truth, noise=noise,
-                        view=view in (True, "terminal"), web=web_options(view, web_page),
-                        level=None if level == "scene" else level, faults=faults,
-                        device_overrides=device_overrides, rig=rig, reality=reality, refine=refine,
-                        remote=remote, remote_rig=remote_name, zenoh_config=zenoh_config, readers=readers,
-                        resume_after_s=resume_after)
-    out = run_guarded(cfg, make_console())
-    return out if isinstance(out, int) else out.exit_code
+T = TypeVar("T")
 
 
-def web_options(view: str | bool, page: tuple[str, int, float]) -> WebOptions | None:
-    """``page``: host, port, updates a second."""
-    return WebOptions(*page) if view == "web" else None
+def check_monitor(options: MonitorOptions) -> None:
+    """Exit code 2, said why, on options that need ``--sim`` without it, or ``--refine`` without a calibration."""
+    world = options.world
+    for wrong, why in (
+            (world.truth is not None and not options.sim,
+             "--truth needs --sim (the ground truth comes from the simulated world)"),
+            (options.refine and options.calibration is None,
+             "--refine needs --calibration (a file with an identification: ftc identify)"),
+            (world.resume_after_s is not None and not options.sim,
+             "--resume-after needs --sim (the emulated controller's operator resumes the arm)"),
+            (bool(world.faults) and not options.sim, "--fault needs --sim (faults are played on the emulated devices)"),
+            (options.sim and world.scenario not in SCENARIOS,
+             f"unknown scenario {world.scenario!r} (known: {', '.join(SCENARIOS)})")):
+        if wrong:
+            typer.echo(f"error: {why}", err=True)
+            raise typer.Exit(2)
 
 
-def run_guarded(cfg: MonitorConfig, console) -> MonitorOutcome | int:
-    """``run_monitor`` with setup errors and Ctrl-C turned into exit codes (1, 130)."""
+def view_options(view: str, host: str, port: int, view_hz: float) -> ViewOptions:
+    """``--view`` with the page's ``--host``, ``--port`` and ``--view-hz``."""
+    return ViewOptions(view, WebOptions(host, port, view_hz))
+
+
+def outcome_or_exit(run: Callable[[], T]) -> T:
+    """The run's outcome; its setup error (exit code 1) or Ctrl-C (130) said, and the command ended."""
     try:
-        return run_monitor(cfg, console)
+        return run()
     except MonitorSetupError as exc:
         typer.echo(f"error: {exc}", err=True)
-        return 1
+        raise typer.Exit(1) from None
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
-        return 130
+        raise typer.Exit(130) from None
+
+
+def replay_exit_code(options: ReplayOptions, check: bool) -> int:
+    """``ftc replay``: 1 when it cannot read or replay, and with ``check`` when the events differ; else 0."""
+    try:
+        result = run_replay(options, make_console())
+    except (MonitorSetupError, ReplayError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        return 1
+    return 1 if check and not result.identical else 0

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import typer
 
-from ftc_hw.app.vendor_meshes import VendorFetchError, fetch_vendor_shell
+from ftc_hw.app.setup.vendor_meshes import VendorFetchError, fetch_vendor_shell
 from ftc_hw.scene import builtin_names, load_scene, variant_names
 from ftc_hw.scene.vendor import shell_fetched, shell_model
 

@@ -1,12 +1,12 @@
-"""``ftc serve`` and ``ftc record --remote``: arguments to :mod:`ftc_hw.app.serve` and
-:mod:`ftc_hw.app.remote_record`."""
+"""``ftc serve`` and ``ftc record --remote``: arguments to :mod:`ftc_hw.app.serving.serve` and
+:mod:`ftc_hw.app.serving.remote_record`."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import typer
 
-from ftc_hw.app.serve import DEFAULT_LISTEN, ServeConfig, ServeError, run_serve
+from ftc_hw.app.serving.serve import DEFAULT_LISTEN, ServeConfig, ServeError, run_serve
 from ftc_hw.bus.remote import RemoteError
 
 
@@ -26,7 +26,7 @@ def run_serve_command(scene: str, devices: tuple[str, ...], rig: Path | None, li
 
 
 def run_record_command(remote: str, name: str, out: Path, duration: float | None, zenoh_config: Path | None) -> int:
-    from ftc_hw.app.remote_record import record_remote  # lazy: only this command records
+    from ftc_hw.app.serving.remote_record import record_remote  # lazy: only this command records
 
     try:
         result = record_remote(remote, name, out, duration, zenoh_config, say=lambda line: typer.echo(line))

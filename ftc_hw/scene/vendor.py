@@ -3,7 +3,7 @@ vendor model's bodies is which of ours, and where ``ftc scenes meshes`` puts the
 
 The simulated world uses them as the true touched surface (``[world] vendor_shell``, or the scene's
 ``[robot] vendor_shell``), and the pipeline answers on them (``ftc_hw.model.mesh_surface``).
-Nothing here downloads: ``ftc_hw.app.vendor_meshes`` does.
+Nothing here downloads: ``ftc_hw.app.setup.vendor_meshes`` does.
 """
 from __future__ import annotations
 

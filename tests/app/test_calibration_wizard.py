@@ -162,8 +162,8 @@ def test_jogging_a_ur_shows_the_live_joint_error_until_within_tolerance():
 
     from rich.console import Console
 
-    from ftc_hw.app.calibrate import JOG_TOLERANCE, _jog
-    from ftc_hw.app.calibration_session import DeviceSession
+    from ftc_hw.app.calibration.calibrate import JOG_TOLERANCE, _jog
+    from ftc_hw.app.calibration.device_session import DeviceSession
     from ftc_hw.scene import load_scene
 
     scene = load_scene("ur5e")

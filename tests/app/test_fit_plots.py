@@ -14,9 +14,9 @@ import pytest
 from matplotlib.image import imread
 from rich.console import Console
 
-from ftc_hw.app import calibrate_plot, identify_plot
-from ftc_hw.app.calibrate_plot import draw_calibration
-from ftc_hw.app.fit_figure import DPI, WARN, new_figure, plot_beside, png_beside
+from ftc_hw.app.calibration import calibrate_plot, identify_plot
+from ftc_hw.app.calibration.calibrate_plot import draw_calibration
+from ftc_hw.app.calibration.fit_figure import DPI, WARN, new_figure, plot_beside, png_beside
 from ftc_hw.calibration import FitOptions, GeometryModel, Identifier, PoseSample
 from ftc_hw.calibration.arm_gravity import joint_limits
 from ftc_hw.calibration.regressor import predict

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from ftc_hw.app import identify_plot
-from ftc_hw.app.identify import IdentifyOptions, identify, motion_segments, run_identify
-from ftc_hw.app.identify_plot import draw_identification
+from ftc_hw.app.calibration import identify_plot
+from ftc_hw.app.calibration.identify import IdentifyOptions, identify, motion_segments, run_identify
+from ftc_hw.app.calibration.identify_plot import draw_identification
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, DeviceEvent
 from ftc_hw.calibration.excitation import SelfCollision, plan_excitation
 from ftc_hw.calibration.file import Calibration, load_calibration, save_calibration

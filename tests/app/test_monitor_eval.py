@@ -8,8 +8,8 @@ import sys
 import pytest
 from rich.console import Console
 
-from ftc_hw.app.evaluate import ContactResult, Evaluation, evaluate
-from ftc_hw.app.view import evaluation_table, make_console
+from ftc_hw.app.monitor.evaluate import ContactResult, Evaluation, evaluate
+from ftc_hw.app.monitor.view import evaluation_table, make_console
 from ftc_hw.scene import builtin_names, load_scene
 
 pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
@@ -110,7 +110,7 @@ def test_the_cramer_rao_bound_of_a_truth_record(contacts):
 
     import numpy as np
 
-    from ftc_hw.app.evaluate import crlb_of_truth
+    from ftc_hw.app.monitor.evaluate import crlb_of_truth
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
     from ftc_hw.sim_devices.world.truth import truth_record
@@ -149,7 +149,7 @@ def test_the_solvers_own_error_at_a_truth_record(contacts):
 
     import numpy as np
 
-    from ftc_hw.app.evaluate import crlb_of_truth, solver_rms_of_truth
+    from ftc_hw.app.monitor.evaluate import crlb_of_truth, solver_rms_of_truth
     from ftc_hw.model import ArmModel
     from ftc_hw.scene import load_scene
     from ftc_hw.sim_devices.world.truth import truth_record

@@ -16,9 +16,9 @@ import time
 
 import pytest
 
-from ftc_hw.app.monitor_config import MonitorConfig
-from ftc_hw.app.monitor_report import DEGRADED_EXIT
-from ftc_hw.app.session import readers_mode
+from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions
+from ftc_hw.app.monitor.report import DEGRADED_EXIT
+from ftc_hw.app.monitor.session import readers_mode
 
 pytestmark = pytest.mark.timeout(120)
 READERS = re.compile(r"readers in processes of their own: (.*), over Zenoh on (tcp/127\.0\.0\.1:\d+)")
@@ -106,8 +106,8 @@ def test_a_killed_monitor_takes_its_readers_with_it():
 @pytest.mark.compute
 def test_auto_says_where_the_readers_run_and_why():
     cpus = os.cpu_count() or 1
-    mode, why = readers_mode(MonitorConfig("dxl-arm", sim=True))
+    mode, why = readers_mode(MonitorOptions("dxl-arm", sim=True))
     assert (mode, str(cpus) in why) == (("thread", True) if cpus < 4 else ("process", False)), why
-    assert readers_mode(MonitorConfig("dxl-arm"))[0] == "process"  # real devices: always their own processes
-    assert readers_mode(MonitorConfig("dxl-arm", sim=True, readers="process"))[0] == "process"
+    assert readers_mode(MonitorOptions("dxl-arm"))[0] == "process"  # real devices: always their own processes
+    assert readers_mode(MonitorOptions("dxl-arm", sim=True, devices=DeviceOptions(readers="process")))[0] == "process"
 

@@ -1,6 +1,6 @@
 """``ftc monitor --sim`` end to end, the way a user runs it: the scene's emulators (each in its own
 process, spoken to through the real client libraries by the adapters), the live monitor, the events
-file and the world's ground truth; the events are scored against the truth (ftc_hw.app.evaluate).
+file and the world's ground truth; the events are scored against the truth (ftc_hw.app.monitor.evaluate).
 
 8 simulated seconds of ``sweep-with-collision``: two collisions (at 1.79 s and 5.79 s).
 """
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from ftc_hw.app.evaluate import evaluate
-from ftc_hw.app.view import evaluation_table
+from ftc_hw.app.monitor.evaluate import evaluate
+from ftc_hw.app.monitor.view import evaluation_table
 from ftc_hw.record.events import read_events, read_truth
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import sweep_trajectory

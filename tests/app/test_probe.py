@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import pytest
 
-from ftc_hw.app.probe import ProbePlan, plan_probe, probe
+from ftc_hw.app.setup.probe import ProbePlan, plan_probe, probe
 from ftc_hw.scene import load_rig_scene, load_scene
 from ftc_hw.sim_devices.host import WorldHost
 

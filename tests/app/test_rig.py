@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import pytest
 
-from ftc_hw.app.rig import RigError, build_rig, pick_device
+from ftc_hw.app.setup.rig import RigError, build_rig, pick_device
 from ftc_hw.devices.can_ft import CanFTAdapter
 from ftc_hw.devices.dynamixel import DynamixelArm
 from ftc_hw.devices.ft300 import FT300Adapter

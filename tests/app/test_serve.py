@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 
-from ftc_hw.app.monitor_config import MonitorConfig, MonitorSetupError
-from ftc_hw.app.remote_rig import RemoteRig
-from ftc_hw.app.rig import RigError
-from ftc_hw.app.serve import ServeConfig, ServeError, run_serve
-from ftc_hw.app.session import run_monitor
+from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, MonitorSetupError, SimOptions, ViewOptions
+from ftc_hw.app.monitor.session import run_monitor
+from ftc_hw.app.serving.remote_rig import RemoteRig
+from ftc_hw.app.serving.serve import ServeConfig, ServeError, run_serve
+from ftc_hw.app.setup.rig import RigError
 from ftc_hw.bus import EVENTS_DEVICE, Bus, Watchdog
 from ftc_hw.bus.remote import RemoteError, RemoteSubscriber, open_session
 from ftc_hw.record.reader import read_recording
@@ -244,6 +244,7 @@ def test_nothing_served_there_is_a_clear_error_and_the_options_that_act_here_are
         run_serve(ServeConfig("dxl-arm", devices=("nope",), sim=True))
     with pytest.raises(RigError, match="is ftc serve listening there"):
         RemoteRig(Bus(), free_endpoint(), "dxl-arm", ["wrench/ft"], timeout=1.0).open()
-    for extra, said in (({"sim": True}, "--sim"), ({"faults": ("ft:kill@1",)}, "--fault")):  # the reflex goes
-        with pytest.raises(MonitorSetupError, match=f"not with {said}"):
-            run_monitor(MonitorConfig("dxl-arm", remote=free_endpoint(), view=False, **extra))
+    for extra, said in (({"sim": True}, "--sim"), ({"world": SimOptions(faults=("ft:kill@1",))}, "--fault")):
+        with pytest.raises(MonitorSetupError, match=f"not with {said}"):  # the reflex goes
+            run_monitor(MonitorOptions("dxl-arm", devices=DeviceOptions(remote=free_endpoint()),
+                                       view=ViewOptions("none"), **extra))

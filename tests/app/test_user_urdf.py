@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from ftc_hw.app.evaluate import evaluate
+from ftc_hw.app.monitor.evaluate import evaluate
 from ftc_hw.calibration.file import load_calibration
 from ftc_hw.record.events import read_events, read_truth
 from ftc_hw.scene import load_scene

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from ftc_hw.app.vendor_output import translate
+from ftc_hw.app.setup.vendor_output import translate
 
 pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
@@ -23,7 +23,7 @@ def test_a_line_written_to_descriptor_2_by_native_code_is_rewritten_and_counted(
     # os.write on fd 2 is what C++'s std::cerr does: below Python's sys.stderr
     code = f"""
 import os, sys
-from ftc_hw.app.vendor_output import vendor_stderr
+from ftc_hw.app.setup.vendor_output import vendor_stderr
 with vendor_stderr() as seen:
     os.write(2, b"{RAW}\\n")
     os.write(2, b"plain line\\n")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ftc_hw.app.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
+from ftc_hw.app.monitor.evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
 from ftc_hw.bus import Bus
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import LiveMonitor, PipelineInput
@@ -27,7 +27,7 @@ pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the
 ROOT = Path(__file__).resolve().parents[2]
 PROBE = """
 import json
-from ftc_hw.app import warm as W
+from ftc_hw.app.setup import warm as W
 from ftc_hw.scene import load_scene
 from tests.app.test_warm import demo_path
 W.warm([load_scene('ur5e')])

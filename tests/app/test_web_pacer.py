@@ -1,10 +1,10 @@
 """The live page's feed slows down while the monitor falls behind, and comes back as it catches up
-(``ftc_hw.app.web_feed.RatePacer``): the view degrades before the pipeline does."""
+(``ftc_hw.app.web.feed.RatePacer``): the view degrades before the pipeline does."""
 from __future__ import annotations
 
 import pytest
 
-from ftc_hw.app.web_feed import BEHIND_MS, SLOWEST_HZ, RatePacer
+from ftc_hw.app.web.feed import BEHIND_MS, SLOWEST_HZ, RatePacer
 
 pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 

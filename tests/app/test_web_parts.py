@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from ftc_hw.app.web_feed import QUEUE_TICKS, PageProcess, WebOptions
-from ftc_hw.app.web_scene import DrawnEntity
-from ftc_hw.app.web_state import TruthTail
+from ftc_hw.app.web.feed import QUEUE_TICKS, PageProcess, WebOptions
+from ftc_hw.app.web.scene import DrawnEntity
+from ftc_hw.app.web.state import TruthTail
 from ftc_hw.record.foxglove_messages import color, entity, pose, vec3
 
 pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others

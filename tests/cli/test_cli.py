@@ -174,11 +174,11 @@ def test_sim_addresses_are_checked_before_anything_starts():
 
 
 def test_plot_is_on_by_default_and_no_plot_reaches_calibrate_and_identify(monkeypatch, tmp_path):
-    import ftc_hw.cli.calibrate as calibrate_cli
+    import ftc_hw.app.calibration.calibrate as calibrate_app
     import ftc_hw.cli.identify as identify_cli
 
     seen = []
-    monkeypatch.setattr(calibrate_cli, "run_calibrate", lambda scene, **kw: seen.append(kw["plot"]) or 0)
+    monkeypatch.setattr(calibrate_app, "run_calibrate", lambda scene, options: seen.append(options.plot) or 0)
     monkeypatch.setattr(identify_cli, "run_identify", lambda scene, rec, opts, **kw: seen.append(opts.plot) or 0)
     calibrate, identify = ["calibrate", "--scene", "dxl-arm"], ["identify", str(tmp_path / "run.mcap"), "--scene",
                                                                  "dxl-arm"]

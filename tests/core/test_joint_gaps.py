@@ -102,11 +102,11 @@ def test_the_live_session_freezes_its_heap_against_collector_pauses():
     import gc
     import inspect
 
-    from ftc_hw.app import session
+    from ftc_hw.app.monitor import session
     from ftc_hw.devices.base import frozen_heap
 
     before = gc.get_freeze_count()
     with frozen_heap():
         assert gc.get_freeze_count() > before + 10_000  # this test process's modules and more
     assert gc.get_freeze_count() == before
-    assert "frozen_heap()" in inspect.getsource(session._run)
+    assert "frozen_heap()" in inspect.getsource(session._go)

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from ftc_hw.app.vendor_meshes import VendorFetchError, _unpack
+from ftc_hw.app.setup.vendor_meshes import VendorFetchError, _unpack
 from ftc_hw.model import ArmModel
 from ftc_hw.model.mesh_fit import SURFACE_GROUP
 from ftc_hw.scene import SceneError, load_scene

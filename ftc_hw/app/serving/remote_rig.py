@@ -1,7 +1,7 @@
 """The rig of a monitor whose devices are served by reader processes (``ftc serve`` elsewhere, or the
-monitor's own :class:`~ftc_hw.app.serve.ServedReaders`): the frames of ``ftc/<rig>/...`` taken from Zenoh
+monitor's own :class:`~ftc_hw.app.serving.serve.ServedReaders`): the frames of ``ftc/<rig>/...`` taken from Zenoh
 into the monitor's bus, and its contact events published back. It stands where
-:class:`~ftc_hw.app.rig.Rig` stands for local adapters: ``open()``, ``wait()``, ``close()``, ``adapters``
+:class:`~ftc_hw.app.setup.rig.Rig` stands for local adapters: ``open()``, ``wait()``, ``close()``, ``adapters``
 (here each reader's counters as it last said them, ``counters`` device events; plus local ones ``add``-ed,
 such as a simulated world's joint source)."""
 from __future__ import annotations
@@ -15,11 +15,11 @@ from typing import Any
 
 import zenoh
 
+from ftc_hw.app.setup.rig import RigError
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, DeviceEvent
 from ftc_hw.bus.remote import RemoteError, RemotePublisher, RemoteSubscriber, connect_session, stop_key
 from ftc_hw.bus.wire import encode
 
-from .rig import RigError
 from .serve import ServedReaders
 
 FINAL_COUNTERS_WAIT_S = 2.0

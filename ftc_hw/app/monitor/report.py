@@ -6,11 +6,11 @@ import time
 
 from rich.console import Console
 
-from ftc_hw.app.view import evaluation_table, stream_table
 from ftc_hw.bus import Bus
 from ftc_hw.monitor import LiveMonitor
 
-from .monitor_config import MonitorConfig, MonitorOutcome
+from .config import MonitorOptions, MonitorOutcome
+from .view import evaluation_table, stream_table
 
 DEGRADED_EXIT = 3  # the run went to its end, but was blind or dropped frames for a while (see degraded)
 DROPPED_SHARE = 0.05  # above this share of F/T frames not judged (or late), a run is degraded
@@ -52,7 +52,7 @@ def judge_degraded(monitor: LiveMonitor, adapters, out: MonitorOutcome, sim: boo
         out.exit_code = DEGRADED_EXIT
 
 
-def print_summary(console: Console, cfg: MonitorConfig, served: bool, bus: Bus, topics: list[str],
+def print_summary(console: Console, cfg: MonitorOptions, served: bool, bus: Bus, topics: list[str],
                   out: MonitorOutcome, adapters, recorder) -> None:
     """The run's summary: streams, events, counters, the reflex, the recording, the evaluation, why
     it is degraded. ``served``: the devices were read by reader processes (own or ``ftc serve``'s)."""
@@ -64,7 +64,7 @@ def print_summary(console: Console, cfg: MonitorConfig, served: bool, bus: Bus, 
     for a in adapters:
         console.print(f"{a.name} ({a.kind}): {dict(a.counters)}")
     if served:
-        console.print(f"from {cfg.remote or 'reader processes'} (Zenoh): {out.remote}")
+        console.print(f"from {cfg.devices.remote or 'reader processes'} (Zenoh): {out.remote}")
     if out.web:
         console.print(web_line(out.web), highlight=False)
     if out.faults:
@@ -91,8 +91,8 @@ def print_summary(console: Console, cfg: MonitorConfig, served: bool, bus: Bus, 
                       "identified (expected)")
     elif out.evaluation is not None:
         console.print(evaluation_table(out.evaluation))
-    if out.evaluation is not None and cfg.truth:
-        console.print(f"ground truth -> {cfg.truth}")
+    if out.evaluation is not None and cfg.world.truth:
+        console.print(f"ground truth -> {cfg.world.truth}")
     for p in out.problems:
         console.print(f"[yellow]{p}[/]")
     if out.degraded:

@@ -12,8 +12,9 @@ from rich.console import Console, Group
 from rich.table import Table
 from rich.text import Text
 
-from ftc_hw.app.evaluate import Evaluation
 from ftc_hw.bus import Bus, ContactEvent, DeviceEvent
+
+from .evaluate import Evaluation
 
 
 def make_console() -> Console:

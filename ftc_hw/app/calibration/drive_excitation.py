@@ -14,7 +14,7 @@ from ftc_hw.calibration.free_motion import MotionData
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.record.reader import RecordedMessage, Recording
 
-from .calibration_session import DeviceSession
+from .device_session import DeviceSession
 
 GOAL_HZ = 200.0  # goals a second: at 50 a second the servo's steps shake the arm well above the model's noise
 
@@ -22,7 +22,7 @@ GOAL_HZ = 200.0  # goals a second: at 50 a second the servo's steps shake the ar
 def drive_excitation(session: DeviceSession, exc: Excitation, segments: Callable[..., tuple[list, dict]],
                      speed: float = 0.6,
                      progress: Callable[[float], None] | None = None) -> tuple[list[MotionData], dict[str, int]]:
-    """``segments``: :func:`ftc_hw.app.identify.motion_segments` (what cuts a recording)."""
+    """``segments``: :func:`ftc_hw.app.calibration.identify.motion_segments` (what cuts a recording)."""
     session.torque_on()
     session.move_to(exc.reference(0.0)[0], speed=speed)
     inputs = session.bus.subscribe(MONITOR_INPUT, maxsize=None)

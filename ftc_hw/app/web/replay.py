@@ -1,6 +1,6 @@
 """``ftc replay --view web``: a recording's page ticks, made while the same pipeline replays it (at
 ``rate_hz`` of recording time, as the live page gets them), then played by the page's own player
-(:mod:`ftc_hw.app.web_player`: pause, seek, speed)."""
+(:mod:`ftc_hw.app.web.player`: pause, seek, speed)."""
 from __future__ import annotations
 
 import signal
@@ -10,8 +10,8 @@ from ftc_hw.bus import Bus
 from ftc_hw.record.foxglove_view import FoxgloveView
 from ftc_hw.scene import Scene
 
-from .web_feed import RATE_HZ, PageProcess, WebOptions
-from .web_state import WebSampler, page_setup
+from .feed import RATE_HZ, PageProcess, WebOptions
+from .state import WebSampler, page_setup
 
 
 class ReplayTimeline:

@@ -31,6 +31,7 @@ from typing import Any
 
 import zenoh
 
+from ftc_hw.app.setup.rig import RigError, build_rig, check_located
 from ftc_hw.bus import EVENTS_DEVICE, Bus, DeviceEvent
 from ftc_hw.bus.remote import RemotePublisher, open_session, stop_key
 from ftc_hw.bus.wire import decode
@@ -38,14 +39,12 @@ from ftc_hw.devices.registry import role_of
 from ftc_hw.priority import READER_NICE, name_process, prefer_cpu
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 
-from .rig import RigError, build_rig, check_located
-
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 COUNTERS_PERIOD_S = 1.0  # how often a reader process says its adapter's counters
 # A reader process's threads (poll loop, Zenoh's callbacks) are light: a stop command waits at most this
 # long for the interpreter (at the monitor's 0.5 ms the reflex's median crossing was 1.1-1.3 ms, here 0.8)
 READER_PROCESS_SWITCH_S = 0.0001
-_PRELOAD = ["numpy", "zenoh", "ftc_hw.bus.remote", "ftc_hw.devices.registry", "ftc_hw.app.rig",
+_PRELOAD = ["numpy", "zenoh", "ftc_hw.bus.remote", "ftc_hw.devices.registry", "ftc_hw.app.setup.rig",
             "ftc_hw.scene"]
 
 

@@ -1,4 +1,4 @@
-"""``--view web``: the page's process (:mod:`ftc_hw.app.web_page`, started with ``spawn``) and, in the
+"""``--view web``: the page's process (:mod:`ftc_hw.app.web.page`, started with ``spawn``) and, in the
 monitor's process, the subscriber that feeds it: a thread that at ``rate_hz`` (``--view-hz``) reads the
 bus's and the monitor's newest state (never waiting on either; events through a queue subscription of
 their own) and puts a tick into a bounded queue to the page; a contact's onset, first point and offset
@@ -25,8 +25,8 @@ from ftc_hw.bus import Bus, ContactEvent, Empty, SubscriptionClosed
 from ftc_hw.record.foxglove_view import FoxgloveView
 from ftc_hw.scene import Scene
 
-from . import web_page
-from .web_state import TruthTail, WebSampler, page_setup
+from . import page as web_page
+from .state import TruthTail, WebSampler, page_setup
 
 RATE_HZ = 10.0  # --view-hz's default: see docs/monitor.md for what a browser's rendering costs
 QUEUE_TICKS = 32  # a second or more: a page further behind loses its oldest ticks

@@ -12,7 +12,7 @@ from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent
 class StopReflex:
     """On every contact onset, ``stop(onset)``: the local arm adapter's ``stop()`` from a thread of its own
     (it waits for the device: never in the pipeline's thread), or, ``inline``, a command to the arm's
-    reader process (:meth:`~ftc_hw.app.remote_rig.RemoteRig.stop_arm`: a Zenoh put that does not wait)
+    reader process (:meth:`~ftc_hw.app.serving.remote_rig.RemoteRig.stop_arm`: a Zenoh put that does not wait)
     at once in the thread that published the onset (a hand-over cost 0.2-0.3 ms, ftc bench reflex).
     It gets the onset before any other subscriber of the monitor's bus."""
 

@@ -22,6 +22,9 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
+from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, SimOptions, ViewOptions
+from ftc_hw.app.monitor.session import run_monitor
+from ftc_hw.app.setup.rig import RigError
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE
 from ftc_hw.calibration.applied import merge_inertials
 from ftc_hw.calibration.excitation import plan_excitation
@@ -43,13 +46,10 @@ from ftc_hw.pipeline import Corrections
 from ftc_hw.record.reader import Recording, RecordingError, read_recording
 from ftc_hw.scene import Scene
 
-from .calibration_session import DeviceSession, SessionError
+from .device_session import DeviceSession, SessionError
 from .drive_excitation import drive_excitation
 from .fit_figure import plot_beside
 from .identify_plot import draw_identification
-from .monitor_config import MonitorConfig, MonitorSetupError
-from .rig import RigError
-from .session import run_monitor
 
 CONTACT_MARGIN_S = 0.3  # cut this much before a reported contact and after its end
 MIN_SEGMENT_S = 0.5
@@ -263,8 +263,8 @@ def _record_sim(scene: Scene, scenario: str, duration: float, seed: int, reality
         raise IdentificationError(f"--scenario {scenario}: identification needs free motion "
                                   f"({', '.join(FREE_SCENARIOS)})")
     console.print(f"recording {duration:g} s of [cyan]{scenario}[/] on the emulated devices (reality {reality}) ...")
-    cfg = MonitorConfig(str(scene.path), sim=True, scenario=scenario, seed=seed, duration=duration, record=path,
-                        view=False, reality=reality, title="ftc identify", judged=False)
+    cfg = MonitorOptions(str(scene.path), sim=True, world=SimOptions(scenario, seed, reality), duration=duration,
+                         record=path, view=ViewOptions("none"), title="ftc identify", judged=False)
     run_monitor(cfg, console)  # its alarms are the untrained model's: the scenario has no contact
     return path
 

@@ -8,24 +8,24 @@ monitor see the same draw (the same seed)."""
 from __future__ import annotations
 
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 from rich.console import Console
 
-from ftc_hw.app.calibration_session import SessionError
-from ftc_hw.app.identify import IdentifyOptions, run_planned_identify
-from ftc_hw.app.monitor_config import MonitorConfig, MonitorOutcome
-from ftc_hw.app.view import make_console
-from ftc_hw.app.web_feed import RATE_HZ
+from ftc_hw.app.calibration.device_session import SessionError
+from ftc_hw.app.calibration.identify import IdentifyOptions, run_planned_identify
+from ftc_hw.app.monitor.config import DemoOptions, MonitorOutcome
+from ftc_hw.app.monitor.session import run_monitor
 from ftc_hw.scene import SceneError, load_scene
 
-from .monitor import run_guarded, web_options
 
-
-def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record: Path | None = None,
-             reality: str = "typical", identify_s: float = 30.0, *, view: str = "terminal",
-             web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ)) -> int:
-    console = make_console()
+def run_demo(options: DemoOptions, console: Console) -> MonitorOutcome:
+    """Identify the drawn arm first (in a mismatched world, for ``options.identify_s`` s), then the monitor
+    run of ``options.monitor`` with that calibration, then the summary. Raises what ``run_monitor`` raises."""
+    cfg, identify_s = options.monitor, options.identify_s
+    scene_name, scenario, duration, seed = cfg.scene, cfg.world.scenario, cfg.duration, cfg.world.seed
+    reality = cfg.world.reality
     identified = reality != "ideal" and identify_s > 0
     console.print(f"[bold]ftc demo[/]: scene [cyan]{scene_name}[/], scenario [cyan]{scenario}[/], reality "
                   f"[cyan]{reality}[/] (seed {seed}), {duration:g} s: "
@@ -44,14 +44,9 @@ def run_demo(scene_name: str, scenario: str, duration: float, seed: int, record:
         if reality != "ideal" and calibration is None:
             console.print("[yellow]monitoring the drawn arm with the scene's nominal model: expect the false alarms "
                           "an unidentified arm raises (docs/reality.md)[/]")
-        cfg = MonitorConfig(scene_name, sim=True, scenario=scenario, seed=seed, duration=duration, record=record,
-                            title="ftc demo", reality=reality, calibration=calibration, view=view == "terminal",
-                            web=web_options(view, web_page))
-        out = run_guarded(cfg, console)
-    if isinstance(out, int):
-        return out
+        out = run_monitor(replace(cfg, calibration=calibration), console)
     _summary(console, out, scenario, duration, how)
-    return out.exit_code
+    return out
 
 
 def _identify(scene_name: str, identify_s: float, seed: int, reality: str, path: Path,

@@ -56,7 +56,7 @@ def _pipeline(scene: Scene) -> None:
 
 
 def _evaluation(scene: Scene) -> None:
-    """The end of a simulated run (``ftc_hw.app.evaluate``): at a contact on the surface, the
+    """The end of a simulated run (``ftc_hw.app.monitor.evaluate``): at a contact on the surface, the
     Cramer-Rao bound and the solver's batch."""
     arm = ArmModel(scene)
     solver = ContactSolver(arm)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +37,7 @@ from ftc_hw.model import ArmModel, Payload
 from ftc_hw.scene import Scene, SceneError
 
 from .calibrate_plot import draw_calibration
-from .calibration_session import DeviceSession, SessionError
+from .device_session import DeviceSession, SessionError
 from .fit_figure import plot_beside
 
 JOG_TOLERANCE = 0.01  # rad: how close a jogged UR must be to the planned pose
@@ -134,29 +134,44 @@ def _ask(console: Console, interactive: bool, question: str, default: bool = Tru
     return Confirm.ask(question, console=console, default=default)
 
 
-def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, interactive: bool, poses: int,
-                  out: Path | None, json_path: Path | None, sample_s: float = 1.0, seed: int = 0,
-                  yaw: bool = False, tilt: bool = False, arm_gravity: bool = False, expected_mass: float = 0.5,
-                  speed: float = 1.0, reality: str = "ideal", plot: bool = True) -> int:
-    """The wizard on ``scene``'s devices (``sim``: emulated, hiding ``sim_payload``, default 0.5 kg 5 cm
-    out along the flange's z); ``plot``: the fit drawn to a PNG beside the saved file. Returns the exit
-    code (module docstring)."""
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """``ftc calibrate``'s: the devices (emulated with ``sim``), the plan, the fit, what is written."""
+
+    sim: bool = False  # emulated devices, hiding ``sim_payload`` (default 0.5 kg 5 cm out along the flange's z)
+    sim_payload: Payload | None = None
+    reality: str = "ideal"  # with sim: how the world's arm differs from the model
+    interactive: bool = True  # asks before moving and saving
+    poses: int = 12  # planned poses
+    sample_s: float = 1.0  # seconds of F/T samples per pose
+    seed: int = 0  # planning candidates, simulated noise
+    expected_mass: float = 0.5  # kg: the payload the plan's expected accuracy assumes
+    speed: float = 1.0  # rad/s: peak joint speed of the moves
+    fit: FitOptions = field(default_factory=FitOptions)  # what else is estimated: yaw, tilt, arm_gravity
+    out: Path | None = None  # the calibration file (default calibration-<scene>.toml)
+    json_path: Path | None = None
+    plot: bool = True  # the fit drawn to a PNG beside the saved file
+
+
+def run_calibrate(scene: Scene, options: CalibrateOptions) -> int:
+    """The wizard on ``scene``'s devices. Returns the exit code (module docstring)."""
     console = Console()
-    payload = sim_payload
+    sim, interactive, reality, sample_s = options.sim, options.interactive, options.reality, options.sample_s
+    payload = options.sim_payload
     if sim and payload is None:
         payload = Payload(0.5, (0.0, 0.0, 0.05))
-    out = out or Path(f"calibration-{scene.name}.toml")
+    out = options.out or Path(f"calibration-{scene.name}.toml")
     console.print(f"[bold]ftc calibrate[/]: scene [cyan]{scene.name}[/]"
                   + (f" on [yellow]emulated devices[/] (hidden payload; reality {reality})" if sim else ""))
-    session = DeviceSession(scene, sim=sim, sim_payload=payload, seed=seed, reality=reality)
+    session = DeviceSession(scene, sim=sim, sim_payload=payload, seed=options.seed, reality=reality)
     # planned before the devices start: then the planning has the CPU to itself (27 s instead of 5 s on
     # 2 cores beside the world and the emulators); the visiting order follows the arm's pose once known
-    opts = FitOptions(yaw=yaw, tilt=tilt, arm_gravity=arm_gravity, q_std=session.q_resolution / np.sqrt(12))
-    identifier = Identifier(GeometryModel(ArmModel(scene)), opts)
+    fit_options = replace(options.fit, q_std=session.q_resolution / np.sqrt(12))
+    identifier = Identifier(GeometryModel(ArmModel(scene)), fit_options)
     n_samples = int(round(sample_s * scene.sensor.rate_hz))
-    with console.status(f"planning {poses} poses"):
-        plan = plan_poses(scene, identifier, poses, samples_per_pose=n_samples, expected_mass=expected_mass,
-                          seed=seed)
+    with console.status(f"planning {options.poses} poses"):
+        plan = plan_poses(scene, identifier, options.poses, samples_per_pose=n_samples,
+                          expected_mass=options.expected_mass, seed=options.seed)
     try:
         with console.status("connecting to the scene's devices"):
             session.start()
@@ -196,7 +211,8 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
                 with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
                               console=console, transient=True) as bar:
                     task = bar.add_task("moving", total=1.0)
-                    session.move_to(q_goal, speed=speed, progress=lambda s, t=task, b=bar: b.update(t, completed=s))
+                    session.move_to(q_goal, speed=options.speed,
+                                    progress=lambda s, t=task, b=bar: b.update(t, completed=s))
             else:
                 _jog(console, session, q_goal)
             with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
@@ -244,11 +260,11 @@ def run_calibrate(scene: Scene, *, sim: bool, sim_payload: Payload | None, inter
                 console.print(f"[red]cannot save {out}: {exc}[/]")
                 return 1
             console.print(f"saved {out}")
-            if plot:
+            if options.plot:
                 plot_beside(out, lambda: draw_calibration(fit, scene.name), console)
-        if json_path is not None:
-            json_path.write_text(json.dumps(json_record(fit, truth), indent=2))
-            console.print(f"wrote {json_path}")
+        if options.json_path is not None:
+            options.json_path.write_text(json.dumps(json_record(fit, truth), indent=2))
+            console.print(f"wrote {options.json_path}")
         return 0 if fit.verdict == "good" else 3
     except (SessionError, DeviceError) as exc:
         console.print(f"[red]device failure:[/] {exc}")

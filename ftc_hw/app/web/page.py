@@ -3,7 +3,7 @@ solver's primitives and the sensor's frame, the sensor's force and torque arrows
 link highlighted, point, 95 % ellipsoid, force arrow, label with its flags) for ``CONTACT_KEEP_S``
 after its last event, with ``--sim`` the world's true contact in green; beside it the current contact,
 the last events, rolling plots of the external wrench and the detection statistic against its
-threshold, and the streams. It draws what :mod:`ftc_hw.app.web_state` sends (ticks); the scene is
+threshold, and the streams. It draws what :mod:`ftc_hw.app.web.state` sends (ticks); the scene is
 redrawn only when a tick changed it (the browser renders on demand), the panel beside it once a second
 (an onset or offset at once), all of a tick in one message.
 
@@ -26,8 +26,8 @@ import viser
 
 from ftc_hw.bus import STREAM_EVENT_KINDS
 
-from .web_player import Player
-from .web_scene import DrawnEntity
+from .player import Player
+from .scene import DrawnEntity
 
 CONTACT_KEEP_S = 3.0  # a contact stays drawn this long after its last event (Foxglove's lifetime too)
 EVENTS_KEEP_S = 5.0  # the events list: the last few seconds

@@ -1,5 +1,5 @@
 """``ftc replay FILE.mcap --view web``: the page over a recording's ticks (made beforehand by the
-same pipeline, :mod:`ftc_hw.app.web_replay`), played in the page's process with a play/pause button,
+same pipeline, :mod:`ftc_hw.app.web.replay`), played in the page's process with a play/pause button,
 a time slider (seek) and a speed. A seek redraws from a clean page: the ticks of the few seconds before
 the target are applied again (contacts, events and plots are what those seconds left)."""
 from __future__ import annotations

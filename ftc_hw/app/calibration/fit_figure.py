@@ -1,7 +1,7 @@
 """A fit's figure as a PNG beside its calibration file (``ftc calibrate``, ``ftc identify``): matplotlib
 loaded only when a figure is drawn, rendered by Agg with no global pyplot state, and a figure that
 cannot be drawn or written a warning with its reason, never a lost calibration (the TOML is written
-first). The drawings are :mod:`ftc_hw.app.calibrate_plot` and :mod:`ftc_hw.app.identify_plot`.
+first). The drawings are :mod:`ftc_hw.app.calibration.calibrate_plot` and :mod:`ftc_hw.app.calibration.identify_plot`.
 """
 from __future__ import annotations
 

@@ -15,6 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ftc_hw.app.setup.rig import Rig, RigError, build_rig, require_device
 from ftc_hw.bus import Bus, joints_topic, wrench_topic
 from ftc_hw.calibration.samples import Window
 from ftc_hw.codecs.dxl_table import MODELS
@@ -22,8 +23,6 @@ from ftc_hw.devices.dynamixel import DEFAULT_MODEL as DEFAULT_DXL_MODEL
 from ftc_hw.model import Payload
 from ftc_hw.scene import Scene
 from ftc_hw.sim_devices.host import WorldHost
-
-from .rig import Rig, RigError, build_rig, require_device
 
 
 class SessionError(RuntimeError):

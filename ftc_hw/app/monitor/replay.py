@@ -1,35 +1,35 @@
 """``ftc replay``: a recording's pipeline inputs through the same pipeline; the events against the recorded ones."""
 from __future__ import annotations
 
-from pathlib import Path
-
-import typer
+from rich.console import Console
 from rich.live import Live
 
-from ftc_hw.app.monitor_config import MonitorSetupError
-from ftc_hw.app.session import load_pipeline_calibration
-from ftc_hw.app.view import LiveView, make_console
-from ftc_hw.app.web_feed import RATE_HZ, WebOptions
-from ftc_hw.app.web_replay import ReplayTimeline, serve_until_interrupted
+from ftc_hw.app.web.replay import ReplayTimeline, serve_until_interrupted
 from ftc_hw.bus import Bus, ContactEvent, joints_topic, wrench_topic
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import event_line
 from ftc_hw.record.reader import RecordingError, read_recording
-from ftc_hw.record.replay import ReplayError, recorded_scene, recorded_settings, replay
+from ftc_hw.record.replay import ReplayError, ReplayResult, recorded_scene, recorded_settings, replay
+
+from .config import MonitorSetupError, ReplayOptions
+from .session import load_pipeline_calibration
+from .view import LiveView
 
 
-def run_replay(path: Path, speed: float, events_path: Path | None, calibration: Path | None, check: bool,
-               view: str, web_page: tuple[str, int, float] = ("127.0.0.1", 8080, RATE_HZ)) -> int:
-    console = make_console()
+def run_replay(options: ReplayOptions, console: Console) -> ReplayResult:
+    """The replay, its live view, its events written, the comparison said; then, with ``--view web``, the
+    page over it until Ctrl-C. Raises ``MonitorSetupError`` when the recording or the calibration cannot
+    be read, ``ReplayError`` when the replay cannot go on."""
+    path, speed, events_path, calibration = options.recording, options.speed, options.events, options.calibration
+    view = options.view.kind
     try:
         rec = read_recording(path)
         scene = recorded_scene(rec)
         settings = recorded_settings(rec)
         if calibration:  # the recorded settings with this calibration's corrections
             settings = settings.replace(corrections=load_pipeline_calibration(calibration, scene)[0])
-    except (RecordingError, ReplayError, MonitorSetupError, OSError) as exc:
-        typer.echo(f"error: {exc}", err=True)
-        return 1
+    except (RecordingError, ReplayError, OSError) as exc:
+        raise MonitorSetupError(str(exc)) from None
     counts = rec.counts()
     console.print(f"{path}: {sum(counts.values())} messages on {len(counts)} topics "
                   f"({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))}), scene {scene.name}"
@@ -38,8 +38,8 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
     bus = Bus()
     topics = [wrench_topic(meta.get("ft_source", "ft")), joints_topic(meta.get("arm_source", "arm")), MONITOR_INPUT]
     show = view == "terminal" and speed > 0
-    options = WebOptions(*web_page)
-    timeline = ReplayTimeline(bus, scene, topics, t0_ns=rec.messages[0].log_time, rate_hz=options.rate_hz) \
+    page = options.view.page
+    timeline = ReplayTimeline(bus, scene, topics, t0_ns=rec.messages[0].log_time, rate_hz=page.rate_hz) \
         if view == "web" and rec.messages else None
     state: dict = {}
     last_ns = [rec.messages[0].log_time if rec.messages else 0]
@@ -73,9 +73,6 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
         result = replay(rec, scene=scene, settings=settings, speed=0.0 if timeline else speed, bus=bus,
                         on_message=on_message,
                         monitor_ready=ready)
-    except ReplayError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        return 1
     finally:
         if live is not None:
             live.stop()
@@ -91,13 +88,11 @@ def run_replay(path: Path, speed: float, events_path: Path | None, calibration: 
                   + (f" -> {events_path}" if events_path else ""))
     if result.identical:
         console.print(f"[green]identical[/] to the {len(result.recorded)} recorded events")
-        rc = 0
     else:
         diff = result.first_difference()
         console.print(f"[yellow]differs[/] from the {len(result.recorded)} recorded events; first difference at "
                       f"#{diff[0]}:\n  replayed: {diff[1]}\n  recorded: {diff[2]}")
-        rc = 1 if check else 0
     if timeline is not None:
         timeline.finish()
-        serve_until_interrupted(timeline.page(f"ftc replay {path.name}", options), console)
-    return rc
+        serve_until_interrupted(timeline.page(f"ftc replay {path.name}", page), console)
+    return result

@@ -1,0 +1,129 @@
+"""What a monitor run is asked to do and what it gives back: the options of ``ftc monitor``, ``ftc demo``
+and ``ftc replay`` (``MonitorOptions``, ``DemoOptions``, ``ReplayOptions``: small frozen objects, passed
+whole, their parts shared: where the view goes, the simulated world, where the devices are), the run's
+``MonitorOutcome``; ``MonitorSetupError`` when it cannot start."""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ftc_hw.app.web.feed import WebOptions
+from ftc_hw.compensation import Drift
+
+from .evaluate import Evaluation
+
+
+class MonitorSetupError(Exception):
+    """The run could not start: scene, devices, calibration or emulators (the message says which)."""
+
+
+VIEWS = ("terminal", "web", "none")
+
+
+@dataclass(frozen=True)
+class ViewOptions:
+    """Where the live view goes (``--view``): ``terminal`` (a table), ``web`` (the 3-D page, served as
+    ``page`` says: ``--host``, ``--port``, ``--view-hz``) or ``none``."""
+
+    kind: str = "terminal"
+    page: WebOptions = WebOptions()
+
+    def __post_init__(self) -> None:
+        if self.kind not in VIEWS:
+            raise ValueError(f"view {self.kind!r}: one of {', '.join(VIEWS)}")
+
+    @property
+    def terminal(self) -> bool:
+        return self.kind == "terminal"
+
+    @property
+    def web(self) -> WebOptions | None:
+        """The page's options with ``--view web``, else None."""
+        return self.page if self.kind == "web" else None
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """The simulated world of a run with ``sim`` (``--sim``; ``ftc demo`` always) and what is played on it."""
+
+    scenario: str = "sweep-with-collision"
+    seed: int = 0
+    reality: str = "ideal"  # how the world's arm differs from the model (ideal, typical, harsh)
+    noise: bool = True
+    truth: Path | None = None  # the world's ground truth written here (else to a temporary file)
+    faults: tuple[str, ...] = ()  # a fault plan (ftc_hw.app.monitor.faults), e.g. ("ft:kill@onset+0.1",)
+    resume_after_s: float | None = None  # with a UR arm: its emulated operator plays again after a stop
+
+
+@dataclass(frozen=True)
+class DeviceOptions:
+    """Where the scene's devices are and where their readers run."""
+
+    overrides: tuple[str, ...] = ()  # NAME.KEY=VALUE (--device), applied after the rig file
+    rig: Path | None = None  # a rig file (--rig): a table of keys per device name
+    remote: str | None = None  # a Zenoh endpoint: the devices' frames from ftc serve there, not adapters here
+    remote_rig: str | None = None  # the rig's name in ftc/<rig>/... (default: the scene's name)
+    zenoh_config: Path | None = None  # with remote: a Zenoh JSON5 file (TLS, credentials), docs/bus.md
+    readers: str = "auto"  # without remote: "process" (each reader in its own, as ftc serve), "thread", "auto"
+
+
+@dataclass(frozen=True)
+class MonitorOptions:
+    """One monitor run (``ftc monitor``; ``ftc demo`` and ``ftc identify --sim`` run one too)."""
+
+    scene: str  # a built-in scene's name or a scene file
+    sim: bool = False  # the scene's emulated devices in a simulated world, as ``world`` says
+    world: SimOptions = SimOptions()
+    duration: float | None = None  # simulated seconds with sim, else wall-clock seconds (None: until Ctrl-C)
+    calibration: Path | None = None
+    level: str | None = "dynamics"  # compensation level; None: the scene's
+    refine: bool = False  # keep refining the calibration's identified model while the arm moves free
+    record: Path | None = None
+    events: Path | None = None
+    reflex: str | None = None  # "stop"
+    view: ViewOptions = ViewOptions()
+    devices: DeviceOptions = DeviceOptions()
+    title: str = "ftc monitor"
+    connect_timeout_s: float = 20.0
+    judged: bool = True  # with sim: the summary judges the events against the truth (not for a run that records
+    # free motion for identification, where the model not yet identified raises alarms that mean nothing)
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """``ftc demo``: a simulated monitor run, in a mismatched world first identified for ``identify_s`` s."""
+
+    monitor: MonitorOptions
+    identify_s: float = 30.0  # 0: the nominal model monitors the drawn arm
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """``ftc replay``: a recording's pipeline inputs through the same pipeline."""
+
+    recording: Path
+    speed: float = 1.0  # 1: as recorded; 0: as fast as possible
+    events: Path | None = None  # the replayed events written here
+    calibration: Path | None = None  # instead of the recording's
+    view: ViewOptions = ViewOptions()
+
+
+@dataclass
+class MonitorOutcome:
+    exit_code: int
+    events: list[dict[str, Any]] = field(default_factory=list)
+    evaluation: Evaluation | None = None
+    counters: dict[str, int] = field(default_factory=dict)
+    reflex: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    t_closed_ns: int = 0  # when the adapters were closed
+    drift: Drift | None = None  # with refine: how far the refined model moved from the calibration's
+    stream_events: list[dict[str, Any]] = field(default_factory=list)  # sensor_lost, arm_back, ...
+    faults: list[tuple[str, float]] = field(default_factory=list)  # (fault, scenario time s when done)
+    vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
+    degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean
+    remote: dict[str, Any] = field(default_factory=dict)  # with remote: frames taken, dropped, events sent
+    device_counters: dict[str, dict[str, int]] = field(default_factory=dict)  # per device: its adapter's counters
+    web: dict[str, Any] = field(default_factory=dict)  # with the page: its URL, ticks sent, dropped
