@@ -98,7 +98,7 @@ def evaluate(scene: Scene, rec: Recording, level: str) -> dict:
     pipe = ContactPipeline(scene, PipelineSettings().with_level(level))
     # tare on the settled arm, in the rest the sweeps begin with
     i0, i1 = np.searchsorted(rec.t, [TARE_FROM_S, TARE_FROM_S + TARE_S])
-    pipe.compensator.tare(rec.wrench[i0:i1].mean(axis=0), rec.q[i0:i1].mean(axis=0), np.zeros(scene.n_joints),
+    pipe.motion.compensator.tare(rec.wrench[i0:i1].mean(axis=0), rec.q[i0:i1].mean(axis=0), np.zeros(scene.n_joints),
                           np.zeros(scene.n_joints))
     n_tare = i1
     onsets, costs, pos_err, free_force = [], [], [], []

@@ -75,14 +75,6 @@ class ContactPipeline:
         return self.motion.level
 
     @property
-    def compensator(self):
-        return self.motion.compensator
-
-    @property
-    def refiner(self):
-        return self.motion.refiner
-
-    @property
     def surface_source(self) -> str:
         """Where events put their points: ``meshes`` or ``primitives``."""
         return self.events.surface_source

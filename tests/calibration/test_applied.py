@@ -46,9 +46,9 @@ def test_calibrated_extras_reach_the_compensator(name):
         expected = predict(gm.at(q), theta, gm.gravity, gm.sign, extras["mount_yaw"],
                            (extras["gravity_tilt_x"], extras["gravity_tilt_y"]), basis.delta(beta))
         # what the pipeline leaves of that reading is nothing: it predicts the same load
-        np.testing.assert_allclose(pipe.compensator.external(expected, q), np.zeros(6), atol=1e-9)
+        np.testing.assert_allclose(pipe.motion.compensator.external(expected, q), np.zeros(6), atol=1e-9)
     plain = ContactPipeline(scene, settings(level="gravity", bias=bias, payload=payload))
-    assert np.abs(plain.compensator.external(expected, q)).max() > 1e-3  # the corrections matter
+    assert np.abs(plain.motion.compensator.external(expected, q)).max() > 1e-3  # the corrections matter
 
 
 def test_identification_round_trips_through_the_file_and_the_recording(tmp_path):
@@ -65,7 +65,7 @@ def test_identification_round_trips_through_the_file_and_the_recording(tmp_path)
     assert back.identification.untold == ["wrist_3.Ixx"]
     restored = PipelineSettings.from_json(PipelineSettings(corrections=back.corrections(scene)).to_json())
     pipe = ContactPipeline(scene, restored)
-    np.testing.assert_allclose(pipe.compensator.gain, gain)
+    np.testing.assert_allclose(pipe.motion.compensator.gain, gain)
     # the contact's wrench: the file's contact_gain undone (the identified gain where the data told it);
     # a file without one (written before): a wholly told gain undone, one with an untold term left as read
     partly = np.eye(6)
@@ -77,7 +77,7 @@ def test_identification_round_trips_through_the_file_and_the_recording(tmp_path)
     contact = np.array([5.0, -8.0, 12.0, 0.4, 2.0, -0.3])
     for ident_i, undone in ((ident, gain), (told, np.eye(6)), (back_kept.identification, partly)):
         corrections = dataclasses.replace(cal, identification=ident_i).corrections(scene)
-        comp = ContactPipeline(scene, PipelineSettings(corrections=corrections)).compensator
+        comp = ContactPipeline(scene, PipelineSettings(corrections=corrections)).motion.compensator
         np.testing.assert_allclose(comp.gain, gain)  # the arm's loads: the whole estimate either way
         np.testing.assert_allclose(comp.contact_wrench(gain @ contact, np.zeros(6)),
                                    np.linalg.solve(undone, gain @ contact), atol=1e-12)

@@ -366,9 +366,9 @@ def test_the_pipeline_loads_the_calibration(tmp_path, identifier, plan12):
     uncal = ContactPipeline(SCENE, settings(level="gravity"))
     noise = np.sqrt(np.diag(SCENE.sensor.noise_cov))
     for s in samples:
-        ext = pipe.compensator.external(s.wrench, s.q)
+        ext = pipe.motion.compensator.external(s.wrench, s.q)
         assert np.all(np.abs(ext) < 5 * noise), ext  # a pose mean: well inside the per-sample noise
-        assert np.abs(uncal.compensator.external(s.wrench, s.q)).max() > 0.5  # the payload and bias remain
+        assert np.abs(uncal.motion.compensator.external(s.wrench, s.q)).max() > 0.5  # the payload and bias remain
 
 
 # -- re-zero ---------------------------------------------------------------------------------------------

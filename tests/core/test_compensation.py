@@ -162,7 +162,7 @@ def test_a_20_newton_step_is_detected_within_two_samples_plus_a_millisecond(cont
                       hold_s=0.1)
         world = World(scene, ScenarioSetup(Hold(q), probes=(probe,)), seed=int(rng.integers(1000)))
         pipe = ContactPipeline(scene)
-        pipe.compensator.bias = scene.sensor.bias.copy()
+        pipe.motion.compensator.bias = scene.sensor.bias.copy()
         for state, reading in world.run(0.45):
             r = pipe.process(int(round(state.t * 1e9)), reading.wrench - scene.sensor.drift_per_s * state.t,
                              state.q, state.qd, world.read_current(state))

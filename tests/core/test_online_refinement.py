@@ -54,7 +54,7 @@ def test_a_heavier_link_is_refined_and_reported_as_drift():
     heavier = ArmModel(SCENE, inertials={"link3": delta})
     fixed, _ = _run(heavier, refine=False)
     refined, pipe = _run(heavier, refine=True)
-    drift = pipe.refiner.drift()
+    drift = pipe.motion.refiner.drift()
     assert refined < 0.7 * fixed, (refined, fixed)
     assert drift.drifted and drift.rms_refined < 0.95 * drift.rms_file, drift.summary()
     assert "DRIFTED" in drift.summary() and drift.applied >= 50
@@ -64,7 +64,7 @@ def test_the_calibrations_own_arm_is_not_drift_and_a_contact_is_never_learned():
     """The file's own arm, pushed by 3 N for 10 s: the refinement stops while the contact is open (it
     would otherwise take the push for a heavier arm) and reports no drift."""
     _, pipe = _run(ArmModel(SCENE), refine=True, seconds=40.0, touch_at=10.0)
-    drift = pipe.refiner.drift()
+    drift = pipe.motion.refiner.drift()
     assert not drift.drifted and drift.frames >= drift.MIN_FRAMES, drift.summary()
     assert drift.frames < 0.8 * 40.0 * 50  # at most 50 frames a second; none of the 10 s of contact
     assert drift.rms_refined == pytest.approx(drift.rms_file, rel=0.05)

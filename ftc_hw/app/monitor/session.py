@@ -390,8 +390,8 @@ def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, 
     """The outcome's figures and judgements, and the summary printed."""
     monitor, rig = live.monitor, live.rig
     _finish(cfg, scene, live, out)
-    if monitor.pipeline.refiner is not None:
-        out.drift = monitor.pipeline.refiner.drift()
+    if monitor.pipeline.motion.refiner is not None:
+        out.drift = monitor.pipeline.motion.refiner.drift()
         console.print(out.drift.summary())
     if isinstance(rig, RemoteRig):
         out.remote = rig.counts
