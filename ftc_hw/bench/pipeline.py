@@ -9,10 +9,11 @@ through what the live monitor runs for it:
   alignment, bus publish). Other kinds: ``publish_sample`` only (their decode is not included).
 * ``monitor``: :meth:`LiveMonitor.handle` less the pipeline: the F/T clock alignment, the joint state
   interpolated at the frame's time, the pipeline input published.
-* the pipeline's stages (:mod:`.pipeline_stages`): ``compensation`` (acceleration estimate, lag model,
-  loads, contact wrench), ``detection``, ``localization`` (joint torques and solves, frames in
-  contact only), ``events`` (the contact's track, events, their point on the meshes);
-  ``pipeline`` is the whole ``process`` call, timed in a second pass without the stage wrappers;
+* the pipeline's stages, timed through the pipeline's clock (:mod:`.pipeline_stages`):
+  ``compensation`` (acceleration estimate, lag model, loads, contact wrench), ``detection``,
+  ``localization`` (joint torques and solves, frames in contact only), ``events`` (the contact's
+  track, events, their point on the meshes); ``pipeline`` is the whole ``process`` call, timed in a
+  second pass by a clock without stage laps;
 ``pipeline cpu`` the same call's thread CPU time (what issue 24's per-frame target is about, less the
 time other processes held the core).
 

@@ -21,9 +21,9 @@ def test_bench_writes_json_with_all_figures(tmp_path, capsys):
     assert "sample_at" in capsys.readouterr().out
 
 
-def test_pipeline_bench_times_every_stage_and_the_wrappers_change_nothing(tmp_path):
+def test_pipeline_bench_times_every_stage_and_its_clock_changes_nothing(tmp_path):
     """The offline leg on the 7 kHz RDT scene: every record through a real UDP socket, every stage timed,
-    and the staged pass (its timing wrappers) judges exactly as the plain one."""
+    and the staged pass (a clock that reads every stage's end) judges exactly as the plain one."""
     from ftc_hw.bench.compensation import record
     from ftc_hw.bench.pipeline import ROWS, monitor_pass, offline, reader_costs, scene_at
 
