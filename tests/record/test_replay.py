@@ -46,8 +46,8 @@ def test_the_recording_has_one_channel_per_topic_and_the_run_as_metadata(recorde
     assert {"foxglove/tf", "foxglove/arm", "foxglove/contacts", "foxglove/wrench"} <= topics
     assert metadata["scene"]["name"] == "dxl-arm" and "[[devices]]" in metadata["scene"]["toml"]
     assert metadata["monitor"]["ft_source"] == "ft" and metadata["monitor"]["sim"] == "True"
-    recorded = PipelineSettings.from_json(metadata["monitor"]["pipeline"])
-    assert recorded.to_json() == PipelineSettings().with_level("dynamics").to_json()
+    settings = PipelineSettings.from_json(metadata["monitor"]["pipeline"])
+    assert settings.to_json() == PipelineSettings().with_level("dynamics").to_json()
     events = read_events(recorded / "events.jsonl")
     assert [json.loads(line) for line in metadata["events"]["jsonl"].splitlines()] == events
     assert any(e["kind"] == "onset" for e in events)
