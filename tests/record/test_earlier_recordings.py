@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from ftc_hw.record.reader import read_recording
-from ftc_hw.record.replay import replay
+from ftc_hw.record.replay import ReplayError, replay
 
 pytestmark = pytest.mark.compute  # replays as fast as it goes: nothing against the wall clock
 
@@ -39,3 +39,10 @@ def test_ftc_replay_check_says_identical_on_an_earlier_recording():
                            "--view", "none"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "identical to the 109 recorded events" in proc.stdout
+
+
+def test_a_recording_whose_settings_this_version_cannot_read_names_what():
+    rec = read_recording(DATA / "dxl-arm-ideal.mcap")
+    rec.metadata["monitor"]["pipeline"] = '{"level": "dynamics", "lag_floor": 0.1}'  # a setting never made
+    with pytest.raises(ReplayError, match="dxl-arm-ideal.mcap.*lag_floor.*unknown"):
+        replay(rec)
