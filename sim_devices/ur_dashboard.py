@@ -37,7 +37,7 @@ class DashboardCommand:
 
     words: str
     replies: dict[str, str]
-    act: Callable[[Controller, str], str] = lambda ctl, arg: OK
+    act: Callable[[Controller, str], str] = lambda ctl, arg: OK  # a query: changes nothing
     takes_arg: bool = False
     sources: tuple[str, ...] = (DOC, URCL)
     closes: bool = False  # the server closes the connection after the reply
@@ -117,7 +117,7 @@ def _clear_operational_mode(ctl: Controller, arg: str) -> str:
 
 
 def _unlock_protective_stop(ctl: Controller, arg: str) -> str:
-    if ctl.safety_mode == 3:  # PROTECTIVE_STOP
+    if ctl.safety_mode == D.SAFETY_PROTECTIVE_STOP:
         ctl.safety_mode = D.SAFETY_NORMAL
     return OK
 

@@ -286,3 +286,14 @@ def test_ur_rtde_dashboard_client_in_its_own_process():
         time.sleep(0.2)
         # the world halted at pause, stop and power off, and went on at each play
         assert [a.kind for a in w.applied(before)] == ["stop", "resume", "stop", "resume", "stop", "resume"]
+
+
+@pytest.mark.compute
+def test_a_protective_stop_shows_and_is_unlocked():
+    ctl = Controller((5, 9, 0, 0), FakeWorld(), "arm", "20205500001", "UR5")
+    ctl.safety_mode = D.SAFETY_PROTECTIVE_STOP  # the world has no such stop: set as the controller would
+    assert [ctl.dashboard(c) for c in ("safetystatus", "safetymode", "stop", "play")] == [
+        "Safetystatus: PROTECTIVE_STOP", "Safetymode: PROTECTIVE_STOP", "Stopped", "Failed to execute: play"]
+    assert ctl.dashboard("unlock protective stop") == "Protective stop releasing"
+    assert [ctl.dashboard(c) for c in ("safetystatus", "play", "programState")] == [
+        "Safetystatus: NORMAL", "Starting program", "PLAYING ftc-scenario.urp"]
