@@ -21,7 +21,10 @@ a new one; and the dashboard, the stop path, is a plain socket with timeouts, no
 
 ``stop()``, the monitor's reflex: dashboard ``stop`` (the program stops, the arm brakes to a halt
 on its path); ``pause()``: dashboard ``pause``. A reply "Failed to execute: stop" is accepted when
-the program is already stopped.
+the program is already stopped. Replies are read as UR documents them for the e-Series dashboard
+server (``sim_devices/SOURCES.md``, "UR dashboard"): ``programState`` as ``<STOPPED|PLAYING|PAUSED>
+<program>``; anything else (``could not understand: ...``, a reply of another command) raises
+``DashboardReplyError``.
 """
 from __future__ import annotations
 
@@ -43,7 +46,24 @@ from .base import DeviceError, DeviceIOError
 
 RTDE_PORT = 30004
 VARIABLES = ["timestamp", "actual_q", "actual_qd", "actual_current", "robot_mode", "safety_mode", "runtime_state"]
-RUNTIME_STOPPED, RUNTIME_PAUSED = 1, 4
+DASHBOARD_WELCOME = "Connected: Universal Robots Dashboard Server"
+PROGRAM_STATES = ("STOPPED", "PLAYING", "PAUSED")
+
+
+class DashboardReplyError(DeviceError):
+    """The dashboard server answered, but not with a documented reply to the command sent."""
+
+    def __init__(self, command: str, reply: str) -> None:
+        super().__init__(f"dashboard {command!r}: unexpected reply {reply!r}")
+        self.command, self.reply = command, reply
+
+
+def parse_program_state(reply: str) -> tuple[str, str]:
+    """``programState``'s reply, ``<STOPPED|PLAYING|PAUSED> <program>``, as (state, program)."""
+    state, _, program = reply.partition(" ")
+    if state not in PROGRAM_STATES or not program:
+        raise DashboardReplyError("programState", reply)
+    return state, program
 
 
 def probe_rtde(host: str, timeout: float = 0.3, port: int = RTDE_PORT) -> None:
@@ -80,7 +100,7 @@ class DashboardLink:
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._buf = b""
         welcome = self._line()
-        if "Dashboard" not in welcome:
+        if welcome != DASHBOARD_WELCOME:
             raise DeviceIOError(f"{self.host}:{self.port} is no dashboard server ({welcome!r})")
 
     def _line(self) -> str:
@@ -263,20 +283,23 @@ class URArm(ArmAdapter):
         self._mark_fresh("RTDE packets again")
 
     # -- commands ----------------------------------------------------------------------------------------
-    def _dashboard(self, command: str, ok: str, already: int) -> None:
+    def _dashboard(self, command: str, ok: str, already: str) -> None:
+        """Send ``command``; its documented success reply is ``ok``, and ``Failed to execute: <command>``
+        is accepted when the program is ``already`` in that state (or stopped)."""
         reply = self.dashboard.command(command)
         if reply == ok:
             return
-        if reply.startswith("Failed to execute") and self.dashboard.command("programState").split()[0] in (
-                {RUNTIME_STOPPED: "STOPPED", RUNTIME_PAUSED: "PAUSED"}[already], "STOPPED"):
-            return
-        raise DeviceError(f"dashboard {command!r}: {reply!r}")
+        if reply == f"Failed to execute: {command}":
+            state, _ = parse_program_state(self.dashboard.command("programState"))
+            if state in (already, "STOPPED"):
+                return
+        raise DashboardReplyError(command, reply)
 
     def stop(self) -> None:
         """The monitor's reflex: stop the program (dashboard ``stop``); the arm halts."""
-        self._dashboard("stop", "Stopped", RUNTIME_STOPPED)
+        self._dashboard("stop", "Stopped", "STOPPED")
         self.counters["stops"] += 1
 
     def pause(self) -> None:
-        self._dashboard("pause", "Pausing program", RUNTIME_PAUSED)
+        self._dashboard("pause", "Pausing program", "PAUSED")
         self.counters["pauses"] += 1

@@ -24,16 +24,18 @@ F/T ring holds the base sensor, which no UR has). Not modelled: momentum, tool I
 Options: ``address``, ``rtde_port``, ``dashboard_port``, ``controller_version`` and ``frequency``
 (override the device's), ``resume_after_s`` (below).
 
-Dashboard: power on / power off / brake release / play / pause / stop / robotmode / safetymode /
-safetystatus / PolyscopeVersion / get serial number / get robot model / running / programState /
-load / get loaded program / is in remote control / unlock protective stop / close (safety) popup /
-popup / addToLog / quit. The emulated robot starts powered, brakes released, its program (the
-world's scenario) playing. ``stop`` and ``pause`` (while playing) and ``power off`` halt the arm
-(``Command("stop")``: it holds where it is); ``play`` (from paused or stopped) continues the scenario
-from where it was halted (``Command("resume")``; a real controller starts a stopped program from its
-beginning, the world has only the one scenario). Option ``resume_after_s``: an operator presses play
-that long after every stop or pause (a sweep then meets each of its contacts with a stop). Modes show
-in RTDE's robot_mode, safety_mode, runtime_state, robot_status_bits and joint_mode.
+Dashboard (``ur_dashboard.py``: every command of the e-Series dashboard server that UR's client
+library and ur_rtde's DashboardClient wrap, as a table of commands, replies and sources; an unknown
+one is answered ``could not understand: '<line>'``). The emulated robot starts powered, brakes
+released, in remote control, operational mode AUTOMATIC, its program (the world's scenario,
+``/programs/ftc-scenario.urp``) playing; ``load <x>.urp`` stops it and loads x (the world plays on
+from where it halted at the next ``play``), ``shutdown`` and ``restart safety`` power the arm off.
+``stop`` and ``pause`` (while playing) and ``power off`` halt the arm (``Command("stop")``: it holds
+where it is); ``play`` (from paused or stopped) continues the scenario from where it was halted
+(``Command("resume")``; a real controller starts a stopped program from its beginning, the world has
+only the one scenario). Option ``resume_after_s``: an operator presses play that long after every
+stop or pause (a sweep then meets each of its contacts with a stop). Modes show in RTDE's
+robot_mode, safety_mode, runtime_state, robot_status_bits and joint_mode.
 """
 from __future__ import annotations
 
@@ -53,6 +55,7 @@ from .emulator import Emulator, serve_with
 from .link import Command, JointRecord
 from .loopback import check_loopback
 from .thermal import ThermalModel
+from .ur_dashboard import answer, serve_connection
 from .ur_model import URKinematics
 
 
@@ -78,7 +81,12 @@ class Controller:
         self.robot_mode = D.ROBOT_RUNNING
         self.safety_mode = D.SAFETY_NORMAL
         self.runtime = D.RUNTIME_PLAYING
-        self.program = "ftc-scenario.urp"
+        self.program_path = "/programs/ftc-scenario.urp"
+        self.installation = "default.installation"
+        self.operational_mode = "AUTOMATIC"  # a password is set for the mode, so never NONE
+        self.remote_control = True
+        self.popup: str | None = None
+        self.log: list[str] = []
         self.digital_out = 0  # standard bits 0-7, configurable 8-15, tool 16-17
         self.analog_out = [0.0, 0.0]
         self.analog_types = 0
@@ -102,9 +110,9 @@ class Controller:
 
     def _operator_plays(self) -> None:
         with self.lock:
-            self._dashboard("play", "play")
+            answer(self, "play")
 
-    def _play(self) -> None:
+    def play(self) -> None:
         if self.runtime != D.RUNTIME_PLAYING:
             self.world.send(Command(self.source, "resume"))
         self.runtime = D.RUNTIME_PLAYING
@@ -156,85 +164,20 @@ class Controller:
                     self.external_wrench = list(v)
 
     # -- dashboard ------------------------------------------------------------------------------------------
+    @property
+    def program(self) -> str:
+        """The loaded program's file name ("" when none)."""
+        return self.program_path.rsplit("/", 1)[-1]
+
     def dashboard(self, line: str, t_rx_ns: int = 0) -> str:
         """The reply to one dashboard line; ``t_rx_ns``: when it was read (recorded with a halt)."""
-        cmd = line.strip()
-        low = cmd.lower()
+        return self.dashboard_line(line, t_rx_ns)[0]
+
+    def dashboard_line(self, line: str, t_rx_ns: int = 0) -> tuple[str, bool]:
+        """The reply to one dashboard line and whether the server closes the connection after it."""
         with self.lock:
             self._t_rx_ns = t_rx_ns
-            return self._dashboard(cmd, low)
-
-    def _dashboard(self, cmd: str, low: str) -> str:
-        modes = D.ROBOT_MODES
-        if low == "power on":
-            if self.robot_mode == D.ROBOT_POWER_OFF:
-                self.robot_mode = D.ROBOT_IDLE
-            return "Powering on"
-        if low == "power off":
-            if self.robot_mode != D.ROBOT_POWER_OFF:
-                self.robot_mode = D.ROBOT_POWER_OFF
-                self.runtime = D.RUNTIME_STOPPED
-                self.halt()  # the brakes hold the arm
-            return "Powering off"
-        if low == "brake release":
-            if self.robot_mode == D.ROBOT_IDLE:
-                self.robot_mode = D.ROBOT_RUNNING
-            return "Brake releasing"
-        if low == "play":
-            if self.robot_mode != D.ROBOT_RUNNING or self.safety_mode != D.SAFETY_NORMAL:
-                return "Failed to execute: play"
-            self._play()
-            return "Starting program"
-        if low == "pause":
-            if self.runtime != D.RUNTIME_PLAYING:
-                return "Failed to execute: pause"
-            self.runtime = D.RUNTIME_PAUSED
-            self.halt()
-            return "Pausing program"
-        if low == "stop":
-            if self.runtime == D.RUNTIME_STOPPED:
-                return "Failed to execute: stop"
-            self.runtime = D.RUNTIME_STOPPED
-            self.halt()
-            return "Stopped"
-        if low == "robotmode":
-            return f"Robotmode: {modes[self.robot_mode]}"
-        if low == "safetymode":
-            return f"Safetymode: {D.SAFETY_MODES[self.safety_mode]}"
-        if low == "safetystatus":
-            return f"Safetystatus: {D.SAFETY_MODES[self.safety_mode]}"
-        if low == "polyscopeversion":
-            return "URSoftware {}.{}.{}.{} (emulated)".format(*self.version)
-        if low == "get serial number":
-            return self.serial
-        if low == "get robot model":
-            return self.model
-        if low == "running":
-            return f"Program running: {str(self.runtime == D.RUNTIME_PLAYING).lower()}"
-        if low == "programstate":
-            return f"{D.RUNTIME_NAMES.get(self.runtime, 'STOPPED')} {self.program}"
-        if low.startswith("load "):
-            self.program = cmd[5:].strip().rsplit("/", 1)[-1]
-            return f"Loading program: {cmd[5:].strip()}"
-        if low == "get loaded program":
-            return f"Loaded program: /programs/{self.program}"
-        if low == "isprogramsaved":
-            return f"true {self.program}"
-        if low == "is in remote control":
-            return "true"
-        if low == "unlock protective stop":
-            return "Protective stop releasing"
-        if low == "close safety popup":
-            return "closing safety popup"
-        if low == "close popup":
-            return "closing popup"
-        if low.startswith("popup "):
-            return "showing popup"
-        if low.startswith("addtolog "):
-            return "Added log message"
-        if low == "quit":
-            return "Disconnected"
-        return f"could not understand: '{cmd}'"
+            return answer(self, line.strip())
 
 
 # -- one stream sample and the value of every output variable ----------------------------------------------
@@ -492,6 +435,12 @@ class _Listener:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self.on_client(conn)
 
+    def close(self) -> None:
+        """Stop listening (the shutdown wakes the accept thread, so the port is free at once)."""
+        with contextlib.suppress(OSError):
+            self.sock.shutdown(socket.SHUT_RDWR)
+        self.sock.close()
+
 
 class RtdeServer:
     def __init__(self, controller: Controller, address: str, port: int, max_rate: float) -> None:
@@ -537,17 +486,12 @@ class DashboardServer:
     def _client(self, conn: socket.socket) -> None:
         threading.Thread(target=self._serve, args=(conn,), name="dashboard", daemon=True).start()
 
+    def close(self) -> None:
+        self.listener.close()
+
     def _serve(self, conn: socket.socket) -> None:
-        with conn, conn.makefile("rb") as lines:
-            try:
-                conn.sendall((D.DASHBOARD_WELCOME + "\n").encode())
-                for raw in lines:
-                    reply = self.controller.dashboard(raw.decode(errors="replace"), time.monotonic_ns())
-                    conn.sendall((reply + "\n").encode())
-                    if reply == "Disconnected":
-                        return
-            except OSError:
-                return
+        serve_connection(conn, lambda line: self.controller.dashboard_line(line, time.monotonic_ns()),
+                         D.DASHBOARD_WELCOME)
 
 
 # -- the emulator process ---------------------------------------------------------------------------------
