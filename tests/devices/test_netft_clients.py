@@ -114,6 +114,11 @@ def test_the_pages_have_the_documented_fields_per_index_and_404_for_the_rest(ft_
     for bad in ("/netftapi2.xml?index=16", "/netftapi2.xml?index=x", "/netftcalapi.xml?index=1", "/netft.xml",
                 "/../etc/passwd", "/netftapi2.xml?index=-1"):
         assert _get(emu, bad)[0] == 404, bad
+    for garbage in (b"GARBAGE\r\n\r\n", b"GET /netftapi2.xml HTTP/9.9\r\n\r\n", b"\x00\xff" * 40 + b"\r\n\r\n"):
+        with socket.create_connection((emu.endpoint["host"], emu.endpoint["http_port"]), timeout=2.0) as c:
+            c.sendall(garbage)  # not HTTP: an error page (400, or 505 for the version), then the connection closes
+            answer = b"".join(iter(lambda: c.recv(4096), b""))
+            assert b"Error code: 400" in answer or b"Error code: 505" in answer, answer
     assert _get(emu, "/netftapi2.xml")[0] == 200  # the server goes on after bad requests
     time.sleep(0.25)
     stats = ft_sim.read_stats(emu)
