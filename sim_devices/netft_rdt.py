@@ -128,30 +128,33 @@ class RdtEmulator(FTEmulator):
             self.sock, self.http = self._bind_own_address()
         else:
             self.sock, self.http = self._bind_udp(self.host), self._bind_http(self.host)
+        self.info = BoxInfo(address=str(self.host))  # before the first page is served
         threading.Thread(target=self.http.serve_forever, name="netft-http", daemon=True).start()
         port, http_port = self.sock.getsockname()[1], self.http.server_address[1]
         if self.http_note:
             print(f"{self.device.name}: {self.http_note}", file=sys.stderr, flush=True)
-        self.info = BoxInfo(address=str(self.host))
         return {**self.endpoint_base("udp", f"{self.host}:{port}"), "host": self.host, "port": port,
                 "http_port": http_port, **({"http_port_note": self.http_note} if self.http_note else {}),
                 "rate_hz": self.rate_hz, "buffer": self.calibration.buffer_size}
 
     def _bind_own_address(self) -> tuple[socket.socket, ThreadingHTTPServer]:
-        """The first 127.0.0.k (in random order) where the RDT port and the web server's both bind."""
+        """The first 127.0.0.k (in random order) where the RDT port and the web server's port 80 both bind;
+        where port 80 is nowhere ours to bind (no root), the first where the RDT port binds, the pages on a
+        free port (said)."""
         candidates = list(BOX_ADDRESSES)
         random.shuffle(candidates)
-        for k in candidates:
-            self.host = f"127.0.0.{k}"
-            try:
-                sock = self._bind_udp(self.host, fallback=False)
-            except OSError:
-                continue
-            try:
-                return sock, self._bind_http(self.host, fallback=False)
-            except OSError:
-                sock.close()
-        self.host = "127.0.0.1"  # every address taken (or port 80 not ours to bind): the free-port fallbacks
+        for http_fallback in (False, True):
+            for k in candidates:
+                self.host = f"127.0.0.{k}"
+                try:
+                    sock = self._bind_udp(self.host, fallback=False)
+                except OSError:
+                    continue
+                try:
+                    return sock, self._bind_http(self.host, fallback=http_fallback)
+                except OSError:
+                    sock.close()
+        self.host = "127.0.0.1"  # the RDT port taken everywhere: free ports, which the endpoint reports
         return self._bind_udp(self.host), self._bind_http(self.host)
 
     def _bind_udp(self, host: str, fallback: bool = True) -> socket.socket:
