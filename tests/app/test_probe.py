@@ -49,7 +49,9 @@ def test_probe_finds_the_emulated_ft300_servos_netft_and_ur_controller():
     by = {(f.what, f.where): f.identity for f in found}
     assert set(by) == {("FT 300", ft_port), ("DYNAMIXEL", dxl_port), ("Net F/T", ep["ft"]["channel"]),
                        ("UR controller", ur), ("Net F/T (RDT)", box["host"])}, tried
-    assert by[("Net F/T (RDT)", box["host"])]["counts_per_force"] == "100000/N"
+    netft = by[("Net F/T (RDT)", box["host"])]
+    assert netft["counts_per_force"] == "100000/N" and netft["counts_from"] == "/netftcalapi.xml calcpf/calcpt"
+    assert "software_bias" not in netft  # none left in the box
     assert by[("FT 300", ft_port)]["firmware"] == "FTS-3.0.1" and by[("FT 300", ft_port)]["serial"] == "FTS-0042"
     servo = by[("DYNAMIXEL", dxl_port)]
     assert servo["baudrate"] == 1_000_000 and servo["ids"] == [11, 12, 13, 14, 15]
