@@ -45,18 +45,18 @@ restarted at 0 and no bias, until a client starts a stream again).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import random
 import select
 import socket
 import sys
 import threading
 import time
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import ThreadingHTTPServer
 from typing import Any
-from urllib.parse import parse_qs, urlsplit
 
 from ftc_hw.codecs.errors import CodecError
-from ftc_hw.codecs.netft_pages import CALIBRATION_PAGE, CONFIG_PAGE, CONFIGS, BoxInfo, calibration_page, config_page
+from ftc_hw.codecs.netft_pages import BoxInfo
 from ftc_hw.codecs.netft_rdt import (
     CMD_LOOP,
     CMD_RESET_LATCH,
@@ -77,8 +77,8 @@ from ftc_hw.scene import DeviceSpec, Scene
 from .emulator import FTEmulator, Pacer, serve_with
 from .link import LinkInfo
 from .loopback import check_loopback
+from .netft_web import BoxPages, bind_web
 
-HTTP_PORT = 80  # where every client looks for the box's pages
 BOX_ADDRESSES = range(10, 100)  # 127.0.0.k of a box without an address given (UR controllers take 100-249)
 LATE_S = 0.3e-3  # how much later than one sample period a record may leave (the box's wake-ups)
 UDP_FAULTS = frozenset(("drop", "duplicate", "reorder", "truncate", "delay", "stall_s", "disconnect_at_s"))
@@ -101,11 +101,7 @@ class RdtEmulator(FTEmulator):
         self.calibration = Calibration(float(p.get("counts_per_force", 100_000)),
                                        float(p.get("counts_per_torque", 1_000_000)), "N", "Nm",
                                        self.rate_hz, int(p.get("buffer", 10)))
-        self.info = BoxInfo()
-        page = self.options.get("calibration_xml")
-        self.fixed_page = None if page is None else str(page).encode()
-        self.calapi = None if self.options.get("calapi", True) is False else \
-            calibration_page(self.calibration, self.info, self.options.get("calapi_fields"))
+        self.pages = BoxPages.of(self.calibration, BoxInfo(), self.options)
         self.error_records = tuple((int(a), int(b)) for a, b in self.options.get("status_error_records") or ())
         self.sock: socket.socket | None = None
         self.http: ThreadingHTTPServer | None = None
@@ -128,7 +124,7 @@ class RdtEmulator(FTEmulator):
             self.sock, self.http = self._bind_own_address()
         else:
             self.sock, self.http = self._bind_udp(self.host), self._bind_http(self.host)
-        self.info = BoxInfo(address=str(self.host))  # before the first page is served
+        self.pages = dataclasses.replace(self.pages, info=BoxInfo(address=str(self.host)))  # before the first page
         threading.Thread(target=self.http.serve_forever, name="netft-http", daemon=True).start()
         port, http_port = self.sock.getsockname()[1], self.http.server_address[1]
         if self.http_note:
@@ -177,40 +173,14 @@ class RdtEmulator(FTEmulator):
         return sock
 
     def _bind_http(self, host: str, fallback: bool = True) -> ThreadingHTTPServer:
-        handler = _page_handler(self)
-        if self.http_port is not None:
-            return ThreadingHTTPServer((host, self.http_port), handler)
-        try:
-            return ThreadingHTTPServer((host, HTTP_PORT), handler)
-        except OSError as exc:
-            if not fallback:
-                raise
-            server = ThreadingHTTPServer((host, 0), handler)
-            self.http_note = (f"cannot bind the web server to {host}:{HTTP_PORT} ({exc.strerror or exc}: port 80 needs "
-                              f"root or CAP_NET_BIND_SERVICE, and a free port); its pages are on port "
-                              f"{server.server_address[1]} instead, where clients looking at port 80 do not find them")
-            return server
+        server, note = bind_web(host, self.http_port, self.page, self.extra_stats, fallback)
+        self.http_note = note
+        return server
 
-    # -- the web server's pages ------------------------------------------------------------------------
     def page(self, url: str) -> bytes | None:
-        """The page at ``url`` (path and query), or None: not a page of the box (404)."""
-        parts = urlsplit(url)
-        index_text = parse_qs(parts.query).get("index", [None])[0]
-        try:
-            index = None if index_text is None else int(index_text)
-        except ValueError:
-            return None
-        if parts.path == CONFIG_PAGE:
-            if index is not None and not 0 <= index < CONFIGS:
-                return None
-            if self.fixed_page is not None:
-                return self.fixed_page
-            reading = tuple(c - b for c, b in zip(self.last_counts, self.bias, strict=True))
-            return config_page(self.calibration, self.info, index=0 if index is None else index, reading=reading,
-                               bias=self.bias, extra=self.options.get("calibration_fields"))
-        if parts.path == CALIBRATION_PAGE and index in (None, 0):
-            return self.calapi
-        return None
+        """The web server's page at ``url``, or None (404)."""
+        reading = tuple(c - b for c, b in zip(self.last_counts, self.bias, strict=True))
+        return self.pages.page(url, reading, self.bias)
 
     def close(self) -> None:
         if self.http is not None:
@@ -381,27 +351,6 @@ class RdtEmulator(FTEmulator):
         self.rdt_seq = 0
         self.bias = (0,) * 6
         self._last_n = None
-
-
-def _page_handler(box: RdtEmulator) -> type[BaseHTTPRequestHandler]:
-    class Page(BaseHTTPRequestHandler):
-        def do_GET(self) -> None:  # noqa: N802 - http.server's name
-            page = box.page(self.path)
-            if page is None:
-                box.extra_stats["page_errors"] += 1
-                self.send_error(404)
-                return
-            box.extra_stats["pages"] += 1
-            self.send_response(200)
-            self.send_header("Content-Type", "text/xml")
-            self.send_header("Content-Length", str(len(page)))
-            self.end_headers()
-            self.wfile.write(page)
-
-        def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - http.server's signature
-            pass
-
-    return Page
 
 
 def serve(device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:
