@@ -5,8 +5,10 @@ network) and configuration N (16 on a box; without ``index``, or with the active
 the active configuration). ``/netftcalapi.xml[?index=N]``: calibration N (``cfgcalsel`` of a
 configuration names its calibration). Field names and types as in ATI's manuals (Net F/T 9620-05-NET
 FT, "XML"; Ethernet Axia 9610-05, table 11.2) and as ATI's Java demo and public clients read them
-(``sim_devices/SOURCES.md``): HEX32 as ``0x%08X``, arrays space-separated, booleans ``Enabled`` /
-``Disabled``, unit codes beside the unit strings.
+(``sim_devices/SOURCES.md``): HEX32 as ``0x%08X``, booleans ``Enabled`` / ``Disabled``, unit codes
+beside the unit strings; arrays of counts (``runft``, ``setbias``) space-separated (a public client
+converts them split on spaces) and the ranges (``cfgmr``, ``calmr``) semicolon-separated (ATI's Java
+demo splits ``cfgmr`` on ``;``); the manual allows either.
 
 Counts per unit: a calibration page's ``calcpf``/``calcpt`` in ``scalfu``/``scaltu`` (what the ROS
 drivers read) and a configuration's ``cfgcpf``/``cfgcpt`` in ``scfgfu``/``scfgtu`` (what ATI's demo
@@ -71,7 +73,7 @@ def _ints(values: Sequence[int]) -> str:
 
 
 def _reals(values: Sequence[float]) -> str:
-    return " ".join(f"{float(v):g}" for v in values)
+    return ";".join(f"{float(v):g}" for v in values)
 
 
 def config_page(cal: Calibration, info: BoxInfo, *, index: int, active: int = 0, reading: Sequence[int] = (0,) * 6,

@@ -111,7 +111,9 @@ def test_the_pages_have_the_documented_fields_per_index_and_404_for_the_rest(ft_
     cal = _fields(page)
     assert {k: cal[k] for k in ("calcpf", "calcpt", "scalfu", "scaltu", "calfu", "caltu")} == {
         "calcpf": "100000", "calcpt": "1000000", "scalfu": "N", "scaltu": "Nm", "calfu": "2", "caltu": "3"}
-    assert cal["calsn"] and cal["calpn"] and len(cal["calmr"].split()) == 6
+    assert cal["calsn"] and cal["calpn"] and len(cal["calmr"].split(";")) == 6
+    # ATI's Java demo: the ranges split on ';' and each parsed as a number (a page it cannot parse stops it)
+    assert [float(r) for r in sys_["cfgmr"].split(";")] == [660.0, 660.0, 1980.0, 60.0, 60.0, 60.0]
     for bad in ("/netftapi2.xml?index=16", "/netftapi2.xml?index=x", "/netftcalapi.xml?index=1", "/netft.xml",
                 "/../etc/passwd", "/netftapi2.xml?index=-1"):
         assert _get(emu, bad)[0] == 404, bad
