@@ -1,13 +1,23 @@
-"""ATI Net F/T over Ethernet (scene kind ``ft-rdt``): RDT over UDP, counts per unit from the box's
-calibration page (:mod:`ftc_hw.codecs.netft_rdt`).
+"""ATI Net F/T over Ethernet (scene kind ``ft-rdt``): RDT over UDP, counts per unit from the box's own
+web pages (:mod:`ftc_hw.codecs.netft_rdt`, :mod:`ftc_hw.codecs.netft_pages`).
 
-On connect the adapter reads ``http://<box>:<http_port>/netftapi2.xml`` (unless
-``read_calibration=False``) and reconciles it with the scene's ``counts_per_force`` /
-``counts_per_torque`` (an override that must agree with the box when both are known), ``rate_hz``
-(the box's ``comrdtrate``; None: take the box's) and, in buffered mode, ``buffer`` (``comrdtbsiz``): a page that is
-malformed or disagrees fails the connect with a :class:`~ftc_hw.codecs.netft_rdt.CalibrationError`
-naming what (a ``reconnecting`` event says it, and the reader retries). Then it sends start (real-time:
-one record per packet; buffered: ``buffer`` per packet) and publishes every record; close sends stop.
+On connect the adapter reads ``http://<box>:<http_port>/netftapi2.xml`` (the active configuration: RDT
+rate, buffer size, the software bias, ``cfgcalsel``) and ``/netftcalapi.xml?index=<cfgcalsel>`` (the
+calibration: ``calcpf``/``calcpt`` in ``scalfu``/``scaltu``, the names real boxes and the ROS drivers
+use; a box without that page (404) falls back to the configuration's ``cfgcpf``/``cfgcpt``, counted in
+``calibration_fallback``), unless ``read_calibration=False``, and reconciles them with the scene's
+``counts_per_force`` / ``counts_per_torque`` (per N and N m, an override that must agree with the box per SI
+unit when both are known), ``rate_hz`` (the box's ``comrdtrate``; None: take the box's) and, in buffered
+mode, ``buffer`` (``comrdtbsiz``): a page that is malformed or disagrees fails the connect with a
+:class:`~ftc_hw.codecs.netft_rdt.CalibrationError` naming what (a ``reconnecting`` event says it, and the
+reader retries). Then it sends start (real-time: one record per packet; buffered: ``buffer`` per packet)
+and publishes every record; close sends stop.
+
+A box left biased in software by another program (RDT ``0x0042``: the box subtracts that reading from
+every record until it reboots) is not re-biased nor cleared (the other program may rely on it): the
+adapter reads the bias (``setbias``, in counts) at each connect, adds it back to every record, so that
+what it publishes is the box's unbiased reading, as this project's calibration expects, and says so in
+its ``connect`` event (``box_bias``). A bias set while the adapter streams is seen at its next connect.
 
 Sequence numbers: ft_sequence (the box's sample counter) is the frame's seq and, at ``rate_hz``, its
 device clock; rdt_sequence (+1 per packet) tells lost packets (``packets_lost``), duplicated ones
@@ -34,8 +44,8 @@ import numpy as np
 
 from ftc_hw.bus import Bus
 from ftc_hw.codecs.errors import FrameFormatError
+from ftc_hw.codecs.netft_pages import CALIBRATION_PAGE, CONFIG_PAGE, BoxState, page_fields, read_box
 from ftc_hw.codecs.netft_rdt import (
-    CALIBRATION_PATH,
     CMD_START_BUFFERED,
     CMD_START_REALTIME,
     CMD_STOP,
@@ -45,7 +55,6 @@ from ftc_hw.codecs.netft_rdt import (
     CalibrationError,
     decode_packet,
     encode_request,
-    parse_calibration,
     reconcile,
 )
 
@@ -79,6 +88,8 @@ class RdtFTAdapter(FTAdapter):
         self.silence = Silence(self.stale_after, silence_s)
         self.receive_buffer = receive_buffer
         self.calibration: Calibration | None = None
+        self.box: BoxState | None = None  # the box's pages, as last read
+        self._bias = np.zeros(6)  # the box's software bias, in counts, added back to every record
         self.sock: socket.socket | None = None
         self._scale = np.ones(6)
         self._per_packet: int | None = None
@@ -90,21 +101,43 @@ class RdtFTAdapter(FTAdapter):
         cal = self.calibration
         units = f", {cal.counts_per_force:g} counts/{cal.force_unit}, {cal.counts_per_torque:g} counts/" \
                 f"{cal.torque_unit}" if cal is not None else ""
-        return f"{self.kind} at {self.host}:{self.port}, {self.mode} at {self.rate_hz or 0:g} Hz{units}"
+        bias = f"; the box's software bias (another program's) undone: box_bias {self._bias.astype(int).tolist()} " \
+               "counts" if self._bias.any() else ""
+        return f"{self.kind} at {self.host}:{self.port}, {self.mode} at {self.rate_hz or 0:g} Hz{units}{bias}"
 
     # -- connect ---------------------------------------------------------------------------------------
     def fetch_calibration(self) -> Calibration:
-        """The box's calibration page, parsed (CalibrationError names what is wrong with it)."""
-        url = f"http://{self.host}:{self.http_port}{CALIBRATION_PATH}"
+        """The box's calibration, from its pages (CalibrationError names what is wrong with them)."""
+        return self.fetch_box().calibration
+
+    def fetch_box(self) -> BoxState:
+        """The box's configuration page, then its calibration page (``cfgcalsel``'s; a 404 there: the
+        configuration's counts, counted in ``calibration_fallback``), read."""
+        config = self._get(CONFIG_PAGE)
+        index = page_fields(config, CONFIG_PAGE).get("cfgcalsel")
+        try:
+            calibration: bytes | None = self._get(CALIBRATION_PAGE + (f"?index={index}" if index else ""))
+        except _NotFound:
+            calibration = None
+            self.counters["calibration_fallback"] += 1
+        return read_box(config, calibration)
+
+    def _get(self, page: str) -> bytes:
+        url = f"http://{self.host}:{self.http_port}{page}"
         try:
             with urllib.request.urlopen(url, timeout=1.0) as answer:
-                page = answer.read()
+                return answer.read()
+        except urllib.error.HTTPError as exc:
+            if exc.code == 404:
+                raise _NotFound(f"page {url}: 404") from exc
+            raise DeviceIOError(f"page {url}: {exc}") from exc
         except (urllib.error.URLError, OSError) as exc:
-            raise DeviceIOError(f"calibration page {url}: {exc}") from exc
-        return parse_calibration(page)
+            raise DeviceIOError(f"page {url}: {exc}") from exc
 
     def _connect(self) -> None:
-        box = self.fetch_calibration() if self.read_calibration else None
+        self.box = self.fetch_box() if self.read_calibration else None
+        box = self.box.calibration if self.box is not None else None
+        self._bias = np.asarray(self.box.bias if self.box is not None else (0,) * 6, dtype=float)
         buffered = self.mode == "buffered"
         cal = reconcile(box, counts_per_force=self.overrides[0], counts_per_torque=self.overrides[1],
                         rate_hz=self.rate_hz, buffer_size=self.buffer if buffered else None)
@@ -165,11 +198,11 @@ class RdtFTAdapter(FTAdapter):
         if not self._in_order(records[0].rdt_sequence):
             return
         self.silence.heard(time.monotonic())
-        scale = self._scale
+        scale, bias = self._scale, self._bias
         for r in records:
             c["records"] += 1
-            self.publish_sample((np.asarray(r.counts, dtype=float) * scale), t_host_ns=t_host, seq=r.ft_sequence,
-                                status=r.status)
+            self.publish_sample((np.asarray(r.counts, dtype=float) + bias) * scale, t_host_ns=t_host,
+                                seq=r.ft_sequence, status=r.status)
 
     def _in_order(self, rdt: int) -> bool:
         """Whether a packet is new (counting lost, duplicated and late packets); the first of a connection is."""
@@ -200,3 +233,7 @@ class RdtFTAdapter(FTAdapter):
             pass
         finally:
             sock.close()
+
+
+class _NotFound(DeviceIOError):
+    """The box answered 404: it has no such page."""

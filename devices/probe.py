@@ -136,11 +136,13 @@ def _status_answer(bus: can.BusABC, codec: NetFTCodec, timeout: float) -> tuple[
 
 
 def probe_netft_rdt(address: str, *, port: int = DEFAULT_PORT, http_port: int = 80, timeout: float = 0.3) -> Probe:
-    """The box's calibration page (HTTP), then one real-time record (RDT: start, count 1)."""
+    """The box's pages on its web server (HTTP: the configuration, the calibration), then one real-time
+    record (RDT: start, count 1). The identity says where the counts per unit came from and any software
+    bias another program left in the box."""
     tried = f"Net F/T (RDT) at {address}:{port}, calibration on port {http_port}"
     adapter = RdtFTAdapter("probe", Bus(), address, port=port, http_port=http_port)
     try:
-        cal = adapter.fetch_calibration()
+        box = adapter.fetch_box()
     except (DeviceError, CodecError) as exc:
         return None, f"{tried}: {exc}"
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -150,9 +152,11 @@ def probe_netft_rdt(address: str, *, port: int = DEFAULT_PORT, http_port: int = 
             records = decode_packet(s.recv(2048), 1)
         except (OSError, CodecError) as exc:
             return None, f"{tried}: calibration read, no RDT record ({exc or 'timed out'})"
+    cal = box.calibration
     identity = {"port": port, "counts_per_force": f"{cal.counts_per_force:g}/{cal.force_unit}",
-                "counts_per_torque": f"{cal.counts_per_torque:g}/{cal.torque_unit}", "rdt_rate_hz": cal.rdt_rate_hz,
-                "status": f"0x{records[0].status:08x}", "ft_sequence": records[0].ft_sequence}
+                "counts_per_torque": f"{cal.counts_per_torque:g}/{cal.torque_unit}", "counts_from": box.source,
+                "rdt_rate_hz": cal.rdt_rate_hz, "status": f"0x{records[0].status:08x}",
+                "ft_sequence": records[0].ft_sequence, **({"software_bias": list(box.bias)} if any(box.bias) else {})}
     return Finding("Net F/T (RDT)", address, identity), f"{tried}: answered"
 
 

@@ -2,8 +2,11 @@
 on python-can's ``serial`` interface over a pty (no kernel CAN here).
 
 Requests on the base ID: opcode 1 answers the newest sample once; 2 streams every world sample (four
-frames each, at the world's sensor rate); 3 stops. The sample counter is the world sample index
-(plus ``options["counter_offset"]``). A restarted emulator (power cycle) starts idle.
+frames each, at the world's sensor rate); 3 stops; 4 (init/bias, what a public driver sends when it
+starts: issue 36) biases the sensor: what it sends from then on is less the newest reading, until a
+power cycle (counted ``biases``); any other opcode is ignored and counted in ``bad_requests``, as a
+frame that does not decode is. The sample counter is the world sample index (plus
+``options["counter_offset"]``). A restarted emulator (power cycle) starts idle and unbiased.
 
 Faults act on CAN frames as a CAN controller would deliver them: ``corrupt`` = the frame failed its
 CRC and the host's controller reports an error frame instead; ``truncate`` = a frame with a shortened
@@ -17,9 +20,11 @@ import select
 import time
 from typing import Any
 
+import numpy as np
+
 from ftc_hw.codecs import serial_can
 from ftc_hw.codecs.errors import CodecError
-from ftc_hw.codecs.netft_can import OP_READ, OP_START, OP_STOP, NetFTCodec
+from ftc_hw.codecs.netft_can import OP_BIAS, OP_READ, OP_START, OP_STOP, NetFTCodec
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .emulator import FTEmulator, Pacer, PtyLink, default_pty_path, serve_with
@@ -42,7 +47,8 @@ class CanFTEmulator(FTEmulator):
         self.streaming = False
         self.rx = bytearray()
         self.last = None
-        self.extra_stats.update(requests=0, bad_requests=0, frames=0)
+        self.bias: np.ndarray | None = None  # the reading at the last bias request (opcode 4), SI
+        self.extra_stats.update(requests=0, bad_requests=0, biases=0, frames=0)
 
     def bind(self) -> dict[str, Any]:
         self.pty = PtyLink(self.path)
@@ -92,13 +98,19 @@ class CanFTEmulator(FTEmulator):
             part = self.codec.decode(arb_id, payload) if arb_id == self.base_id else None
             if part is None:
                 continue
-            self.extra_stats["requests"] += 1
             op = part.value[0]
+            if op not in (OP_READ, OP_START, OP_STOP, OP_BIAS):
+                self.extra_stats["bad_requests"] += 1
+                continue
+            self.extra_stats["requests"] += 1
             if op in (OP_START, OP_STOP):
                 self.streaming = op == OP_START
                 self._last_n = None  # samples outside a stream are not missing
             elif op == OP_READ and self.last is not None:
                 self.send_sample(self.last, count=False)
+            elif op == OP_BIAS and self.last is not None:
+                self.bias = np.asarray(self.last[1:7], dtype=float).copy()
+                self.extra_stats["biases"] += 1
 
     def send_sample(self, rec, count: bool = True) -> None:
         n = self.sample_number(float(rec[0])) + self.counter_offset
@@ -115,7 +127,8 @@ class CanFTEmulator(FTEmulator):
         out: list[bytes] = []
         destroyed = False
         written = True
-        for arb_id, data in self.codec.encode_sample(rec[1:7], n, self.saturation_bits(rec)):
+        wrench = rec[1:7] if self.bias is None else np.asarray(rec[1:7], dtype=float) - self.bias
+        for arb_id, data in self.codec.encode_sample(wrench, n, self.saturation_bits(rec)):
             fault = faults.next_fault()
             destroyed |= fault in _DESTROYS
             if fault == "delay":

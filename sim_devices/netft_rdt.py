@@ -1,19 +1,35 @@
-"""Emulator of the ATI Net F/T box over Ethernet (scene kind ``ft-rdt``): RDT over UDP, and its
-calibration page over HTTP.
+"""Emulator of the ATI Net F/T box over Ethernet (scene kind ``ft-rdt``): RDT over UDP, and its web
+pages over HTTP, both on the box's own loopback address. What each behaviour follows (ATI's manual,
+ATI's Java demo, public clients): ``sim_devices/SOURCES.md``, section Net F/T.
 
-UDP on ``options["host"]`` (default 127.0.0.1; loopback only) and ``options["port"]`` (default the
-device's ``port`` param, 49152, or a free port when that one is taken: the endpoint says which; an
-explicit option is bound or fails; 0 takes a free one). HTTP on the same host, ``options["http_port"]``
-(default 0: a free port, in the endpoint), serving ``/netftapi2.xml``: counts per unit from the
-device's ``counts_per_force`` / ``counts_per_torque`` params (default 100000 per N and 1000000 per
-N m), N and N-m, ``comrdtrate`` the world's sensor rate, ``comrdtbsiz`` the ``buffer`` param (10).
-``options["calibration_fields"]`` replaces elements of that page and ``options["calibration_xml"]``
-replaces the whole page (tests of bad pages).
+Address: ``options["host"]`` (``ftc sim --address ft=127.0.0.7``; loopback only), else one of its own,
+127.0.0.k (k in 10-99) with UDP 49152 and TCP 80 free there, as the UR emulator has for RTDE: every client
+looks for the box at RDT port 49152 and the web server at port 80 of its address. UDP port
+``options["port"]`` (an explicit one is bound or fails; 0: a free one), default the device's ``port``
+param (49152), or a free one when that is taken. HTTP ``options["http_port"]`` (explicit: bound or fails),
+default 80; where 80 cannot be bound (no root nor CAP_NET_BIND_SERVICE, or taken) a free port, said on
+stderr and in the endpoint (``http_port``, ``http_port_note``), never silently.
 
-Requests: start real-time (one record per packet) or buffered (``comrdtbsiz`` records per packet)
-streams every world sample from then on to the requester's address, ``count`` records or until stop;
-set software bias subtracts the newest reading's counts from what follows. ft_sequence is the world
-sample index since the box booted; rdt_sequence counts the packets of the current stream from 1.
+Pages: ``/netftapi2.xml[?index=N]`` (the system's fields and configuration N of 16, the active one, 0,
+from the scene: counts per unit from the device's ``counts_per_force`` / ``counts_per_torque`` params,
+default 100000 per N and 1000000 per N m, N and Nm, ``comrdtrate`` the world's sensor rate, ``comrdtbsiz``
+the ``buffer`` param (10); ``runft`` the newest reading less the bias, ``setbias`` the software bias)
+and ``/netftcalapi.xml[?index=0]`` (the calibration: ``calcpf``, ``calcpt`` ...); anything else, an index
+out of range or not a number: 404. ``options["calibration_fields"]`` replaces elements of the
+configuration page, ``options["calibration_xml"]`` the whole page (tests of bad pages),
+``options["calapi_fields"]`` elements of the calibration page, ``options["calapi"] = False`` removes it
+(404: a box without it).
+
+Requests: start real-time (0x0002, one record per packet), loop-driven output (0x0001, one record per
+packet: ATI's Java library asks for a single record with count 1) or buffered (0x0003, ``comrdtbsiz``
+records per packet) streams every world sample from then on to the requester's address, ``count``
+records or until stop (0x0000); set software bias (0x0042) subtracts the newest reading's counts from what
+follows (and shows in ``setbias``); reset threshold latch (0x0041) is taken (no thresholds are set: the
+latch, ``runmcl``, stays 0) and counted in ``latch_resets``; multi-unit streaming (0x0004) is refused:
+no answer, counted in ``refused`` (one box alone has no units to synchronise). A datagram that is not a
+request (length, header, an unknown command) is ignored and counted in ``bad_requests``.
+ft_sequence is the world sample index since the box booted; rdt_sequence counts the packets of the
+current stream from 1.
 The box's loop wakes every sample period, or above 3.3 kHz every few (``LATE_S``): at 7 kHz every
 third, sending the three records made since, one datagram each, in order (each up to 0.29 ms later
 than a box that sends every record the moment it is made; the emulator's CPU: a wake-up costs more
@@ -29,18 +45,24 @@ restarted at 0 and no bias, until a client starts a stream again).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import random
 import select
 import socket
+import sys
 import threading
 import time
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import ThreadingHTTPServer
 from typing import Any
 
 from ftc_hw.codecs.errors import CodecError
+from ftc_hw.codecs.netft_pages import BoxInfo
 from ftc_hw.codecs.netft_rdt import (
-    CALIBRATION_PATH,
+    CMD_LOOP,
+    CMD_RESET_LATCH,
     CMD_SET_BIAS,
     CMD_START_BUFFERED,
+    CMD_START_MULTI_UNIT,
     CMD_START_REALTIME,
     CMD_STOP,
     DEFAULT_PORT,
@@ -48,7 +70,6 @@ from ftc_hw.codecs.netft_rdt import (
     Calibration,
     RdtRecord,
     decode_request,
-    encode_calibration,
     encode_records,
 )
 from ftc_hw.scene import DeviceSpec, Scene
@@ -56,7 +77,9 @@ from ftc_hw.scene import DeviceSpec, Scene
 from .emulator import FTEmulator, Pacer, serve_with
 from .link import LinkInfo
 from .loopback import check_loopback
+from .netft_web import BoxPages, bind_web
 
+BOX_ADDRESSES = range(10, 100)  # 127.0.0.k of a box without an address given (UR controllers take 100-249)
 LATE_S = 0.3e-3  # how much later than one sample period a record may leave (the box's wake-ups)
 UDP_FAULTS = frozenset(("drop", "duplicate", "reorder", "truncate", "delay", "stall_s", "disconnect_at_s"))
 
@@ -67,17 +90,18 @@ class RdtEmulator(FTEmulator):
     def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
         super().__init__(device, scene, link, options)
         p = device.params
-        self.host = check_loopback(str(self.options.get("host", "127.0.0.1")))
+        host = self.options.get("host")
+        self.host: str | None = None if host is None else check_loopback(str(host))
         port = self.options.get("port")
         self.port: int | None = None if port is None else int(port)
         self.default_port = int(p.get("port", DEFAULT_PORT))
-        self.http_port = int(self.options.get("http_port", 0))
+        http_port = self.options.get("http_port")
+        self.http_port: int | None = None if http_port is None else int(http_port)
+        self.http_note = ""
         self.calibration = Calibration(float(p.get("counts_per_force", 100_000)),
-                                       float(p.get("counts_per_torque", 1_000_000)), "N", "N-m",
+                                       float(p.get("counts_per_torque", 1_000_000)), "N", "Nm",
                                        self.rate_hz, int(p.get("buffer", 10)))
-        page = self.options.get("calibration_xml")
-        self.page = (str(page).encode() if page is not None
-                     else encode_calibration(self.calibration, self.options.get("calibration_fields")))
+        self.pages = BoxPages.of(self.calibration, BoxInfo(), self.options)
         self.error_records = tuple((int(a), int(b)) for a, b in self.options.get("status_error_records") or ())
         self.sock: socket.socket | None = None
         self.http: ThreadingHTTPServer | None = None
@@ -91,30 +115,72 @@ class RdtEmulator(FTEmulator):
         self.pending: list[tuple[int, int, int, tuple[int, ...]]] = []  # (world sample, ft_sequence, status,
         # counts) of the records of the packet being filled
         self.held: tuple[bytes, list[int]] | None = None  # a packet held back by a reorder fault
-        self.extra_stats.update(requests=0, bad_requests=0, packets=0, records=0, send_errors=0, reboots=0)
+        self.extra_stats.update(requests=0, bad_requests=0, refused=0, latch_resets=0, pages=0, page_errors=0,
+                                packets=0, records=0, send_errors=0, reboots=0)
 
     # -- endpoint ------------------------------------------------------------------------------------
     def bind(self) -> dict[str, Any]:
-        self.sock = self._bind_udp()
-        self.http = ThreadingHTTPServer((self.host, self.http_port), _page_handler(self.page))
-        self.http.daemon_threads = True
+        if self.host is None:
+            self.sock, self.http = self._bind_own_address()
+        else:
+            self.sock, self.http = self._bind_udp(self.host), self._bind_http(self.host)
+        self.pages = dataclasses.replace(self.pages, info=BoxInfo(address=str(self.host)))  # before the first page
         threading.Thread(target=self.http.serve_forever, name="netft-http", daemon=True).start()
         port, http_port = self.sock.getsockname()[1], self.http.server_address[1]
+        if self.http_note:
+            print(f"{self.device.name}: {self.http_note}", file=sys.stderr, flush=True)
         return {**self.endpoint_base("udp", f"{self.host}:{port}"), "host": self.host, "port": port,
-                "http_port": http_port, "rate_hz": self.rate_hz, "buffer": self.calibration.buffer_size}
+                "http_port": http_port, **({"http_port_note": self.http_note} if self.http_note else {}),
+                "rate_hz": self.rate_hz, "buffer": self.calibration.buffer_size}
 
-    def _bind_udp(self) -> socket.socket:
+    def _bind_own_address(self) -> tuple[socket.socket, ThreadingHTTPServer]:
+        """The first 127.0.0.k (in random order) where the RDT port and the web server's port 80 both bind;
+        where port 80 is nowhere ours to bind (no root), the first where the RDT port binds, the pages on a
+        free port (said)."""
+        candidates = list(BOX_ADDRESSES)
+        random.shuffle(candidates)
+        for http_fallback in (False, True):
+            for k in candidates:
+                self.host = f"127.0.0.{k}"
+                try:
+                    sock = self._bind_udp(self.host, fallback=False)
+                except OSError:
+                    continue
+                try:
+                    return sock, self._bind_http(self.host, fallback=http_fallback)
+                except OSError:
+                    sock.close()
+        self.host = "127.0.0.1"  # the RDT port taken everywhere: free ports, which the endpoint reports
+        return self._bind_udp(self.host), self._bind_http(self.host)
+
+    def _bind_udp(self, host: str, fallback: bool = True) -> socket.socket:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         with contextlib.suppress(OSError):
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 20)
-        if self.port is not None:
-            sock.bind((self.host, self.port))
-            return sock
         try:
-            sock.bind((self.host, self.default_port))
-        except OSError:  # taken (another run): a free port, which the endpoint reports
-            sock.bind((self.host, 0))
+            if self.port is not None:
+                sock.bind((host, self.port))
+                return sock
+            try:
+                sock.bind((host, self.default_port))
+            except OSError:  # taken (another run): a free port, which the endpoint reports
+                if not fallback:
+                    raise
+                sock.bind((host, 0))
+        except OSError:
+            sock.close()
+            raise
         return sock
+
+    def _bind_http(self, host: str, fallback: bool = True) -> ThreadingHTTPServer:
+        server, note = bind_web(host, self.http_port, self.page, self.extra_stats, fallback)
+        self.http_note = note
+        return server
+
+    def page(self, url: str) -> bytes | None:
+        """The web server's page at ``url``, or None (404)."""
+        reading = tuple(c - b for c, b in zip(self.last_counts, self.bias, strict=True))
+        return self.pages.page(url, reading, self.bias)
 
     def close(self) -> None:
         if self.http is not None:
@@ -155,10 +221,13 @@ class RdtEmulator(FTEmulator):
         except CodecError:
             self.extra_stats["bad_requests"] += 1
             return
+        if req.command == CMD_START_MULTI_UNIT:
+            self.extra_stats["refused"] += 1
+            return
         self.extra_stats["requests"] += 1
-        if req.command in (CMD_START_REALTIME, CMD_START_BUFFERED):
+        if req.command in (CMD_LOOP, CMD_START_REALTIME, CMD_START_BUFFERED):
             self.client = addr
-            self.per_packet = 1 if req.command == CMD_START_REALTIME else int(self.calibration.buffer_size or 1)
+            self.per_packet = int(self.calibration.buffer_size or 1) if req.command == CMD_START_BUFFERED else 1
             self.remaining = req.count
             self.rdt_seq = 0
             self.pending = []
@@ -167,6 +236,8 @@ class RdtEmulator(FTEmulator):
             self._stop_stream()
         elif req.command == CMD_SET_BIAS:
             self.bias = self.last_counts
+        elif req.command == CMD_RESET_LATCH:
+            self.extra_stats["latch_resets"] += 1
 
     def _stop_stream(self) -> None:
         self._flush_held(overtaken=False)
@@ -280,24 +351,6 @@ class RdtEmulator(FTEmulator):
         self.rdt_seq = 0
         self.bias = (0,) * 6
         self._last_n = None
-
-
-def _page_handler(page: bytes) -> type[BaseHTTPRequestHandler]:
-    class Page(BaseHTTPRequestHandler):
-        def do_GET(self) -> None:  # noqa: N802 - http.server's name
-            if self.path.split("?")[0] != CALIBRATION_PATH:
-                self.send_error(404)
-                return
-            self.send_response(200)
-            self.send_header("Content-Type", "text/xml")
-            self.send_header("Content-Length", str(len(page)))
-            self.end_headers()
-            self.wfile.write(page)
-
-        def log_message(self, format: str, *args: Any) -> None:  # noqa: A002 - http.server's signature
-            pass
-
-    return Page
 
 
 def serve(device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:

@@ -16,7 +16,7 @@ from .errors import FrameFormatError
 from .stream import StreamSample
 
 BUILTIN_DIR = Path(__file__).resolve().parents[2] / "ftc_hw" / "scene" / "builtin"
-OP_READ, OP_START, OP_STOP = 1, 2, 3
+OP_READ, OP_START, OP_STOP, OP_BIAS = 1, 2, 3, 4  # 4: init/bias, as a public driver sends it (issue 36)
 STATUS_ERROR = 1 << 31
 _DATA = ("NetFT_FxTx", "NetFT_FyTy", "NetFT_FzTz")
 _PAIRS = (("Fx", "Tx"), ("Fy", "Ty"), ("Fz", "Tz"))

@@ -1,16 +1,20 @@
 """ATI Net F/T over Ethernet: RDT (Raw Data Transfer) over UDP, and the box's calibration page. No I/O.
 
 Request, 8 bytes, network byte order: uint16 header 0x1234, uint16 command, uint32 sample count (0:
-until stopped). Commands: 0x0000 stop, 0x0002 start real-time (one record per packet), 0x0003 start
-buffered (``comrdtbsiz`` records per packet), 0x0042 set software bias (the box subtracts the current
+until stopped). Commands (ATI's Net F/T manual, 9620-05-NET FT, "RDT"; 0x0001 from ATI's Java demo
+library, ``NetFTRDTCommand``): 0x0000 stop, 0x0001 loop-driven output (one record per packet, ``count``
+of them: ATI's library sends it with count 1 for a single record), 0x0002 start real-time (one record
+per packet), 0x0003 start buffered (``comrdtbsiz`` records per packet), 0x0004 start multi-unit
+streaming, 0x0041 reset the threshold latch, 0x0042 set software bias (the box subtracts the current
 reading from what follows). Record, 36 bytes: uint32 rdt_sequence (+1 per packet), uint32 ft_sequence
 (the box's internal sample counter), uint32 status, int32 Fx Fy Fz Tx Ty Tz in counts. A packet is
 one or more whole records.
 
-Counts to units: the box's calibration, served over HTTP as XML (``/netftapi2.xml``): ``cfgcpf`` and
-``cfgcpt`` (counts per force and torque unit), ``scfgfu`` / ``scfgtu`` (those units), ``comrdtrate``
-(the RDT output rate, Hz) and ``comrdtbsiz`` (records per buffered packet). :func:`parse_calibration`
-reads it; :class:`CalibrationError` names what is wrong.
+Counts to units: the box's configuration page (``/netftapi2.xml``): ``cfgcpf`` and ``cfgcpt`` (counts
+per force and torque unit), ``scfgfu`` / ``scfgtu`` (those units), ``comrdtrate`` (the RDT output rate,
+Hz) and ``comrdtbsiz`` (records per buffered packet). :func:`parse_calibration` reads it;
+:class:`CalibrationError` names what is wrong. The box's other pages (its calibration,
+``/netftcalapi.xml``, with ``calcpf``/``calcpt``): :mod:`ftc_hw.codecs.netft_pages`.
 
 Status word: ATI's manual defines its bits; this codec keeps the convention of the project's other
 F/T codecs for the bits the emulator sets (bits 0-5: that axis saturated) and treats every other set
@@ -22,15 +26,17 @@ import math
 import struct
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 from .errors import CodecError, FrameFormatError
 
 HEADER = 0x1234
 CMD_STOP, CMD_START_REALTIME, CMD_START_BUFFERED, CMD_SET_BIAS = 0x0000, 0x0002, 0x0003, 0x0042
-COMMANDS = {CMD_STOP: "stop", CMD_START_REALTIME: "start real-time", CMD_START_BUFFERED: "start buffered",
-            CMD_SET_BIAS: "set software bias"}
+CMD_LOOP, CMD_START_MULTI_UNIT, CMD_RESET_LATCH = 0x0001, 0x0004, 0x0041
+COMMANDS = {CMD_STOP: "stop", CMD_LOOP: "loop-driven output", CMD_START_REALTIME: "start real-time",
+            CMD_START_BUFFERED: "start buffered", CMD_START_MULTI_UNIT: "start multi-unit streaming",
+            CMD_RESET_LATCH: "reset threshold latch", CMD_SET_BIAS: "set software bias"}
 DEFAULT_PORT = 49152
 CALIBRATION_PATH = "/netftapi2.xml"
 STATUS_SATURATION_MASK = 0x3F
@@ -46,8 +52,8 @@ INT32 = (-(1 << 31), (1 << 31) - 1)
 # SI per unit of the box's force and torque units (scfgfu / scfgtu as the box spells them)
 FORCE_UNITS = {"N": 1.0, "kN": 1000.0, "lbf": 4.4482216152605, "klbf": 4448.2216152605, "gf": 0.00980665,
                "kgf": 9.80665}
-TORQUE_UNITS = {"N-m": 1.0, "Nm": 1.0, "N-mm": 0.001, "kN-m": 1000.0, "lbf-in": 0.1129848290276167,
-                "lbf-ft": 1.3558179483314004, "kgf-cm": 0.0980665, "gf-cm": 9.80665e-5}
+TORQUE_UNITS = {"Nm": 1.0, "N-m": 1.0, "Nmm": 0.001, "N-mm": 0.001, "kNm": 1000.0, "kN-m": 1000.0,
+                "lbf-in": 0.1129848290276167, "lbf-ft": 1.3558179483314004, "kgf-cm": 0.0980665, "gf-cm": 9.80665e-5}
 
 
 class CalibrationError(CodecError):
@@ -80,9 +86,10 @@ class Calibration:
     counts_per_force: float
     counts_per_torque: float
     force_unit: str = "N"
-    torque_unit: str = "N-m"
+    torque_unit: str = "Nm"
     rdt_rate_hz: float | None = None
     buffer_size: int | None = None
+    fields: tuple[str, str] = field(default=("cfgcpf", "cfgcpt"), compare=False)  # the page's names of the counts
 
     @cached_property  # computed once: to_si and to_counts run for every record (7 kHz)
     def scale(self) -> tuple[float, ...]:
@@ -201,16 +208,23 @@ def reconcile(box: Calibration | None, *, counts_per_force: float | None = None,
               buffer_size: int | None = None) -> Calibration:
     """The calibration to decode with: the box's (``None``: not read), with the scene's values where it
     gives them. Where both say something they must agree: CalibrationError naming the field and both
-    values. Without the box's page the scene must give both counts (in N and N m)."""
+    values. The scene's counts are per N and per N m: a box in other units (lbf, N-mm, ...) is compared
+    per SI unit. Without the box's page the scene must give both counts (in N and N m)."""
     if box is None:
         if counts_per_force is None or counts_per_torque is None:
             raise CalibrationError("counts_per_force", "the box's calibration was not read: the scene must give "
                                    "counts_per_force and counts_per_torque")
         return Calibration(counts_per_force, counts_per_torque, rdt_rate_hz=rate_hz, buffer_size=buffer_size)
-    for name, ours, theirs in (("cfgcpf", counts_per_force, box.counts_per_force),
-                               ("cfgcpt", counts_per_torque, box.counts_per_torque),
-                               ("comrdtrate", rate_hz, box.rdt_rate_hz),
-                               ("comrdtbsiz", buffer_size, box.buffer_size)):
+    si_f, si_t = FORCE_UNITS[box.force_unit], TORQUE_UNITS[box.torque_unit]
+    checks = ((box.fields[0], counts_per_force, box.counts_per_force / si_f, _unit_note(box.force_unit, si_f)),
+              (box.fields[1], counts_per_torque, box.counts_per_torque / si_t, _unit_note(box.torque_unit, si_t)),
+              ("comrdtrate", rate_hz, box.rdt_rate_hz, ""), ("comrdtbsiz", buffer_size, box.buffer_size, ""))
+    for name, ours, theirs, note in checks:
         if ours is not None and theirs is not None and not math.isclose(ours, theirs, rel_tol=1e-9):
-            raise CalibrationError(name, f"the box says {_num(theirs)}, the scene {_num(ours)}")
+            raise CalibrationError(name, f"the box says {_num(theirs)}{note}, the scene {_num(ours)}")
     return box
+
+
+def _unit_note(unit: str, si: float) -> str:
+    """How a box's count in a unit other than N or N m is said: per SI unit, from its own unit."""
+    return "" if si == 1.0 else f" per SI unit (its unit is {unit})"

@@ -136,7 +136,8 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
     ), locators=("channel",)),
     DeviceKind("ft-rdt", ("udp",), "the Net F/T box's IP address", "192.168.1.1", (
         Param("port", "int", "RDT's UDP port (also the emulator's, where 0 takes a free one)", 49152, 0, 65535),
-        Param("http_port", "int", "the box's web server, which serves its calibration (/netftapi2.xml)", 80,
+        Param("http_port", "int", "the box's web server, which serves its configuration and calibration pages "
+              "(/netftapi2.xml, /netftcalapi.xml)", 80,
               0, 65535),
         Param("mode", "str", "realtime: one record per packet; buffered: several per packet", "realtime",
               choices=("realtime", "buffered")),
@@ -144,9 +145,9 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
               "comrdtrate, checked against it when given", lo=0.0, hi=7000.0, above=True),
         Param("buffer", "int", "records per packet in buffered mode; default the box's comrdtbsiz (the "
               "emulator's: 10), checked against it", lo=1, hi=40),
-        Param("counts_per_force", "number", "counts per force unit, overriding the box's cfgcpf (which must "
-              "agree when it is read)", lo=0.0, above=True),
-        Param("counts_per_torque", "number", "counts per torque unit, overriding the box's cfgcpt", lo=0.0,
+        Param("counts_per_force", "number", "counts per N, overriding the box's calcpf (or cfgcpf), which "
+              "must agree per SI unit when it is read", lo=0.0, above=True),
+        Param("counts_per_torque", "number", "counts per N m, overriding the box's calcpt (or cfgcpt)", lo=0.0,
               above=True),
         Param("read_calibration", "bool", "read the box's calibration over HTTP (false: counts_per_force and "
               "counts_per_torque, in N and N m, are required)", True),

@@ -32,8 +32,7 @@ def test_probe_finds_the_emulated_ft300_servos_netft_and_ur_controller():
     dxl = load_scene("dxl-arm")
     ft300, servos = replace(dxl.devices[0], name="ft300"), replace(dxl.devices[1], name="servos")
     rdt = replace(load_scene("ur5e-netft").devices[0], name="box")
-    with WorldHost("ur5e", "hold", devices=["ft", "arm", ft300, servos, rdt], noise=False,
-                   options={"box": {"port": 0}}) as world:
+    with WorldHost("ur5e", "hold", devices=["ft", "arm", ft300, servos, rdt], noise=False) as world:
         ep = world.endpoints
         box = ep["box"]
         ft_port, dxl_port, ur = ep["ft300"]["endpoint"], ep["servos"]["endpoint"], ep["arm"]["address"]
@@ -44,13 +43,15 @@ def test_probe_finds_the_emulated_ft300_servos_netft_and_ur_controller():
         plan.add("can", ep["ft"]["channel"])
         plan.add("ur", ur)
         plan.add("ur", "127.0.0.98")  # nobody there
-        plan.add("rdt", "127.0.0.1", port=box["port"], http_port=box["http_port"])
-        plan.add("rdt", "127.0.0.97")  # nobody there
+        plan.add("rdt", box["host"], port=box["port"], http_port=box["http_port"])  # 49152 and 80 as a rule
+        plan.add("rdt", "127.0.0.253")  # nobody there
         found, tried = probe(plan, timeout=0.3)
     by = {(f.what, f.where): f.identity for f in found}
     assert set(by) == {("FT 300", ft_port), ("DYNAMIXEL", dxl_port), ("Net F/T", ep["ft"]["channel"]),
-                       ("UR controller", ur), ("Net F/T (RDT)", "127.0.0.1")}, tried
-    assert by[("Net F/T (RDT)", "127.0.0.1")]["counts_per_force"] == "100000/N"
+                       ("UR controller", ur), ("Net F/T (RDT)", box["host"])}, tried
+    netft = by[("Net F/T (RDT)", box["host"])]
+    assert netft["counts_per_force"] == "100000/N" and netft["counts_from"] == "/netftcalapi.xml calcpf/calcpt"
+    assert "software_bias" not in netft  # none left in the box
     assert by[("FT 300", ft_port)]["firmware"] == "FTS-3.0.1" and by[("FT 300", ft_port)]["serial"] == "FTS-0042"
     servo = by[("DYNAMIXEL", dxl_port)]
     assert servo["baudrate"] == 1_000_000 and servo["ids"] == [11, 12, 13, 14, 15]

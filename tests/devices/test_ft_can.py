@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ftc_hw.bus import Bus, WrenchFlag
-from ftc_hw.codecs.netft_can import OP_START, NetFTCodec
+from ftc_hw.codecs.netft_can import OP_BIAS, OP_READ, OP_START, NetFTCodec
 from ftc_hw.devices.can_ft import CanFTAdapter
 from ftc_hw.devices.registry import make_adapter
 
@@ -103,3 +103,39 @@ def test_virtual_interface_in_process(wait_for, wrench_of):
     assert [f.seq for f in frames] == [1, 3, 4]  # 0 only establishes the counter
     assert frames[1].flags & WrenchFlag.SEQ_GAP and adapter.counters["incomplete"] == 1
     _check(frames, wrench_of)
+
+
+def test_the_init_bias_request_biases_what_follows_and_other_opcodes_are_counted(ft_sim, wait_for):
+    """Opcode 4 (init/bias, what a public driver sends when it starts: issue 36): the samples that follow
+    are less the reading of that moment; an unknown opcode is ignored and counted, never a crash."""
+    held = np.array([5.0, -2.5, 30.0, 0.25, -0.5, 0.125])
+    scene, spec = ft_sim.device("ur5e", "ft-can")
+    world = ft_sim.world(1000.0, n_joints=6, fn=lambda k: held)
+    emu = ft_sim.start_emulator(spec, scene, world)
+    codec = NetFTCodec(spec.params.get("dbc", "ati_netft_can.dbc"), int(spec.params.get("base_id", 8)))
+    with can.Bus(interface="serial", channel=emu.endpoint["channel"], bitrate=1_000_000) as sensor:
+
+        def one_sample(opcode: int = OP_READ) -> np.ndarray:
+            arb_id, data = codec.encode_request(opcode)
+            sensor.send(can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+            parts = {}
+            while len(parts) < 4:
+                msg = sensor.recv(timeout=2.0)
+                assert msg is not None
+                part = codec.decode(msg.arbitration_id, bytes(msg.data))
+                if part is not None and part.role == "data":
+                    parts[part.index] = part.value
+                elif part is not None and part.role == "status":
+                    parts[3] = part.value
+            return np.array([parts[i][0] for i in range(3)] + [parts[i][1] for i in range(3)])
+
+        assert np.allclose(one_sample(), held, atol=1e-9)
+        for opcode in (0x09, 0xFF):
+            arb_id, data = codec.encode_request(opcode)
+            sensor.send(can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+        arb_id, data = codec.encode_request(OP_BIAS)
+        sensor.send(can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+        assert wait_for(lambda: ft_sim.read_stats(emu).get("biases") == 1, 5.0)
+        assert np.allclose(one_sample(), 0.0, atol=1e-9)
+    assert wait_for(lambda: ft_sim.read_stats(emu).get("requests") == 3, 5.0)  # the stats file lags 0.1 s
+    assert ft_sim.read_stats(emu)["bad_requests"] == 2

@@ -139,7 +139,7 @@ def test_plain_socket_client_from_atis_description_reads_the_same_counts(ft_sim,
     with urllib.request.urlopen(f"http://{host}:{http_port}/netftapi2.xml", timeout=2.0) as page:
         xml = ET.fromstring(page.read())
     per_count = np.array([1 / float(xml.findtext("cfgcpf"))] * 3 + [1 / float(xml.findtext("cfgcpt"))] * 3)
-    assert (xml.findtext("scfgfu"), xml.findtext("scfgtu")) == ("N", "N-m")
+    assert (xml.findtext("scfgfu"), xml.findtext("scfgtu")) == ("N", "Nm")
     theirs: dict[int, tuple[int, ...]] = {}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.settimeout(2.0)
@@ -256,7 +256,13 @@ def test_bad_datagrams_and_status_errors_never_crash_the_reader(wait_for):
     ({"calibration_xml": "<netft><cfgcpf>100000</cfgcpf><cfgcpt>"}, "/netftapi2.xml"),
     ({"calibration_fields": {"cfgcpt": "ten"}}, "cfgcpt"),
     ({"calibration_fields": {"comrdtrate": "1000"}}, "comrdtrate: the box says 1000, the scene 7000"),
-    ({"calibration_fields": {"cfgcpf": "1000000"}}, "cfgcpf: the box says 1000000, the scene 100000"),
+    ({"calibration_fields": {"cfgcpf": "1000000"}, "calapi_fields": {"calcpf": "1000000"}},
+     "calcpf: the box says 1000000, the scene 100000"),
+    ({"calibration_fields": {"cfgcpf": "1000000"}, "calapi": False}, "cfgcpf: the box says 1000000, the scene 100000"),
+    ({"calibration_fields": {"cfgcpf": "1000000"}}, "cfgcpf: the configuration's counts per SI unit (1e+06) are not "
+     "the calibration's (100000, /netftcalapi.xml calcpf/calcpt)"),
+    ({"calapi_fields": {"scalfu": "lbf"}, "calibration_fields": {"scfgfu": "lbf"}},
+     "calcpf: the box says 22480.89430997105 per SI unit (its unit is lbf), the scene 100000"),
 ])
 def test_a_bad_or_disagreeing_calibration_page_is_named_and_nothing_is_published(ft_sim, wait_event, options, field):
     scene, spec = ft_sim.device("ur5e-netft", "ft-rdt", counts_per_force=100000)
@@ -288,3 +294,35 @@ def test_scene_counts_without_the_calibration_page(wait_for):
     (frame,) = bus.history("wrench/ft")
     assert np.allclose(frame.wrench, [100.0, -200.0, 300.0, 500.0, 0.0, -500.0])
     assert frame.t_device_ns == 5 * 1_000_000
+
+
+def test_a_box_biased_by_another_program_is_read_unbiased(ft_sim, wrench_of, wait_for):
+    """Another program set the box's software bias (RDT 0x0042) and left: the box subtracts that reading from
+    every record. The adapter reads the bias from the box's page (setbias), adds it back, publishes the
+    unbiased wrench (the world's, exactly) and says so when it connects; the box keeps its bias."""
+    scene, spec = ft_sim.device("ur5e-netft", "ft-rdt")
+    world = ft_sim.world(RATE, n_joints=6)
+    emu = ft_sim.start_emulator(spec, scene, world, port=0)
+    host, port, http_port = emu.endpoint["host"], emu.endpoint["port"], emu.endpoint["http_port"]
+
+    def page_bias() -> tuple[int, ...]:
+        with urllib.request.urlopen(f"http://{host}:{http_port}/netftapi2.xml", timeout=2.0) as page:
+            return tuple(int(c) for c in ET.fromstring(page.read()).findtext("setbias").split())
+
+    assert page_bias() == (0,) * 6
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(struct.pack("!HHI", 0x1234, 0x0042, 0), (host, port))
+    assert wait_for(lambda: any(page_bias()), 5.0)
+    bias = page_bias()
+    bus = Bus()
+    events = bus.subscribe(EVENTS_DEVICE, maxsize=None)
+    with make_adapter(spec, bus, emu.endpoint, scene=scene) as adapter:
+        assert adapter.wait_connected(5.0)
+        frames = bus.subscribe(adapter.topic, maxsize=None)
+        got = [frames.get(timeout=2.0) for _ in range(300)]
+    assert adapter.box is not None and adapter.box.bias == bias
+    assert adapter.box.source == "/netftcalapi.xml calcpf/calcpt"
+    _seqs_match_world(got, wrench_of)  # every frame the world's wrench, not the biased one
+    connect = next(e for e in events.drain() if e.kind == "connect")
+    assert f"box_bias {list(bias)}" in connect.message
+    assert page_bias() == bias  # left as the other program set it

@@ -26,6 +26,7 @@ from ftc_hw.codecs import (
     register_map,
     stream_format,
 )
+from ftc_hw.codecs import netft_pages as pages
 from ftc_hw.codecs import netft_rdt as rdt
 from ftc_hw.codecs import serial_can as scan
 from ftc_hw.codecs.modbus_frames import mbap_decode, mbap_encode, rtu_decode_request, rtu_encode
@@ -388,6 +389,69 @@ def test_rdt_malformed_calibration_page_names_the_field(page, field):
     with pytest.raises(rdt.CalibrationError) as err:
         rdt.parse_calibration(page)
     assert err.value.field == field and field in str(err.value)
+
+
+def test_rdt_request_and_record_bytes_as_atis_layout_fixes_them():
+    assert rdt.encode_request(rdt.CMD_LOOP, 1) == bytes.fromhex("1234000100000001")
+    assert rdt.encode_request(rdt.CMD_SET_BIAS) == bytes.fromhex("1234004200000000")
+    for command in (0x0000, 0x0001, 0x0002, 0x0003, 0x0004, 0x0041, 0x0042):
+        assert rdt.decode_request(rdt.encode_request(command, 7)) == rdt.RdtRequest(command, 7)
+    record = rdt.encode_records([rdt.RdtRecord(1, 2, 0x80000000, (1, -1, 2, -2, 3, -3))])
+    assert record == bytes.fromhex("00000001" "00000002" "80000000" "00000001" "ffffffff" "00000002"
+                                   "fffffffe" "00000003" "fffffffd")
+
+
+def _box_pages(bias=(0,) * 6, cal_extra=None, cfg_extra=None, cal=None):
+    cal = cal or rdt.Calibration(1e5, 1e6, "N", "Nm", 7000.0, 10)
+    info = pages.BoxInfo()
+    return (pages.config_page(cal, info, index=0, bias=bias, extra=cfg_extra),
+            pages.calibration_page(cal, info, cal_extra))
+
+
+def test_netft_pages_round_trip_and_the_calibration_page_comes_first():
+    config, calibration = _box_pages(bias=(1, -2, 3, -4, 5, -6))
+    box = pages.read_box(config, calibration)
+    assert box.source == "/netftcalapi.xml calcpf/calcpt" and box.calibration.fields == ("calcpf", "calcpt")
+    assert box.calibration == rdt.Calibration(1e5, 1e6, "N", "Nm", 7000.0, 10)
+    assert (box.bias, box.config, box.calibration_index, box.status, box.rdt_enabled) == (
+        (1, -2, 3, -4, 5, -6), 0, 0, 0, True)
+    fallback = pages.read_box(config, None)  # a box without netftcalapi.xml
+    assert fallback.source == "/netftapi2.xml cfgcpf/cfgcpt" and fallback.calibration == box.calibration
+    lbf = rdt.Calibration(1e5 * 4.4482216152605, 1e6, "lbf", "Nm", 7000.0, 10)  # the same counts per N
+    config, _ = _box_pages(cal=lbf)
+    assert pages.read_box(config, _box_pages()[1]).calibration.force_unit == "N"
+
+
+@pytest.mark.parametrize(("pages_", "field"), [
+    (_box_pages(cfg_extra={"cfgcpf": "1000000"}), "cfgcpf"),  # the configuration disagrees with the calibration
+    (_box_pages(cal_extra={"calcpt": "many"}), "calcpt"),
+    (_box_pages(cal_extra={"scalfu": "stone"}), "scalfu"),
+    (_box_pages(cfg_extra={"setbias": "1 2 3"}), "setbias"),
+    (_box_pages(cfg_extra={"runstat": "0xZZ"}), "runstat"),
+    (_box_pages(cfg_extra={"setcfgsel": "first"}), "setcfgsel"),
+    ((_box_pages()[0], b"<netftCalibration><calcpf>"), "/netftcalapi.xml"),
+])
+def test_netft_pages_wrong_fields_are_named(pages_, field):
+    with pytest.raises(rdt.CalibrationError) as err:
+        pages.read_box(*pages_)
+    assert err.value.field == field
+
+
+def test_rdt_scene_counts_are_compared_per_si_unit():
+    box = rdt.Calibration(1e6, 1e6 * 0.1129848290276167, "N", "lbf-in", 7000.0, 10)
+    assert rdt.reconcile(box, counts_per_torque=1e6) is box  # 1e6 per N m either way
+    with pytest.raises(rdt.CalibrationError, match=r"cfgcpt: the box says 8850745.791327184 per SI unit \(its "
+                       r"unit is lbf-in\), the scene 100000"):
+        rdt.reconcile(rdt.Calibration(1e6, 1e6, "N", "lbf-in"), counts_per_torque=1e5)
+
+
+@FUZZ
+@given(data=st.binary(max_size=400))
+def test_netft_pages_random_bytes_raise_only_typed_errors(data):
+    with contextlib.suppress(CodecError):
+        pages.read_box(data, data)
+    with contextlib.suppress(CodecError):
+        pages.read_box(_box_pages()[0], data)
 
 
 def test_rdt_calibration_that_disagrees_with_the_scene_names_both_values():
