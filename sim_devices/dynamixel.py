@@ -26,7 +26,8 @@ clears it).
 
 Bus time (on by default): a pty moves bytes at once, a DYNAMIXEL bus at its baud rate, half duplex. Each
 instruction packet is taken to end ``bytes x 10 / baud`` after the bus was last free (its arrival, or the
-end of the previous answer); each status packet is written once its Return Delay Time (the servo's
+end of the previous packet); an instruction without an answer (Sync Write, a broadcast) reaches the
+world only then, and each status packet is written once its Return Delay Time (the servo's
 control table, 2 us units, factory 250 = 500 us) and its own ``bytes x 10 / baud`` have passed, so that a
 client sees what a real chain allows (a Sync Read of 10 bytes from 5 servos at 1 Mbit/s: 124 bytes,
 1.24 ms, about 806 a second). The device param ``bus_time = false`` (or ``options["bus_time"]``) turns
@@ -430,6 +431,8 @@ class PtyTransport:
             return
         byte_s = 10.0 / (baud or 1_000_000)  # 8N1: a start bit, 8 data bits, a stop bit
         t = max(t_rx, self.bus_free_at) + request_bytes * byte_s
+        if not replies:  # a Sync Write, a broadcast: the servos act once the whole instruction is in
+            _precise_wait(t)
         for servo, frame in replies:
             t += servo.get("Return Delay Time") * 2e-6 + len(frame) * byte_s
             _precise_wait(t)
