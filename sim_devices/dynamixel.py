@@ -375,13 +375,13 @@ class DxlBus:
 
 
 # -- the pty transport --------------------------------------------------------------------------------------
-def _precise_wait(deadline: float) -> None:
-    while True:
-        left = deadline - time.perf_counter()
-        if left <= 0:
-            return
-        if left > 0.0015:
-            time.sleep(left - 0.001)
+def _wait_until(deadline: float) -> None:
+    """Sleep until ``deadline`` (perf_counter). No busy wait: on a shared host a spinning emulator takes the
+    core from the client it serves; a late wake-up (tens of us) delays one packet, and the next packets keep
+    the schedule, so lateness does not add up."""
+    left = deadline - time.perf_counter()
+    if left > 0:
+        time.sleep(left)
 
 
 class PtyTransport:
@@ -432,10 +432,10 @@ class PtyTransport:
         byte_s = 10.0 / (baud or 1_000_000)  # 8N1: a start bit, 8 data bits, a stop bit
         t = max(t_rx, self.bus_free_at) + request_bytes * byte_s
         if not replies:  # a Sync Write, a broadcast: the servos act once the whole instruction is in
-            _precise_wait(t)
+            _wait_until(t)
         for servo, frame in replies:
             t += servo.get("Return Delay Time") * 2e-6 + len(frame) * byte_s
-            _precise_wait(t)
+            _wait_until(t)
             os.write(self.master, frame)
         self.bus_free_at = t
 
