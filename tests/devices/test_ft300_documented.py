@@ -30,6 +30,8 @@ READ_300 = bytes.fromhex("09 03 01 2c 00 01 45 77")
 ILLEGAL_ADDRESS = bytes.fromhex("09 83 02 41 33")
 WRITE_COIL = bytes.fromhex("09 05 00 00 ff 00 8d 72")  # FC05: the FT 300 has no coils
 ILLEGAL_FUNCTION = bytes.fromhex("09 85 01 02 92")
+READ_DEVICE_ID = bytes.fromhex("09 2b 0e 01 00 91 b6")  # FC43/14 (MEI): a function the FT 300 has not
+ILLEGAL_FUNCTION_2B = bytes.fromhex("09 ab 01 1f 32")
 READ_126_REGISTERS = bytes.fromhex("09 03 00 b4 00 7e 84 84")
 ILLEGAL_VALUE = bytes.fromhex("09 83 03 80 f3")
 START_STREAM = bytes.fromhex("09 10 01 9a 00 01 02 02 00")  # FC16: 0x0200 to register 410 (CRC added below)
@@ -65,8 +67,9 @@ def test_documented_replies_byte_for_byte_and_bad_input(ft_sim):
         assert _ask(port, other_unit, 1) == b""  # another unit's request
         assert _ask(port, READ_180_185[:5], 1) == b""  # short: waits for the rest, then drops it
         time.sleep(0.1)  # longer than the inter-frame silence: the fragment is stale
-        assert _ask(port, b"\x09\x2b\x0e\x01\x00", 1) == b""  # an unknown function's frame: no length to trust
+        assert _ask(port, b"\x09\x2b\x0e\x01\x00", 1) == b""  # an unknown function's bytes without a CRC
         time.sleep(0.1)
+        assert _ask(port, READ_DEVICE_ID, len(ILLEGAL_FUNCTION_2B)) == ILLEGAL_FUNCTION_2B  # whole, with its CRC
         assert _ask(port, READ_180_185, len(REPLY_180_185)) == REPLY_180_185  # still answering
 
 
