@@ -2,7 +2,8 @@
 100 Hz data stream, as Robotiq's own driver (``rq_sensor_com.c``) drives it:
 
 1. listen for a running stream; if there is one, send the 50-byte 0xFF "jam signal" until the line
-   is quiet (the manual's way of stopping the stream);
+   is quiet (the manual's way of stopping the stream). A sensor left streaming by another program
+   answers no Modbus until then; this runs on every RTU connect, in poll mode too;
 2. identity: FC03 at 500 (firmware, must start with ``F``), 510 (serial), 514 (production year);
 3. stream mode: FC16 writes 0x0200 to register 410, then ``20 4E`` frames arrive on the same port
    (:data:`ftc_hw.codecs.stream.FT300_STREAM`); closing sends the jam signal again.
@@ -56,14 +57,26 @@ class FT300Adapter(ModbusFTAdapter):
     def describe(self) -> str:
         return f"{super().describe()}, {self.mode} mode"
 
+    def _open_client(self) -> Any:
+        """The Modbus client, on RTU with a stream left running by another program stopped first."""
+        client = super()._open_client()
+        if self.transport == "modbus-rtu":
+            try:
+                self._stop_stream(client.socket)  # type: ignore[arg-type]
+            except (serial.SerialException, OSError) as exc:
+                client.close()
+                raise DeviceIOError(str(exc)) from exc
+            except BaseException:
+                client.close()
+                raise
+        return client
+
     def _connect(self) -> None:
         if self.mode == "poll":
             super()._connect()
             return
         client = self._open_client()
-        ser: serial.Serial = client.socket  # type: ignore[assignment]
         try:
-            self._stop_stream(ser)
             self.identity = self._with_retries(self.read_identity) or {}
             if not self.identity.get("firmware", "").startswith("F"):
                 raise DeviceIOError(f"not an FT 300 (firmware {self.identity.get('firmware')!r})")
@@ -81,10 +94,8 @@ class FT300Adapter(ModbusFTAdapter):
     def identify(self) -> dict[str, str]:
         """Once, without the reader thread (``ftc devices probe``): stop a running stream, read the
         identity, close the port. DeviceIOError when nothing answers or what answers is no FT 300."""
-        client = self._open_client()
+        self._open_client()
         try:
-            if self.transport == "modbus-rtu":
-                self._stop_stream(client.socket)  # type: ignore[arg-type]
             identity = self._with_retries(self.read_identity) or {}
         except PollFailed as exc:
             raise DeviceIOError(f"no answer to the identity read ({exc})") from exc

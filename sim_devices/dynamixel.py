@@ -24,8 +24,17 @@ Drive Mode (normal direction always), Bus Watchdog, Shutdown conditions at run t
 (``options["hardware_error"]`` sets Hardware Error Status at start: torque off, alert bit, reboot
 clears it).
 
-Options: ``path``, ``wire_time`` (bool: add the bytes' time on the wire at the baud rate, off by
-default since a pty has none), ``return_delay_us`` (overrides every servo's Return Delay Time),
+Bus time (on by default): a pty moves bytes at once, a DYNAMIXEL bus at its baud rate, half duplex. Each
+instruction packet is taken to end ``bytes x 10 / baud`` after the bus was last free (its arrival, or the
+end of the previous packet); an instruction without an answer (Sync Write, a broadcast) reaches the
+world only then, and each status packet is written once its Return Delay Time (the servo's
+control table, 2 us units, factory 250 = 500 us) and its own ``bytes x 10 / baud`` have passed, so that a
+client sees what a real chain allows (a Sync Read of 10 bytes from 5 servos at 1 Mbit/s: 124 bytes,
+1.24 ms, about 806 a second). The device param ``bus_time = false`` (or ``options["bus_time"]``) turns
+it off, Return Delay Time included, for speed tests: answers then go out as soon as they are made.
+
+Options: ``path``, ``bus_time`` (bool, overrides the device param), ``return_delay_us`` (overrides every
+servo's Return Delay Time),
 ``reboot_s`` (silence after a reboot, default 0.1 s), ``hardware_error`` ({id: bits}),
 ``torque_on`` (default True: the world starts under joint control, as if a controller had enabled
 torque).
@@ -366,19 +375,19 @@ class DxlBus:
 
 
 # -- the pty transport --------------------------------------------------------------------------------------
-def _precise_wait(deadline: float) -> None:
-    while True:
-        left = deadline - time.perf_counter()
-        if left <= 0:
-            return
-        if left > 0.0015:
-            time.sleep(left - 0.001)
+def _wait_until(deadline: float) -> None:
+    """Sleep until ``deadline`` (perf_counter). No busy wait: on a shared host a spinning emulator takes the
+    core from the client it serves; a late wake-up (tens of us) delays one packet, and the next packets keep
+    the schedule, so lateness does not add up."""
+    left = deadline - time.perf_counter()
+    if left > 0:
+        time.sleep(left)
 
 
 class PtyTransport:
     """Owns a pty pair: the master end is the bus; ``path`` is a symlink to the slave for clients."""
 
-    def __init__(self, path: str, *, wire_time: bool = False) -> None:
+    def __init__(self, path: str, *, bus_time: bool = True) -> None:
         if os.path.exists(path) and not os.path.islink(path):
             raise FileExistsError(f"{path} exists and is no symlink: not replacing it")
         self.master, self.slave = os.openpty()
@@ -388,7 +397,8 @@ class PtyTransport:
         tmp = f"{path}.{os.getpid()}.tmp"
         os.symlink(self.slave_name, tmp)
         os.replace(tmp, path)
-        self.wire_time = wire_time
+        self.bus_time = bus_time
+        self.bus_free_at = 0.0  # perf_counter time when the last packet on the bus ends
 
     def line_baud(self) -> int | None:
         return _TERMIOS_BAUD.get(termios.tcgetattr(self.slave)[5])
@@ -415,12 +425,19 @@ class PtyTransport:
                 bus.flush()
 
     def _send(self, replies: list[Reply], t_rx: float, request_bytes: int, baud: int | None) -> None:
-        byte_s = 10.0 / (baud or 1_000_000) if self.wire_time else 0.0
-        t = t_rx + request_bytes * byte_s
+        if not self.bus_time:
+            for _, frame in replies:
+                os.write(self.master, frame)
+            return
+        byte_s = 10.0 / (baud or 1_000_000)  # 8N1: a start bit, 8 data bits, a stop bit
+        t = max(t_rx, self.bus_free_at) + request_bytes * byte_s
+        if not replies:  # a Sync Write, a broadcast: the servos act once the whole instruction is in
+            _wait_until(t)
         for servo, frame in replies:
             t += servo.get("Return Delay Time") * 2e-6 + len(frame) * byte_s
-            _precise_wait(t)
+            _wait_until(t)
             os.write(self.master, frame)
+        self.bus_free_at = t
 
     def close(self) -> None:
         try:
@@ -488,9 +505,11 @@ class DynamixelEmulator(Emulator):
 
     def bind(self) -> dict[str, Any]:
         path = self.options.get("path") or default_path(self.scene.name, self.device.name)
-        self.transport = PtyTransport(path, wire_time=bool(self.options.get("wire_time", False)))
+        on = self.options.get("bus_time", self.device.params.get("bus_time", True))
+        self.transport = PtyTransport(path, bus_time=bool(on))
         return {**self.endpoint_base("serial", self.transport.path), "pty": self.transport.slave_name,
                 "protocol": 2.0, "baudrate": int(self.device.params.get("baudrate", 57600)),
+                "bus_time": self.transport.bus_time,
                 "ids": [s.id for s in self.servos], "model": self.servos[0].model.name}
 
     def loop(self) -> None:

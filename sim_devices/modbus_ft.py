@@ -7,7 +7,9 @@ hold ``params.identity`` (``{name: value}``). Transport: the device's ``transpor
 (``modbus-rtu`` | ``modbus-tcp``) unless ``options["transport"]``; TCP binds ``options["host"]`` or
 the device's ``address`` (default 127.0.0.1) and ``options["port"]`` (default 0: a free port, reported).
 RTU answers after the wire time of request and response at the device's baud rate
-(``options["wire_time"]``, default true): a poll costs what it costs on a real RS-485 line.
+(``options["wire_time"]``, default true): a poll costs what it costs on a real RS-485 line. A request
+with a wrong CRC, or for another unit, gets no answer; a whole frame (CRC good) of a function the
+device has not gets exception 01 (Modbus Application Protocol V1.1b3), FC05 and FC43 included.
 
 Faults on RTU: all (a ``corrupt`` response fails its CRC; in stream mode they hit stream frames).
 On TCP, whose bytes cannot be corrupted in flight: ``drop`` (no answer), ``delay``, ``duplicate``,
@@ -22,7 +24,8 @@ import socket
 import time
 from typing import Any
 
-from ftc_hw.codecs.errors import CodecError
+from ftc_hw.codecs.checksums import crc16_modbus
+from ftc_hw.codecs.errors import CodecError, FrameFormatError
 from ftc_hw.codecs.modbus_frames import mbap_decode, mbap_encode, rtu_decode_request, rtu_encode
 from ftc_hw.codecs.registers import RegisterMap, encode_identity, register_map
 from ftc_hw.codecs.stream import StreamFormat
@@ -177,6 +180,12 @@ class ModbusFTEmulator(FTEmulator):
         while self.rx:
             try:
                 n, req = rtu_decode_request(self.rx)
+            except FrameFormatError as exc:
+                if self._unknown_function(bytes(self.rx)):
+                    continue
+                del self.rx[:exc.consumed]
+                self.extra_stats["bad_requests"] += 1
+                continue
             except CodecError as exc:
                 del self.rx[:exc.consumed]
                 self.extra_stats["bad_requests"] += 1
@@ -185,6 +194,16 @@ class ModbusFTEmulator(FTEmulator):
                 break
             del self.rx[:n]
             self._answer_rtu(n, *req)
+
+    def _unknown_function(self, frame: bytes) -> bool:
+        """A whole frame of a function code the codec cannot size (RTU frames end by silence; a request
+        arrives in one write): when its CRC holds, answer it (exception 01, illegal function, from the
+        slave) and take it off the buffer."""
+        if len(frame) < 4 or crc16_modbus(frame[:-2]) != int.from_bytes(frame[-2:], "little"):
+            return False
+        self.rx.clear()
+        self._answer_rtu(len(frame), frame[0], frame[1:-2])
+        return True
 
     def _answer_rtu(self, request_len: int, unit: int, pdu: bytes) -> None:
         self._start_stream = False

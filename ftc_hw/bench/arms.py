@@ -6,7 +6,11 @@ Each part runs the scene's world and its arm emulator in their own processes
 * UR: ``rtde_receive.RTDEReceiveInterface(address)`` with default arguments for ``duration`` s --
   every new packet's ``actual_q`` compared with the world's joint sample of the same time (the
   world's shared-memory ring), packet rate over the wall clock, packets missed by the poller;
-* Dynamixel: dynamixel_sdk GroupSyncRead (and Fast Sync Read) of 126..135 from all 4 servos, reads/s;
+* Dynamixel: dynamixel_sdk GroupSyncRead (and Fast Sync Read) of 126..135 from all 5 servos, reads/s,
+  beside the bus limit computed from the packets' sizes (instruction and status packets, 10 bits a
+  byte at the baud rate, plus the servos' Return Delay Time), at the scene's 1 Mbit/s and at 57 600
+  baud with the emulator's bus time on (its default), and once at 1 Mbit/s with bus time off
+  (``bus_time = false``: a speed test of the emulator and the client, no bus limit);
 * both adapters: JointFrame rate on the bus; ``stop()`` latency against one control period (the
   device's cycle, 2 ms for both), over ``stops`` calls: from the call until the arm's commanded motion
   is frozen -- the world applied the halt and its clock reached the first physics step using it (all
@@ -32,6 +36,8 @@ from ftc_hw.bench.report import table_console
 from ftc_hw.bus import Bus
 from ftc_hw.devices.base import DeviceError, frozen_heap, responsive_readers
 from ftc_hw.scene import load_scene
+from ftc_hw.scene.overrides import apply_overrides
+from ftc_hw.sim_devices.dxl_protocol import fast_status, packet, status
 from ftc_hw.sim_devices.host import WorldHost
 from ftc_hw.sim_devices.link import JointRecord
 
@@ -230,28 +236,74 @@ def _mover(world: WorldHost, adapter: Any, scene: Any) -> Any:
     return move
 
 
-def bench_dxl(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any]:
+READ_ADDRESS, READ_LENGTH = 126, 10  # Present Current, Velocity, Position: what the adapter reads
+
+
+def sync_read_limit(ids: list[int], baud: int, return_delay_us: float = 0.0, fast: bool = False) -> float:
+    """Sync Reads a second a half-duplex bus at ``baud`` allows: one instruction packet and the status
+    packets (one per servo, or one Fast Sync Read packet), 10 bits a byte (8N1), plus each answering
+    servo's Return Delay Time (one for the fast packet, as the emulator spends it). Built from the packets
+    themselves (all-zero data: no byte stuffing)."""
+    params = READ_ADDRESS.to_bytes(2, "little") + READ_LENGTH.to_bytes(2, "little") + bytes(ids)
+    instruction = packet(0xFE, 0x8A if fast else 0x82, params)
+    data = bytes(READ_LENGTH)
+    if fast:
+        answers, delays = [fast_status([(0, i, data) for i in ids])], 1
+    else:
+        answers, delays = [status(i, 0, data) for i in ids], len(ids)
+    n_bytes = len(instruction) + sum(len(a) for a in answers)
+    return 1.0 / (n_bytes * 10.0 / baud + delays * return_delay_us * 1e-6)
+
+
+def _sync_read_rates(endpoint: str, ids: list[int], baud: int, seconds: float) -> dict[str, Any]:
+    """dynamixel_sdk's GroupSyncRead and Fast Sync Read as fast as they go for ``seconds`` each."""
+    port = sdk.PortHandler(endpoint)
+    port.openPort()
+    port.setBaudRate(baud)
+    ph = sdk.PacketHandler(2.0)
+    group = sdk.GroupSyncRead(port, ph, READ_ADDRESS, READ_LENGTH)
+    for i in ids:
+        group.addParam(i)
+    out = {}
+    for label, call in (("sync_read", group.txRxPacket), ("fast_sync_read", group.fastSyncRead)):
+        n = fails = 0
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < seconds:
+            fails += call() != sdk.COMM_SUCCESS
+            n += 1
+        out[label] = {"reads": n, "failures": fails, "reads_per_s": n / (time.monotonic() - t0)}
+    port.closePort()
+    return out
+
+
+def bench_dxl_reads(seconds: float, bauds: tuple[int, ...] = (1_000_000, 57_600)) -> dict[str, Any]:
+    """Sync Read rates against the emulator at each baud rate with bus time on, beside the bus limits,
+    and at the first baud rate with bus time off (no limit: a speed test)."""
     scene = load_scene("dxl-arm")
     device = next(d for d in scene.devices if d.kind == "dynamixel")
     ids = list(device.params["ids"])
+    delay_us = 2.0 * float(device.params.get("return_delay_time", 250))  # factory 250 x 2 us
+    runs = [(b, True) for b in bauds] + [(bauds[0], False)]
     out: dict[str, Any] = {}
+    for baud, bus_time in runs:
+        changes: dict[str, Any] = {"baudrate": baud}
+        if not bus_time:
+            changes["bus_time"] = False
+        run_scene = apply_overrides(scene, {device.name: changes}, "ftc bench arms")
+        with WorldHost(run_scene, "sweep", devices=[device.name], noise=False) as w:
+            rates = _sync_read_rates(w.endpoint(device.name)["endpoint"], ids, baud, seconds)
+        for label, fast in (("sync_read", False), ("fast_sync_read", True)):
+            rates[label]["limit_per_s"] = sync_read_limit(ids, baud, delay_us, fast) if bus_time else None
+        out[f"{baud}" + ("" if bus_time else "_no_bus_time")] = {"baud": baud, "bus_time": bus_time, **rates}
+    return out
+
+
+def bench_dxl(duration: float, stops: int = 200, kills: int = 5) -> dict[str, Any]:
+    scene = load_scene("dxl-arm")
+    device = next(d for d in scene.devices if d.kind == "dynamixel")
     seconds = min(10.0, duration)
+    out: dict[str, Any] = {"reads": bench_dxl_reads(seconds)}
     with WorldHost(scene, "sweep", devices=[device.name], noise=False) as w:
-        port = sdk.PortHandler(w.endpoint(device.name)["endpoint"])
-        port.openPort()
-        port.setBaudRate(int(device.params["baudrate"]))
-        ph = sdk.PacketHandler(2.0)
-        group = sdk.GroupSyncRead(port, ph, 126, 10)
-        for i in ids:
-            group.addParam(i)
-        for label, call in (("sync_read", group.txRxPacket), ("fast_sync_read", group.fastSyncRead)):
-            n = fails = 0
-            t0 = time.monotonic()
-            while time.monotonic() - t0 < seconds:
-                fails += call() != sdk.COMM_SUCCESS
-                n += 1
-            out[label] = {"reads": n, "failures": fails, "reads_per_s": n / (time.monotonic() - t0)}
-        port.closePort()
 
         rig = build_rig(scene, devices=[device], endpoints=w.endpoints, timeout=5.0)
         bus, adapter = rig.bus, rig.arm
@@ -274,8 +326,7 @@ def acceptance(ur: dict[str, Any], dxl: dict[str, Any]) -> list[tuple[str, str, 
         ("UR receive: 500 Hz +- 1 %", f"stream {rc['stream_rate_hz']:.2f} Hz over {rc['duration_s']:.0f} s; "
          f"read by a Python poller {rc['read_rate_hz']:.2f} Hz ({rc['missed_by_poller']} missed)",
          abs(rc["stream_rate_hz"] - 500.0) <= 5.0),
-        ("DXL group sync read >= 1000 reads/s", f"{dxl['sync_read']['reads_per_s']:.0f}/s "
-         f"(fast sync read {dxl['fast_sync_read']['reads_per_s']:.0f}/s)", dxl["sync_read"]["reads_per_s"] >= 1000),
+        *_dxl_read_rows(dxl["reads"]),
         ("DXL adapter JointFrames >= 200 Hz", f"{dxl['adapter']['rate_hz']:.0f} Hz", dxl["adapter"]["rate_hz"] >= 200),
         ("UR adapter JointFrames at the device rate", f"{ur['adapter']['rate_hz']:.1f} Hz "
          f"({ur['adapter']['missed_packets']} packets missed)", abs(ur["adapter"]["rate_hz"] - 500.0) <= 5.0),
@@ -291,6 +342,26 @@ def acceptance(ur: dict[str, Any], dxl: dict[str, Any]) -> list[tuple[str, str, 
         rows.append((f"{label} restarted: reconnected within 1 s",
                      f"max {max(k['reconnect_ms']):.0f} ms over {len(k['reconnect_ms'])}",
                      max(k["reconnect_ms"]) <= 1000.0))
+    return rows
+
+
+def _dxl_read_rows(reads: dict[str, Any]) -> list[tuple[str, str, bool]]:
+    """Sync Read within 10 % of the bus limit where bus time is on; with it off, a speed test (>= 1000/s)."""
+    rows = []
+    for run in reads.values():
+        sr, fsr = run["sync_read"], run["fast_sync_read"]
+        if run["bus_time"]:
+            name = f"DXL Sync Read at {run['baud']} baud within 10 % of the bus limit"
+            text = (f"{sr['reads_per_s']:.0f}/s, limit {sr['limit_per_s']:.0f}/s "
+                    f"({sr['reads_per_s'] / sr['limit_per_s']:.0%}); fast {fsr['reads_per_s']:.0f}/s, "
+                    f"limit {fsr['limit_per_s']:.0f}/s ({fsr['reads_per_s'] / fsr['limit_per_s']:.0%})")
+            ok = all(abs(r["reads_per_s"] / r["limit_per_s"] - 1.0) <= 0.1 for r in (sr, fsr))
+        else:
+            name = f"DXL Sync Read at {run['baud']} baud, bus time off (speed test) >= 1000/s"
+            text = f"{sr['reads_per_s']:.0f}/s; fast {fsr['reads_per_s']:.0f}/s"
+            ok = sr["reads_per_s"] >= 1000
+        rows.append((name, text + (f"; {sr['failures'] + fsr['failures']} failed" if sr["failures"] + fsr["failures"]
+                                   else ""), ok))
     return rows
 
 

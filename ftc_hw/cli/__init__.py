@@ -165,6 +165,10 @@ def sim(
         metavar="DEVICE=ADDR", help="Where an emulator listens: a loopback IP for a UR arm (arm=127.0.0.3) or a "
         "Modbus TCP device (host[:port]), a pty path for a serial or CAN device; repeatable.")] = None,
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal)] = RealityChoice.ideal,
+    device: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        "--device", metavar="NAME.KEY=VALUE", help="A scene device's param for its emulator, e.g. "
+        "arm.baudrate=57600, arm.bus_time=false (a DYNAMIXEL chain answers without the bus's time: speed "
+        "tests only); repeatable.")] = None,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth. Ctrl-C stops it (exit code 130)."""
     from ftc_hw.cli.sim import list_scenarios, run_sim  # lazy: CLI start-up
@@ -174,7 +178,8 @@ def sim(
         return
     if scene is None:
         raise typer.BadParameter("give a scene (ftc scenes lists them) or --list", param_hint="SCENE")
-    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices, address or [], reality.value)
+    run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices, address or [], reality.value,
+            device or [])
 
 
 @app.command()

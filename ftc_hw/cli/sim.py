@@ -27,8 +27,8 @@ def list_scenarios() -> None:
 
 def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: Path | None,
             realtime: bool, noise: bool, devices: bool = True, addresses: list[str] | None = None,
-            reality: str = "ideal") -> None:
-    scene = scene_or_exit(scene_name)
+            reality: str = "ideal", device_overrides: list[str] | None = None) -> None:
+    scene = scene_or_exit(scene_name, device_overrides or ())
     if scenario not in SCENARIOS:
         typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
         raise typer.Exit(2)

@@ -176,6 +176,9 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
               hi=255),
         Param("return_delay_time", "int", "Return Delay Time written to the servos, 2 us units (emulator)",
               lo=0, hi=254),
+        Param("bus_time", "bool", "the emulator spends each packet's time on the wire at the baud rate (bytes x "
+              "10 / baud) and each servo's Return Delay Time; false: answers at once, for speed tests (emulator)",
+              True),
     )),
     DeviceKind("ur-rtde", ("tcp",), "the controller's IP address", "192.168.1.10", (
         Param("frequency", "number", "RTDE output rate, Hz (500 e-Series, 125 CB3)", 500.0, 0.0, 500.0,

@@ -66,3 +66,15 @@ def test_ftc_sim_stopped_by_a_signal_ends_cleanly_and_leaves_nothing_running(tmp
     while (left := _alive_in_group(proc.pid)) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not left, left
+
+
+@pytest.mark.parametrize(("args", "bus_time", "baud"), [([], True, 1_000_000),
+                                                         (["--device", "arm.bus_time=false", "--device",
+                                                           "arm.baudrate=57600"], False, 57_600)],
+                         ids=["default", "bus-time-off"])
+def test_ftc_sim_dynamixel_bus_time_on_by_default_and_off_by_a_device_param(args, bus_time, baud):
+    done = subprocess.run([sys.executable, "-m", "ftc_hw", "sim", "dxl-arm", "--duration", "0.5", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    arm = next(d for d in json.loads(done.stdout.splitlines()[0])["devices"] if d["kind"] == "dynamixel")
+    assert (arm["bus_time"], arm["baudrate"]) == (bus_time, baud)
