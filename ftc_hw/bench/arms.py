@@ -278,13 +278,16 @@ def _sync_read_rates(endpoint: str, ids: list[int], baud: int, seconds: float) -
 
 def bench_dxl_reads(seconds: float, bauds: tuple[int, ...] = (1_000_000, 57_600)) -> dict[str, Any]:
     """Sync Read rates against the emulator at each baud rate with bus time on, beside the bus limits,
-    and at the first baud rate with bus time off (no limit: a speed test)."""
+    and at the first baud rate with bus time off (no limit: a speed test). The run with bus time off goes
+    first: its cycle is this host's own turnaround (the client's code, the pty's wake-ups), which a
+    bus-timed cycle adds to the bus's time; ``limit_with_host_per_s`` is the bus limit with it added."""
     scene = load_scene("dxl-arm")
     device = next(d for d in scene.devices if d.kind == "dynamixel")
     ids = list(device.params["ids"])
     delay_us = 2.0 * float(device.params.get("return_delay_time", 250))  # factory 250 x 2 us
-    runs = [(b, True) for b in bauds] + [(bauds[0], False)]
+    runs = [(bauds[0], False)] + [(b, True) for b in bauds]
     out: dict[str, Any] = {}
+    host_s: dict[str, float] = {}
     for baud, bus_time in runs:
         changes: dict[str, Any] = {"baudrate": baud}
         if not bus_time:
@@ -293,7 +296,13 @@ def bench_dxl_reads(seconds: float, bauds: tuple[int, ...] = (1_000_000, 57_600)
         with WorldHost(run_scene, "sweep", devices=[device.name], noise=False) as w:
             rates = _sync_read_rates(w.endpoint(device.name)["endpoint"], ids, baud, seconds)
         for label, fast in (("sync_read", False), ("fast_sync_read", True)):
-            rates[label]["limit_per_s"] = sync_read_limit(ids, baud, delay_us, fast) if bus_time else None
+            r = rates[label]
+            if not bus_time:
+                host_s[label] = 1.0 / r["reads_per_s"]
+                r["limit_per_s"] = r["limit_with_host_per_s"] = None
+                continue
+            r["limit_per_s"] = sync_read_limit(ids, baud, delay_us, fast)
+            r["limit_with_host_per_s"] = 1.0 / (1.0 / r["limit_per_s"] + host_s[label])
         out[f"{baud}" + ("" if bus_time else "_no_bus_time")] = {"baud": baud, "bus_time": bus_time, **rates}
     return out
 
@@ -346,16 +355,22 @@ def acceptance(ur: dict[str, Any], dxl: dict[str, Any]) -> list[tuple[str, str, 
 
 
 def _dxl_read_rows(reads: dict[str, Any]) -> list[tuple[str, str, bool]]:
-    """Sync Read within 10 % of the bus limit where bus time is on; with it off, a speed test (>= 1000/s)."""
+    """Where bus time is on, each rate between its two bounds, 10 % either side: at most the bus limit (the
+    bus's time alone, from the packets), at least the bus limit with this host's own turnaround added (the
+    cycle with bus time off: the client's code and the pty's wake-ups, and the emulator's work, which a
+    bus-timed cycle partly hides behind the bus's time). A rate above the first means bus time is not spent;
+    below the second, spent twice. With bus time off, a speed test (>= 1000/s)."""
     rows = []
     for run in reads.values():
         sr, fsr = run["sync_read"], run["fast_sync_read"]
         if run["bus_time"]:
-            name = f"DXL Sync Read at {run['baud']} baud within 10 % of the bus limit"
-            text = (f"{sr['reads_per_s']:.0f}/s, limit {sr['limit_per_s']:.0f}/s "
-                    f"({sr['reads_per_s'] / sr['limit_per_s']:.0%}); fast {fsr['reads_per_s']:.0f}/s, "
-                    f"limit {fsr['limit_per_s']:.0f}/s ({fsr['reads_per_s'] / fsr['limit_per_s']:.0%})")
-            ok = all(abs(r["reads_per_s"] / r["limit_per_s"] - 1.0) <= 0.1 for r in (sr, fsr))
+            name = (f"DXL Sync Read at {run['baud']} baud between the bus limit with this host's turnaround "
+                    "and the bus limit (10 % either side)")
+            text = "; ".join(f"{label}{r['reads_per_s']:.0f}/s: bus limit {r['limit_per_s']:.0f}/s "
+                             f"({r['reads_per_s'] / r['limit_per_s']:.0%}), with the host's turnaround "
+                             f"{r['limit_with_host_per_s']:.0f}/s ({r['reads_per_s'] / r['limit_with_host_per_s']:.0%})"
+                             for label, r in (("", sr), ("fast ", fsr)))
+            ok = all(0.9 * r["limit_with_host_per_s"] <= r["reads_per_s"] <= 1.1 * r["limit_per_s"] for r in (sr, fsr))
         else:
             name = f"DXL Sync Read at {run['baud']} baud, bus time off (speed test) >= 1000/s"
             text = f"{sr['reads_per_s']:.0f}/s; fast {fsr['reads_per_s']:.0f}/s"
