@@ -23,12 +23,13 @@ configuration page, ``options["calibration_xml"]`` the whole page (tests of bad 
 
 TCP interface (:mod:`ftc_hw.sim_devices.netft_tcp`): ``options["tcp_port"]`` (explicit: bound or fails),
 default 49151; where that cannot be bound, a free port, said on stderr and in the endpoint (``tcp_port``,
-``tcp_port_note``). READCALINFO answers the pages' calibration (counts per force and torque, unit codes
-2 and 3 for N and Nm), scale factors the smallest that fit each axis's rated range (``calmr``) in int16;
-READFT the newest reading less the bias over those factors, status 0 (its sysCommands bias as 0x0042 does
-and reset the latch as 0x0041); WRITETRANSFORM and WRITETHRESHOLD are refused with write status 1
-(``tcp_refused``): tool transforms and monitor conditions are not emulated. Counted: ``tcp_connections``,
-``tcp_commands``, ``tcp_bad_commands``, ``tcp_aborted``.
+``tcp_port_note``); ``options["tcp"] = False`` removes it (a box without it). READCALINFO answers the
+pages' calibration (counts per force and torque, unit codes 2 and 3 for N and Nm), scale factors the
+smallest that fit each axis's rated range (``calmr``) in int16; READFT the newest reading less the bias
+over those factors, status 0 (its sysCommands bias as 0x0042 does and reset the latch as 0x0041);
+WRITETRANSFORM and WRITETHRESHOLD are refused with write status 1 (``tcp_refused``): tool transforms and
+monitor conditions are not emulated. Counted: ``tcp_connections``, ``tcp_commands``, ``tcp_bad_commands``,
+``tcp_aborted``.
 
 Requests: start real-time (0x0002, one record per packet), loop-driven output (0x0001, one record per
 packet: ATI's Java library asks for a single record with count 1) or buffered (0x0003, ``comrdtbsiz``
@@ -130,10 +131,12 @@ class RdtEmulator(FTEmulator):
                                        float(p.get("counts_per_torque", 1_000_000)), "N", "Nm",
                                        self.rate_hz, int(p.get("buffer", 10)))
         self.pages = BoxPages.of(self.calibration, BoxInfo(), self.options)
+        self.cal_info: CalInfo | None = None  # None: no TCP interface
         try:  # READCALINFO on TCP 49151: the counts per unit of the pages, scale factors from their ranges
-            self.cal_info: CalInfo | None = cal_info(self.calibration, self.pages.info.max_range)
+            if self.options.get("tcp", True) is not False:
+                self.cal_info = cal_info(self.calibration, self.pages.info.max_range)
         except CodecError as exc:
-            self.cal_info, self.tcp_note = None, f"no TCP interface (port 49151): {exc}"
+            self.tcp_note = f"no TCP interface (port 49151): {exc}"
         self.error_records = tuple((int(a), int(b)) for a, b in self.options.get("status_error_records") or ())
         self.sock: socket.socket | None = None
         self.http: ThreadingHTTPServer | None = None

@@ -84,6 +84,7 @@ def test_a_client_of_its_own_reads_the_calibration_our_adapter_reads_from_the_pa
         assert adapter.wait_connected(5.0)
         ours = adapter.calibration
     assert (ours.counts_per_force, ours.counts_per_torque) == (theirs["cpf"], theirs["cpt"])
+    time.sleep(0.3)  # the emulator's stats file is rewritten every 0.1 s
     stats = ft_sim.read_stats(emu)
     assert (stats["tcp_commands"], stats["tcp_bad_commands"], stats["tcp_aborted"]) == (1, 0, 0)
 
@@ -108,7 +109,7 @@ def test_each_command_answers_byte_for_byte(ft_sim):
         assert _recv(s, 4) == b"\x12\x34\x03\x01"
         s.sendall(b"\x00" + bytes(17) + b"\x00\x03")  # READFT with bias and latch reset: the reading is now zero
         assert _recv(s, 16) == b"\x12\x34" + bytes(14)
-        assert _nothing_more(s) == b"timeout"  # one reply per command, nothing else
+        assert _nothing_more(s) == b"timeout"  # one reply per command, nothing else (and 0.3 s for the stats)
     stats = ft_sim.read_stats(emu)
     assert (stats["tcp_commands"], stats["tcp_refused"], stats["tcp_bad_commands"], stats["latch_resets"]) == (
         5, 2, 1, 1)
@@ -162,3 +163,29 @@ def test_where_49151_is_taken_the_interface_moves_to_a_free_port_and_says_so(ft_
         with _connect(emu) as s:
             s.sendall(b"\x01" + bytes(19))
             assert _recv(s, 24)[:2] == b"\x12\x34"
+
+
+@pytest.mark.parametrize("tcp", [True, False])
+def test_without_the_calibration_page_our_adapter_asks_readcalinfo(ft_sim, tcp):
+    """A box without /netftcalapi.xml (404): the adapter reads the calibration over TCP 49151, as the ROS 2
+    driver does; a box without the TCP interface either: the configuration's cfgcpf/cfgcpt. The same counts
+    per unit either way, and the same wrench."""
+    scene, spec, emu = _box(ft_sim, calapi=False, tcp=tcp)
+    assert (emu.endpoint["tcp_port"] is not None) == tcp
+    bus = Bus()
+    with make_adapter(spec, bus, emu.endpoint, scene=scene) as adapter:
+        assert adapter.wait_connected(5.0)
+        frames = bus.subscribe(adapter.topic, maxsize=None)
+        wrench = frames.get(timeout=2.0).wrench
+        source, cal, c = adapter.box.source, adapter.calibration, dict(adapter.counters)
+    assert (cal.counts_per_force, cal.counts_per_torque, cal.force_unit, cal.torque_unit) == (100_000, 1_000_000,
+                                                                                             "N", "Nm")
+    assert np.allclose(wrench, WRENCH, atol=1e-5)
+    if tcp:
+        assert source == "TCP 49151 READCALINFO countsPerForce/countsPerTorque"
+        assert (c["calibration_tcp"], c.get("calinfo_errors", 0), c.get("calibration_fallback", 0)) == (1, 0, 0)
+        time.sleep(0.3)  # the emulator's stats file is rewritten every 0.1 s
+        assert ft_sim.read_stats(emu)["tcp_commands"] == 1
+    else:
+        assert source == "/netftapi2.xml cfgcpf/cfgcpt"
+        assert (c.get("calibration_tcp", 0), c["calinfo_errors"], c["calibration_fallback"]) == (0, 1, 1)

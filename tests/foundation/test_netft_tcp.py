@@ -6,6 +6,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from ftc_hw.codecs import netft_pages as pages
 from ftc_hw.codecs import netft_tcp as tcp
 from ftc_hw.codecs.errors import CodecError, FrameFormatError
 from ftc_hw.codecs.netft_rdt import Calibration
@@ -99,3 +100,19 @@ def test_random_bytes_give_only_typed_errors(data):
         if decode is tcp.decode_cal_info:
             assert tcp.encode_cal_info(out) == data
             out.calibration()
+
+
+def test_the_box_read_from_its_pages_and_readcalinfo():
+    """Without the calibration page, READCALINFO's counts are taken (and checked against the configuration's);
+    the calibration page, when there, comes first."""
+    cal = Calibration(100_000, 1_000_000, "N", "Nm", 7000.0, 10)
+    config = pages.config_page(cal, pages.BoxInfo(), index=0)
+    info = tcp.cal_info(cal, pages.BoxInfo().max_range)
+    box = pages.read_box(config, None, info.calibration(), "TCP 49151 READCALINFO")
+    assert box.source == "TCP 49151 READCALINFO countsPerForce/countsPerTorque"
+    assert box.calibration == cal and box.calibration.rdt_rate_hz == 7000.0
+    assert pages.read_box(config, pages.calibration_page(cal, pages.BoxInfo()), info.calibration()).source == (
+        "/netftcalapi.xml calcpf/calcpt")
+    other = tcp.CalInfo(2, 3, 1_000_000, 1_000_000, info.scale_factors).calibration()
+    with pytest.raises(pages.CalibrationError, match="cfgcpf: .*READCALINFO"):
+        pages.read_box(config, None, other)
