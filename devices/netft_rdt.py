@@ -4,8 +4,10 @@ web pages (:mod:`ftc_hw.codecs.netft_rdt`, :mod:`ftc_hw.codecs.netft_pages`).
 On connect the adapter reads ``http://<box>:<http_port>/netftapi2.xml`` (the active configuration: RDT
 rate, buffer size, the software bias, ``cfgcalsel``) and ``/netftcalapi.xml?index=<cfgcalsel>`` (the
 calibration: ``calcpf``/``calcpt`` in ``scalfu``/``scaltu``, the names real boxes and the ROS drivers
-use; a box without that page (404) falls back to the configuration's ``cfgcpf``/``cfgcpt``, counted in
-``calibration_fallback``), unless ``read_calibration=False``, and reconciles them with the scene's
+use; a box without that page (404) is asked READCALINFO on its TCP interface, ``tcp_port`` 49151
+(:mod:`ftc_hw.codecs.netft_tcp`: counts per force and torque unit, unit codes; counted in ``calibration_tcp``),
+and where that does not answer either (``calinfo_errors``) the configuration's ``cfgcpf``/``cfgcpt`` are
+taken, counted in ``calibration_fallback``), unless ``read_calibration=False``, and reconciles them with the scene's
 ``counts_per_force`` / ``counts_per_torque`` (per N and N m, an override that must agree with the box per SI
 unit when both are known), ``rate_hz`` (the box's ``comrdtrate``; None: take the box's) and, in buffered
 mode, ``buffer`` (``comrdtbsiz``): a page that is malformed or disagrees fails the connect with a
@@ -43,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from ftc_hw.bus import Bus
-from ftc_hw.codecs.errors import FrameFormatError
+from ftc_hw.codecs.errors import CodecError, FrameFormatError
 from ftc_hw.codecs.netft_pages import CALIBRATION_PAGE, CONFIG_PAGE, BoxState, page_fields, read_box
 from ftc_hw.codecs.netft_rdt import (
     CMD_START_BUFFERED,
@@ -57,6 +59,7 @@ from ftc_hw.codecs.netft_rdt import (
     encode_request,
     reconcile,
 )
+from ftc_hw.codecs.netft_tcp import CAL_REPLY_SIZE, TCP_PORT, ReadCalInfo, decode_cal_info, encode_command
 
 from .base import DeviceError, DeviceIOError
 from .ft_base import FTAdapter, Silence
@@ -71,6 +74,7 @@ class RdtFTAdapter(FTAdapter):
     status_error_mask = STATUS_ERROR_MASK
 
     def __init__(self, name: str, bus: Bus, host: str, *, port: int = DEFAULT_PORT, http_port: int = 80,
+                 tcp_port: int = TCP_PORT,
                  mode: str = "realtime", rate_hz: float | None = None, buffer: int | None = None,
                  counts_per_force: float | None = None, counts_per_torque: float | None = None,
                  read_calibration: bool = True, silence_s: float | None = 1.0, receive_buffer: int = 4 << 20,
@@ -79,7 +83,7 @@ class RdtFTAdapter(FTAdapter):
             raise DeviceError(f"mode {mode!r}: expected realtime or buffered")
         kwargs.setdefault("stale_after", max(0.05, 5.0 * (buffer or 1) / (rate_hz or MAX_RATE_HZ)))
         super().__init__(name, bus, seq_modulus=1 << 32, seq_period_ns=round(1e9 / (rate_hz or MAX_RATE_HZ)), **kwargs)
-        self.host, self.port, self.http_port = host, int(port), int(http_port)
+        self.host, self.port, self.http_port, self.tcp_port = host, int(port), int(http_port), int(tcp_port)
         self.mode = mode
         self.rate_hz = None if rate_hz is None else float(rate_hz)  # None: the box's comrdtrate
         self.buffer = buffer
@@ -111,16 +115,33 @@ class RdtFTAdapter(FTAdapter):
         return self.fetch_box().calibration
 
     def fetch_box(self) -> BoxState:
-        """The box's configuration page, then its calibration page (``cfgcalsel``'s; a 404 there: the
-        configuration's counts, counted in ``calibration_fallback``), read."""
+        """The box's configuration page, then its calibration page (``cfgcalsel``'s; a 404 there: READCALINFO
+        on its TCP interface, else the configuration's counts, counted in ``calibration_fallback``), read."""
         config = self._get(CONFIG_PAGE)
         index = page_fields(config, CONFIG_PAGE).get("cfgcalsel")
+        tcp = None
         try:
             calibration: bytes | None = self._get(CALIBRATION_PAGE + (f"?index={index}" if index else ""))
         except _NotFound:
             calibration = None
-            self.counters["calibration_fallback"] += 1
-        return read_box(config, calibration)
+            tcp = self.read_cal_info()
+            if tcp is None:
+                self.counters["calibration_fallback"] += 1
+        return read_box(config, calibration, tcp, f"TCP {self.tcp_port} READCALINFO")
+
+    def read_cal_info(self) -> Calibration | None:
+        """The calibration as the box's TCP interface answers READCALINFO; None where it does not (nothing
+        there, a short or malformed reply: counted in ``calinfo_errors``)."""
+        try:
+            with socket.create_connection((self.host, self.tcp_port), timeout=1.0) as s:
+                s.sendall(encode_command(ReadCalInfo()))
+                reply = s.recv(CAL_REPLY_SIZE, socket.MSG_WAITALL)
+            cal = decode_cal_info(reply).calibration()
+        except (OSError, CodecError):
+            self.counters["calinfo_errors"] += 1
+            return None
+        self.counters["calibration_tcp"] += 1
+        return cal
 
     def _get(self, page: str) -> bytes:
         url = f"http://{self.host}:{self.http_port}{page}"

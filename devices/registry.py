@@ -124,7 +124,9 @@ def _rdt(device: DeviceSpec, bus: Bus, ep: Mapping[str, Any], kw: dict[str, Any]
         raise DeviceError(f"device {device.name!r}: no endpoint and no address (the Net F/T box's IP address)")
     cpf, cpt, buffer = p.get("counts_per_force"), p.get("counts_per_torque"), p.get("buffer")
     return RdtFTAdapter(device.name, bus, host, port=int(ep.get("port", p.get("port", 49152))),
-                        http_port=int(ep.get("http_port", p.get("http_port", 80))), mode=str(p.get("mode", "realtime")),
+                        http_port=int(ep.get("http_port", p.get("http_port", 80))),
+                        tcp_port=int(ep.get("tcp_port") or p.get("tcp_port", 49151)),
+                        mode=str(p.get("mode", "realtime")),
                         rate_hz=None if "rate_hz" not in p else float(p["rate_hz"]),
                         buffer=None if buffer is None else int(buffer),
                         counts_per_force=None if cpf is None else float(cpf),

@@ -1,14 +1,15 @@
-"""Emulator of the ATI Net F/T box over Ethernet (scene kind ``ft-rdt``): RDT over UDP, and its web
-pages over HTTP, both on the box's own loopback address. What each behaviour follows (ATI's manual,
-ATI's Java demo, public clients): ``sim_devices/SOURCES.md``, section Net F/T.
+"""Emulator of the ATI Net F/T box over Ethernet (scene kind ``ft-rdt``): RDT over UDP, its web pages
+over HTTP and its TCP interface (port 49151), all on the box's own loopback address. What each behaviour
+follows (ATI's manual, ATI's Java demo, public clients): ``sim_devices/SOURCES.md``, section Net F/T.
 
 Address: ``options["host"]`` (``ftc sim --address ft=127.0.0.7``; loopback only), else one of its own,
-127.0.0.k (k in 10-99) with UDP 49152 and TCP 80 free there, as the UR emulator has for RTDE: every client
-looks for the box at RDT port 49152 and the web server at port 80 of its address. UDP port
-``options["port"]`` (an explicit one is bound or fails; 0: a free one), default the device's ``port``
-param (49152), or a free one when that is taken. HTTP ``options["http_port"]`` (explicit: bound or fails),
-default 80; where 80 cannot be bound (no root nor CAP_NET_BIND_SERVICE, or taken) a free port, said on
-stderr and in the endpoint (``http_port``, ``http_port_note``), never silently.
+127.0.0.k (k in 10-99) with UDP 49152, TCP 80 and TCP 49151 free there, as the UR emulator has for RTDE:
+every client looks for the box at RDT port 49152, the web server at port 80 and the TCP interface at
+49151 of its address. UDP port ``options["port"]`` (an explicit one is bound or fails; 0: a free one),
+default the device's ``port`` param (49152), or a free one when that is taken. HTTP
+``options["http_port"]`` (explicit: bound or fails), default 80; where 80 cannot be bound (no root nor
+CAP_NET_BIND_SERVICE, or taken) a free port, said on stderr and in the endpoint (``http_port``,
+``http_port_note``), never silently.
 
 Pages: ``/netftapi2.xml[?index=N]`` (the system's fields and configuration N of 16, the active one, 0,
 from the scene: counts per unit from the device's ``counts_per_force`` / ``counts_per_torque`` params,
@@ -19,6 +20,16 @@ out of range or not a number: 404. ``options["calibration_fields"]`` replaces el
 configuration page, ``options["calibration_xml"]`` the whole page (tests of bad pages),
 ``options["calapi_fields"]`` elements of the calibration page, ``options["calapi"] = False`` removes it
 (404: a box without it).
+
+TCP interface (:mod:`ftc_hw.sim_devices.netft_tcp`): ``options["tcp_port"]`` (explicit: bound or fails),
+default 49151; where that cannot be bound, a free port, said on stderr and in the endpoint (``tcp_port``,
+``tcp_port_note``); ``options["tcp"] = False`` removes it (a box without it). READCALINFO answers the
+pages' calibration (counts per force and torque, unit codes 2 and 3 for N and Nm), scale factors the
+smallest that fit each axis's rated range (``calmr``) in int16; READFT the newest reading less the bias
+over those factors, status 0 (its sysCommands bias as 0x0042 does and reset the latch as 0x0041);
+WRITETRANSFORM and WRITETHRESHOLD are refused with write status 1 (``tcp_refused``): tool transforms and
+monitor conditions are not emulated. Counted: ``tcp_connections``, ``tcp_commands``, ``tcp_bad_commands``,
+``tcp_aborted``.
 
 Requests: start real-time (0x0002, one record per packet), loop-driven output (0x0001, one record per
 packet: ATI's Java library asks for a single record with count 1) or buffered (0x0003, ``comrdtbsiz``
@@ -72,11 +83,26 @@ from ftc_hw.codecs.netft_rdt import (
     decode_request,
     encode_records,
 )
+from ftc_hw.codecs.netft_tcp import (
+    WRITETHRESHOLD,
+    WRITETRANSFORM,
+    CalInfo,
+    ReadCalInfo,
+    ReadFT,
+    TcpCommand,
+    WriteTransform,
+    cal_info,
+    encode_cal_info,
+    encode_ft_reply,
+    encode_write_reply,
+    ft_reply,
+)
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .emulator import FTEmulator, Pacer, serve_with
 from .link import LinkInfo
 from .loopback import check_loopback
+from .netft_tcp import TcpServer, bind_tcp, close_tcp
 from .netft_web import BoxPages, bind_web
 
 BOX_ADDRESSES = range(10, 100)  # 127.0.0.k of a box without an address given (UR controllers take 100-249)
@@ -98,13 +124,23 @@ class RdtEmulator(FTEmulator):
         http_port = self.options.get("http_port")
         self.http_port: int | None = None if http_port is None else int(http_port)
         self.http_note = ""
+        tcp_port = self.options.get("tcp_port")
+        self.tcp_port: int | None = None if tcp_port is None else int(tcp_port)
+        self.tcp_note = ""
         self.calibration = Calibration(float(p.get("counts_per_force", 100_000)),
                                        float(p.get("counts_per_torque", 1_000_000)), "N", "Nm",
                                        self.rate_hz, int(p.get("buffer", 10)))
         self.pages = BoxPages.of(self.calibration, BoxInfo(), self.options)
+        self.cal_info: CalInfo | None = None  # None: no TCP interface
+        try:  # READCALINFO on TCP 49151: the counts per unit of the pages, scale factors from their ranges
+            if self.options.get("tcp", True) is not False:
+                self.cal_info = cal_info(self.calibration, self.pages.info.max_range)
+        except CodecError as exc:
+            self.tcp_note = f"no TCP interface (port 49151): {exc}"
         self.error_records = tuple((int(a), int(b)) for a, b in self.options.get("status_error_records") or ())
         self.sock: socket.socket | None = None
         self.http: ThreadingHTTPServer | None = None
+        self.tcp: TcpServer | None = None
         self.client: tuple[str, int] | None = None
         self.per_packet = 1
         self.remaining = 0  # records still to send; 0: until stopped
@@ -121,25 +157,31 @@ class RdtEmulator(FTEmulator):
     # -- endpoint ------------------------------------------------------------------------------------
     def bind(self) -> dict[str, Any]:
         if self.host is None:
-            self.sock, self.http = self._bind_own_address()
+            self.sock, self.http, self.tcp = self._bind_own_address()
         else:
             self.sock, self.http = self._bind_udp(self.host), self._bind_http(self.host)
+            self.tcp = self._bind_tcp(self.host)
         self.pages = dataclasses.replace(self.pages, info=BoxInfo(address=str(self.host)))  # before the first page
         threading.Thread(target=self.http.serve_forever, name="netft-http", daemon=True).start()
+        if self.tcp is not None:
+            threading.Thread(target=self.tcp.serve_forever, name="netft-tcp", daemon=True).start()
         port, http_port = self.sock.getsockname()[1], self.http.server_address[1]
-        if self.http_note:
-            print(f"{self.device.name}: {self.http_note}", file=sys.stderr, flush=True)
+        for note in (self.http_note, self.tcp_note):
+            if note:
+                print(f"{self.device.name}: {note}", file=sys.stderr, flush=True)
         return {**self.endpoint_base("udp", f"{self.host}:{port}"), "host": self.host, "port": port,
                 "http_port": http_port, **({"http_port_note": self.http_note} if self.http_note else {}),
+                "tcp_port": None if self.tcp is None else self.tcp.server_address[1],
+                **({"tcp_port_note": self.tcp_note} if self.tcp_note else {}),
                 "rate_hz": self.rate_hz, "buffer": self.calibration.buffer_size}
 
-    def _bind_own_address(self) -> tuple[socket.socket, ThreadingHTTPServer]:
-        """The first 127.0.0.k (in random order) where the RDT port and the web server's port 80 both bind;
-        where port 80 is nowhere ours to bind (no root), the first where the RDT port binds, the pages on a
-        free port (said)."""
+    def _bind_own_address(self) -> tuple[socket.socket, ThreadingHTTPServer, TcpServer | None]:
+        """The first 127.0.0.k (in random order) where the RDT port, the web server's port 80 and the TCP
+        interface's 49151 all bind; where port 80 is nowhere ours to bind (no root), the first where the RDT
+        port binds, the pages and the TCP interface on free ports where theirs are taken (said)."""
         candidates = list(BOX_ADDRESSES)
         random.shuffle(candidates)
-        for http_fallback in (False, True):
+        for fallback in (False, True):
             for k in candidates:
                 self.host = f"127.0.0.{k}"
                 try:
@@ -147,11 +189,17 @@ class RdtEmulator(FTEmulator):
                 except OSError:
                     continue
                 try:
-                    return sock, self._bind_http(self.host, fallback=http_fallback)
+                    http = self._bind_http(self.host, fallback=fallback)
                 except OSError:
                     sock.close()
+                    continue
+                try:
+                    return sock, http, self._bind_tcp(self.host, fallback=fallback)
+                except OSError:
+                    sock.close()
+                    http.server_close()
         self.host = "127.0.0.1"  # the RDT port taken everywhere: free ports, which the endpoint reports
-        return self._bind_udp(self.host), self._bind_http(self.host)
+        return self._bind_udp(self.host), self._bind_http(self.host), self._bind_tcp(self.host)
 
     def _bind_udp(self, host: str, fallback: bool = True) -> socket.socket:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -177,6 +225,30 @@ class RdtEmulator(FTEmulator):
         self.http_note = note
         return server
 
+    def _bind_tcp(self, host: str, fallback: bool = True) -> TcpServer | None:
+        if self.cal_info is None:
+            return None
+        server, note = bind_tcp(host, self.tcp_port, self.tcp_answer, self.extra_stats, fallback)
+        self.tcp_note = note
+        return server
+
+    def tcp_answer(self, command: TcpCommand) -> bytes:
+        """The TCP interface's reply: READCALINFO the calibration the pages show; READFT the newest reading
+        less the bias in 16-bit counts (its sysCommands bias, as 0x0042 does, and clear the latch, as
+        0x0041); the writes refused (tool transforms and monitor conditions are not emulated): status 1."""
+        assert self.cal_info is not None
+        if isinstance(command, ReadCalInfo):
+            return encode_cal_info(self.cal_info)
+        if isinstance(command, ReadFT):
+            if command.bias:
+                self.bias = self.last_counts
+            if command.clear_latch:
+                self.extra_stats["latch_resets"] += 1
+            reading = tuple(c - b for c, b in zip(self.last_counts, self.bias, strict=True))
+            return encode_ft_reply(ft_reply(reading, self.cal_info.scale_factors))
+        self.extra_stats["tcp_refused"] += 1
+        return encode_write_reply(WRITETRANSFORM if isinstance(command, WriteTransform) else WRITETHRESHOLD, 1)
+
     def page(self, url: str) -> bytes | None:
         """The web server's page at ``url``, or None (404)."""
         reading = tuple(c - b for c, b in zip(self.last_counts, self.bias, strict=True))
@@ -187,6 +259,7 @@ class RdtEmulator(FTEmulator):
             with contextlib.suppress(Exception):
                 self.http.shutdown()
                 self.http.server_close()
+        close_tcp(self.tcp)
         if self.sock is not None:
             self.sock.close()
 

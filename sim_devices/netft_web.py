@@ -6,13 +6,14 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any
+from typing import Any, TypeVar
 from urllib.parse import parse_qs, urlsplit
 
 from ftc_hw.codecs.netft_pages import CALIBRATION_PAGE, CONFIG_PAGE, CONFIGS, BoxInfo, calibration_page, config_page
 from ftc_hw.codecs.netft_rdt import Calibration
 
 HTTP_PORT = 80  # where every client looks for the box's pages
+S = TypeVar("S")
 
 
 @dataclass(frozen=True)
@@ -62,17 +63,26 @@ def bind_web(host: str, port: int | None, serve: Callable[[str], bytes | None], 
     a free port, with the sentence that says so (empty when on 80 or as given). ``serve(url)`` gives a
     page or None (404); ``counts`` gets ``pages`` and ``page_errors``."""
     handler = _handler(serve, counts)
+    return bind_server(lambda p: ThreadingHTTPServer((host, p), handler), port, HTTP_PORT, fallback,
+                       f"the web server to {host}:{HTTP_PORT} ({{}}: port 80 needs root or CAP_NET_BIND_SERVICE, "
+                       "and a free port); its pages are on port {} instead, where clients looking at port 80 do "
+                       "not find them")
+
+
+def bind_server(make: Callable[[int], S], port: int | None, default: int, fallback: bool,
+                said: str) -> tuple[S, str]:
+    """``make(port)`` when ``port`` is given (bound or OSError), else ``make(default)``, else (``fallback``)
+    ``make(0)``, a free port, with the sentence that says so: "cannot bind " and ``said`` with the error and
+    the free port in its two ``{}`` (empty where it should be)."""
     if port is not None:
-        return ThreadingHTTPServer((host, port), handler), ""
+        return make(port), ""
     try:
-        return ThreadingHTTPServer((host, HTTP_PORT), handler), ""
+        return make(default), ""
     except OSError as exc:
         if not fallback:
             raise
-        server = ThreadingHTTPServer((host, 0), handler)
-        return server, (f"cannot bind the web server to {host}:{HTTP_PORT} ({exc.strerror or exc}: port 80 needs "
-                        f"root or CAP_NET_BIND_SERVICE, and a free port); its pages are on port "
-                        f"{server.server_address[1]} instead, where clients looking at port 80 do not find them")
+        server = make(0)
+        return server, "cannot bind " + said.format(exc.strerror or exc, server.server_address[1])  # type: ignore[attr-defined]
 
 
 def _handler(serve: Callable[[str], bytes | None], counts: dict[str, int]) -> type[BaseHTTPRequestHandler]:

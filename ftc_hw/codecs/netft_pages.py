@@ -12,8 +12,9 @@ demo splits ``cfgmr`` on ``;``); the manual allows either.
 
 Counts per unit: a calibration page's ``calcpf``/``calcpt`` in ``scalfu``/``scaltu`` (what the ROS
 drivers read) and a configuration's ``cfgcpf``/``cfgcpt`` in ``scfgfu``/``scfgtu`` (what ATI's demo
-reads); :func:`read_box` takes the calibration's when the box serves it and checks the configuration's
-against it (the same counts per SI unit, or :class:`~ftc_hw.codecs.netft_rdt.CalibrationError`).
+reads); :func:`read_box` takes the calibration's when the box serves it, else the TCP interface's
+READCALINFO when given (:mod:`ftc_hw.codecs.netft_tcp`), and checks the configuration's against it (the
+same counts per SI unit, or :class:`~ftc_hw.codecs.netft_rdt.CalibrationError`).
 """
 from __future__ import annotations
 
@@ -114,10 +115,12 @@ def page_fields(data: bytes, page: str) -> dict[str, str]:
     return {el.tag.rsplit("}", 1)[-1].lower(): (el.text or "").strip() for el in root.iter()}
 
 
-def read_box(config: bytes, calibration: bytes | None = None) -> BoxState:
+def read_box(config: bytes, calibration: bytes | None = None, tcp: Calibration | None = None,
+             tcp_source: str = "TCP 49151 READCALINFO") -> BoxState:
     """The box as its pages say: counts from the calibration page (``calcpf``/``calcpt``) when it has
-    them, else the configuration's (``cfgcpf``/``cfgcpt``); both given, they must agree per SI unit.
-    CalibrationError names the field at fault."""
+    them, else from the TCP interface's READCALINFO (``tcp``, read from ``tcp_source``) when given, else
+    the configuration's (``cfgcpf``/``cfgcpt``); the configuration's and the one taken must agree per SI
+    unit. CalibrationError names the field at fault."""
     cfg = parse_calibration(config)
     values = page_fields(config, CONFIG_PAGE)
     cal, source = cfg, f"{CONFIG_PAGE} cfgcpf/cfgcpt"
@@ -130,6 +133,11 @@ def read_box(config: bytes, calibration: bytes | None = None) -> BoxState:
                 raise CalibrationError(key, f"unit {unit!r} not known (known: {', '.join(known)})")
         cal = Calibration(cpf, cpt, fu, tu, cfg.rdt_rate_hz, cfg.buffer_size, ("calcpf", "calcpt"))
         source = f"{CALIBRATION_PAGE} calcpf/calcpt"
+    elif tcp is not None:
+        cal = Calibration(tcp.counts_per_force, tcp.counts_per_torque, tcp.force_unit, tcp.torque_unit,
+                          cfg.rdt_rate_hz, cfg.buffer_size, tcp.fields)
+        source = f"{tcp_source} {'/'.join(tcp.fields)}"
+    if cal is not cfg:
         for ours, theirs, name in ((cal.scale[0], cfg.scale[0], "cfgcpf"), (cal.scale[3], cfg.scale[3], "cfgcpt")):
             if not math.isclose(ours, theirs, rel_tol=1e-9):
                 raise CalibrationError(name, f"the configuration's counts per SI unit ({1 / theirs:g}) are not the "

@@ -139,6 +139,8 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
         Param("http_port", "int", "the box's web server, which serves its configuration and calibration pages "
               "(/netftapi2.xml, /netftcalapi.xml)", 80,
               0, 65535),
+        Param("tcp_port", "int", "the box's TCP interface, asked READCALINFO where the calibration page is "
+              "missing", 49151, 0, 65535),
         Param("mode", "str", "realtime: one record per packet; buffered: several per packet", "realtime",
               choices=("realtime", "buffered")),
         Param("rate_hz", "number", "the RDT output rate, Hz (the F/T sequence's clock); default the box's "

@@ -258,7 +258,10 @@ def test_bad_datagrams_and_status_errors_never_crash_the_reader(wait_for):
     ({"calibration_fields": {"comrdtrate": "1000"}}, "comrdtrate: the box says 1000, the scene 7000"),
     ({"calibration_fields": {"cfgcpf": "1000000"}, "calapi_fields": {"calcpf": "1000000"}},
      "calcpf: the box says 1000000, the scene 100000"),
-    ({"calibration_fields": {"cfgcpf": "1000000"}, "calapi": False}, "cfgcpf: the box says 1000000, the scene 100000"),
+    ({"calibration_fields": {"cfgcpf": "1000000"}, "calapi": False, "tcp": False},
+     "cfgcpf: the box says 1000000, the scene 100000"),
+    ({"calibration_fields": {"cfgcpf": "1000000"}, "calapi": False}, "cfgcpf: the configuration's counts per SI unit "
+     "(1e+06) are not the calibration's (100000, TCP 49151 READCALINFO countsPerForce/countsPerTorque)"),
     ({"calibration_fields": {"cfgcpf": "1000000"}}, "cfgcpf: the configuration's counts per SI unit (1e+06) are not "
      "the calibration's (100000, /netftcalapi.xml calcpf/calcpt)"),
     ({"calapi_fields": {"scalfu": "lbf"}, "calibration_fields": {"scfgfu": "lbf"}},
