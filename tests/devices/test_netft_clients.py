@@ -185,9 +185,9 @@ def test_where_port_80_is_taken_the_pages_move_to_a_free_port_and_say_so(ft_sim,
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as squatter:
         try:
             squatter.bind((host, 80))
-        except OSError:
-            pytest.skip("cannot bind port 80 here: the fallback is what every emulator does")
-        squatter.listen()
+            squatter.listen()
+        except OSError:  # no right to bind port 80 here: the emulator has none either, the same fallback
+            pass
         scene, spec, emu = _box(ft_sim, host=host, port=0)
         note = emu.endpoint["http_port_note"]
         assert emu.endpoint["http_port"] != 80 and f"{host}:80" in note and str(emu.endpoint["http_port"]) in note
