@@ -160,9 +160,9 @@ class PipelineSettings:
             data = _from_flat(data)
         elif data["schema"] != SCHEMA:
             raise SettingsError(f"pipeline settings schema {data['schema']!r}: this version reads {SCHEMA}")
-        sections = {f.name: f.type for f in fields(PipelineSettings)}
-        _check_keys("pipeline settings", data.keys() - {"schema"}, set(sections), set(sections))
-        return PipelineSettings(**{name: _section_in(name, data[name]) for name in sections})
+        names = set(SECTION_TYPES)
+        _check_keys("pipeline settings", data.keys() - {"schema"}, names, names)
+        return PipelineSettings(**{name: _section_in(name, data[name]) for name in SECTION_TYPES})
 
 
 SECTION_TYPES: dict[str, type] = {"corrections": Corrections, "motion": MotionSettings,
