@@ -12,9 +12,12 @@ from .device_params import ParamError, check_params, check_transport, device_kin
 from .errors import SceneError
 from .schema import (
     COMPENSATION_LEVELS,
+    SENSING_KINDS,
+    SENSOR_MOUNTS,
     SIGN_CONVENTIONS,
     Coupling,
     DeviceSpec,
+    JointTorqueSpec,
     RobotSpec,
     Scene,
     SensorSpec,
@@ -172,8 +175,8 @@ class _Parser:
 
     # -- sections --------------------------------------------------------------------------------------
     def scene(self, data: dict) -> Scene:
-        self.unknown_keys(data, {"schema", "name", "description", "robot", "gravity", "sensor",
-                                 "touchable", "compensation", "devices", "world"}, "")
+        self.unknown_keys(data, {"schema", "name", "description", "robot", "gravity", "sensor", "joint_torque",
+                                 "sensing", "touchable", "compensation", "devices", "world"}, "")
         schema = self.get(data, "schema", "", int)
         if schema != SCHEMA_VERSION:
             raise self.fail("schema", f"expected schema version {SCHEMA_VERSION}, got {schema}")
@@ -183,16 +186,42 @@ class _Parser:
         robot = self.robot(self.table(data, "robot"))
         gravity = self.vector(self.table(data, "gravity"), "vector", "gravity.", 3)
         self.unknown_keys(data["gravity"], {"vector"}, "gravity.")
-        sensor = self.sensor(self.table(data, "sensor"))
+        sensor = self.sensor(self.table(data, "sensor")) if "sensor" in data else None
+        joint_torque = self.joint_torque(self.table(data, "joint_torque"), len(robot.joints)) \
+            if "joint_torque" in data else None
+        has_currents = "torque_constant" in data["robot"]
         touchable = self.touchable(data.get("touchable"))
         comp = self.table(data, "compensation")
         self.unknown_keys(comp, {"level"}, "compensation.")
         level = self.choice(comp, "level", "compensation.", COMPENSATION_LEVELS)
         devices = self.devices(data.get("devices", []))
         world = self.world(self.table(data, "world"), robot.joints) if "world" in data else IDEAL
-        return Scene(name=name, description=self.get(data, "description", "", str, ""), path=self.path,
-                     robot=robot, gravity=gravity, sensor=sensor, touchable=touchable,
-                     compensation=level, devices=devices, world=world)
+        scene = Scene(name=name, description=self.get(data, "description", "", str, ""), path=self.path,
+                      robot=robot, gravity=gravity, sensor=sensor, touchable=touchable,
+                      compensation=level, devices=devices, world=world, joint_torque=joint_torque,
+                      has_currents=has_currents)
+        if not scene.available.kinds:
+            raise self.fail("sensor", "the scene senses nothing: give an F/T sensor ([sensor]), joint torque "
+                                      "sensors ([joint_torque]) or motor currents ([robot] torque_constant)")
+        return self.sensing(data["sensing"], scene) if "sensing" in data else scene
+
+    def sensing(self, t: Any, scene: Scene) -> Scene:
+        """``[sensing] uses``: which of what the scene has the pipeline uses."""
+        if not isinstance(t, dict):
+            raise self.fail("sensing", f"expected a table, got {type(t).__name__}")
+        self.unknown_keys(t, {"uses"}, "sensing.")
+        uses = self.get(t, "uses", "sensing.", list)
+        if not all(isinstance(u, str) for u in uses) or len(set(uses)) != len(uses):
+            raise self.fail("sensing.uses", f"expected distinct names of {', '.join(SENSING_KINDS)}")
+        return scene.with_sensing(uses)
+
+    def joint_torque(self, t: dict, n: int) -> JointTorqueSpec:
+        p = "joint_torque."
+        self.unknown_keys(t, {"noise_std", "range", "offset", "rate_hz"}, p)
+        return JointTorqueSpec(noise_std=self.vector(t, "noise_std", p, n, nonneg=True),
+                               range=self.vector(t, "range", p, n, positive=True),
+                               offset=self.vector(t, "offset", p, n, default=[0.0] * n),
+                               rate_hz=self.number(t, "rate_hz", p, positive=True, default=1000.0))
 
     def robot(self, t: dict) -> RobotSpec:
         p = "robot."
@@ -278,7 +307,7 @@ class _Parser:
     def sensor(self, t: dict) -> SensorSpec:
         p = "sensor."
         self.unknown_keys(t, {"site", "reports", "range", "noise_std", "quantization", "rate_hz", "bias",
-                              "drift_per_s", "accuracy"}, p)
+                              "drift_per_s", "accuracy", "mount"}, p)
         accuracy = self.number(t, "accuracy", p, default=0.005)
         if not 0.0 <= accuracy <= 0.2:
             raise self.fail(p + "accuracy", f"expected 0 to 0.2 (relative), got {accuracy}")
@@ -292,6 +321,7 @@ class _Parser:
             bias=self.vector(t, "bias", p, 6, default=[0.0] * 6),
             drift_per_s=self.vector(t, "drift_per_s", p, 6, default=[0.0] * 6),
             accuracy=accuracy,
+            mount=self.choice(t, "mount", p, SENSOR_MOUNTS) if "mount" in t else "base",  # type: ignore[arg-type]
         )
 
     def world(self, t: dict, joints: tuple[str, ...]) -> WorldSpec:

@@ -4,15 +4,21 @@ All quantities are SI (m, kg, s, N, N m, rad). See docs/conventions.md for frame
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
+from .errors import SceneError
 from .world_spec import IDEAL, WorldSpec
 
 SignConvention = Literal["base_on_arm", "arm_on_base"]
+SensorMount = Literal["base", "flange"]
+SENSOR_MOUNTS: tuple[SensorMount, ...] = ("base", "flange")
+SensingKind = Literal["base_ft", "flange_ft", "joint_torques", "currents"]
+SENSING_KINDS: tuple[SensingKind, ...] = ("base_ft", "flange_ft", "joint_torques", "currents")
 CompensationLevel = Literal["bias", "gravity", "dynamics"]
 COMPENSATION_LEVELS: tuple[CompensationLevel, ...] = ("bias", "gravity", "dynamics")
 SIGN_CONVENTIONS: tuple[SignConvention, ...] = ("base_on_arm", "arm_on_base")
@@ -64,6 +70,9 @@ class SensorSpec:
     drift_per_s: np.ndarray
     # 1 sigma, relative: each gain and crosstalk term (crosstalk in units of the two axes' ranges)
     accuracy: float = 0.005
+    # "base": under the arm, it carries the whole arm; "flange": between the flange and the tool, it
+    # carries only the bodies beyond its site (tool, payload) and sees only contacts on them
+    mount: SensorMount = "base"
 
     @property
     def noise_cov(self) -> np.ndarray:
@@ -77,6 +86,48 @@ class SensorSpec:
         the arm's on the mount (``arm_on_base``). ``reading = reading_sign * base_on_arm wrench``;
         a contact (p, c x p) on the arm changes the reading by ``-reading_sign * (p, c x p)``."""
         return 1.0 if self.reports == "base_on_arm" else -1.0
+
+
+@dataclass(frozen=True)
+class JointTorqueSpec:
+    """Torque sensors in the joints, on the link side of the gears (Franka's ``tau_J``): they read the
+    torque the joint transmits, i.e. the motor's torque less the gear's friction. Per joint, N m."""
+
+    noise_std: np.ndarray  # 1 sigma white noise
+    range: np.ndarray  # symmetric limit of the reading
+    offset: np.ndarray  # the simulated sensors' offsets (the world's truth; identification estimates them)
+    rate_hz: float = 1000.0
+
+
+@dataclass(frozen=True)
+class Sensing:
+    """Which sensing a scene has, or which of it the pipeline uses: any of :data:`SENSING_KINDS`.
+    ``base_ft`` / ``flange_ft``: the scene's F/T sensor by its mount; ``joint_torques``: joint torque
+    sensors; ``currents``: motor currents through the torque constants and the joints' friction."""
+
+    kinds: frozenset[SensingKind]
+
+    @property
+    def ft(self) -> SensorMount | None:
+        """The F/T sensor's mount when an F/T sensor is used, else None."""
+        return "base" if "base_ft" in self.kinds else "flange" if "flange_ft" in self.kinds else None
+
+    @property
+    def currents(self) -> bool:
+        return "currents" in self.kinds
+
+    @property
+    def joint_torques(self) -> bool:
+        return "joint_torques" in self.kinds
+
+    @property
+    def joint(self) -> bool:
+        """Joint signals (currents or torques) are used."""
+        return self.currents or self.joint_torques
+
+    def label(self) -> str:
+        """e.g. ``currents + flange_ft`` (in :data:`SENSING_KINDS`' order)."""
+        return " + ".join(k for k in SENSING_KINDS if k in self.kinds) or "nothing"
 
 
 @dataclass(frozen=True)
@@ -101,11 +152,54 @@ class Scene:
     path: Path
     robot: RobotSpec
     gravity: np.ndarray  # m/s^2, base frame
-    sensor: SensorSpec
+    sensor: SensorSpec | None  # the 6-axis F/T sensor (``[sensor]``), None: the scene has none
     touchable: tuple[TouchableLink, ...]
     compensation: CompensationLevel
     devices: tuple[DeviceSpec, ...]
     world: WorldSpec = IDEAL  # how the simulated world's arm differs from this model (``[world]``)
+    joint_torque: JointTorqueSpec | None = None  # joint torque sensors (``[joint_torque]``), if any
+    has_currents: bool = True  # the arm reports motor currents (``[robot] torque_constant`` given)
+    uses: frozenset[SensingKind] | None = None  # ``[sensing] uses``; None: all the scene has
+
+    @property
+    def available(self) -> Sensing:
+        """The sensing the scene has."""
+        kinds: set[SensingKind] = set()
+        if self.sensor is not None:
+            kinds.add("base_ft" if self.sensor.mount == "base" else "flange_ft")
+        if self.joint_torque is not None:
+            kinds.add("joint_torques")
+        if self.has_currents:
+            kinds.add("currents")
+        return Sensing(frozenset(kinds))
+
+    @property
+    def sensing(self) -> Sensing:
+        """The sensing the pipeline uses: ``[sensing] uses``, else all the scene has."""
+        return self.available if self.uses is None else Sensing(self.uses)
+
+    def with_sensing(self, kinds) -> Scene:
+        """This scene using only ``kinds`` (names of :data:`SENSING_KINDS`) of what it has; the hardware
+        (and so the simulated world) stays as it is. A ``SceneError`` names what it lacks."""
+        wanted = frozenset(kinds)
+        unknown = sorted(wanted - set(SENSING_KINDS))
+        if unknown:
+            raise SceneError(self.path, "sensing.uses", f"unknown sensing {unknown[0]!r} "
+                             f"(known: {', '.join(SENSING_KINDS)})")
+        missing = sorted(wanted - self.available.kinds)
+        if missing:
+            raise SceneError(self.path, "sensing.uses", f"scene {self.name!r} has no {', '.join(missing)} "
+                             f"(it has: {self.available.label()})")
+        if not wanted:
+            raise SceneError(self.path, "sensing.uses", "expected at least one kind of sensing")
+        return dataclasses.replace(self, uses=wanted)
+
+    def require_ft(self, purpose: str) -> SensorSpec:
+        """The scene's F/T sensor; a ``SceneError`` saying that ``purpose`` needs one when it has none."""
+        if self.sensor is None:
+            raise SceneError(self.path, "sensor", f"scene {self.name!r} has no F/T sensor: {purpose} needs one "
+                             f"(it has: {self.available.label()})")
+        return self.sensor
 
     @property
     def n_joints(self) -> int:
