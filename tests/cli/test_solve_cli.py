@@ -126,3 +126,28 @@ def test_file_errors_are_one_line_messages(tmp_path):
         assert proc.returncode != 0
         assert proc.stderr.strip().count("\n") == 0 and says in proc.stderr, proc.stderr
         assert "Traceback" not in proc.stderr
+
+
+def test_leng2016_takes_base_moments_of_the_papers_experiment(tmp_path):
+    """Forces of a few hundred newtons at the paper's test pose make base moments above 100 N m: the
+    scene's sensor range must take them (it is sized from the arm and its loads, not refuse them)."""
+    scene = load_scene("leng2016")
+    model = ArmModel(scene)
+    q = np.array(scene.robot.home)
+    b_T = model.kinematics(q)["link3"]
+    point = b_T[:3, :3] @ np.array([0.18, 0.0, 0.04]) + b_T[:3, 3]
+    lines = []
+    for magnitude in (100.0, 250.0, 400.0):
+        force = -magnitude * (b_T[:3, :3] @ np.array([0.0, 0.0, 1.0]))
+        lines.append(_raw_line(model, q, "link3", point, force))
+    moments = [np.abs(json.loads(line)["wrench"][3:]).max() for line in lines]
+    assert max(moments) > 100.0  # the case the old +-50 N m range refused
+    src, out = tmp_path / "in.jsonl", tmp_path / "out.jsonl"
+    src.write_text("\n".join(lines) + "\n")
+    proc = subprocess.run([*FTC, "solve", "--scene", "leng2016", "--input", str(src), "--output", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    for record in map(json.loads, out.read_text().splitlines()):
+        assert "error" not in record, record
+        assert record["contact"] and record["link"] == "link3"
+        np.testing.assert_allclose(record["point"], point, atol=1e-6)
