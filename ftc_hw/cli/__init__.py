@@ -100,6 +100,9 @@ ZenohConfigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--zenoh-config", metavar="FILE.json5", exists=True, dir_okay=False,
     help="A Zenoh configuration file under the session: TLS, user-password credentials, access control "
          "(docs/bus.md).")]
+SensingOption = Annotated[Optional[str], typer.Option(  # noqa: UP045
+    metavar="KIND,...", help="Which of the scene's sensing to use: base_ft, flange_ft, joint_torques, currents, "
+    "comma-separated (default: the scene's own; docs/scenes.md, Sensing).")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
 # monitor, demo, replay: the live page
@@ -218,6 +221,7 @@ def demo(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     record: Annotated[Optional[Path], typer.Option(help="Also record the run to this MCAP file.")] = None,  # noqa: UP045
     reality: Annotated[RealityChoice, reality_option(RealityChoice.typical)] = RealityChoice.typical,
+    sensing: SensingOption = None,
     identify_seconds: Annotated[float, typer.Option(
         min=0.0, help="In a typical or harsh world: seconds of planned excitation the drawn arm is identified from "
                       "first (ftc identify --sim --plan); 0 monitors it with the nominal model.")] = 30.0,
@@ -233,9 +237,11 @@ def demo(
     from ftc_hw.app.demo import run_demo  # lazy: CLI start-up
     from ftc_hw.app.monitor.config import DemoOptions, MonitorOptions, SimOptions  # lazy: CLI start-up
     from ftc_hw.app.monitor.view import make_console  # lazy: CLI start-up
+    from ftc_hw.cli.common import sensing_kinds  # lazy: CLI start-up
     from ftc_hw.cli.monitor import outcome_or_exit, view_options  # lazy: CLI start-up
 
-    options = DemoOptions(MonitorOptions(scene, sim=True, world=SimOptions(scenario, seed, reality.value),
+    options = DemoOptions(MonitorOptions(scene, sensing_kinds(sensing), sim=True,
+                                         world=SimOptions(scenario, seed, reality.value),
                                          duration=duration, record=record,
                                          view=view_options(view.value, host, port, view_hz), title="ftc demo"),
                           identify_s=identify_seconds)
@@ -274,6 +280,7 @@ def monitor(
              "time T, +S after the previous fault, or onset+S (docs/monitor.md).")] = None,
     device: DeviceOption = None,
     rig: RigOption = None,
+    sensing: SensingOption = None,
     reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "With --sim: ")] = RealityChoice.ideal,
     refine: Annotated[bool, typer.Option("--refine", metavar="", help="Keep refining the calibration's identified "
                                          "model (ftc identify) while the arm moves free, and say at the end how far "
@@ -301,7 +308,10 @@ def monitor(
                        faults=tuple(fault or ()), resume_after_s=resume_after)
     devices = DeviceOptions(overrides=tuple(device or ()), rig=rig, remote=remote, remote_rig=remote_name,
                             zenoh_config=zenoh_config, readers=readers.value)
-    options = MonitorOptions(scene, sim=sim, world=world, duration=duration, calibration=calibration,
+    from ftc_hw.cli.common import sensing_kinds  # lazy: CLI start-up
+
+    options = MonitorOptions(scene, sensing_kinds(sensing), sim=sim, world=world, duration=duration,
+                             calibration=calibration,
                              level=None if level is Level.scene else level.value, refine=refine, record=record,
                              events=events, reflex=reflex.value if reflex else None,
                              view=view_options((View.none if no_view else view).value, host, port, view_hz),

@@ -39,10 +39,14 @@ Overrides = dict[str, dict[str, Any]]  # device name -> key -> value
 CLI = "--device"
 
 
-def load_rig_scene(name_or_path: str | Path, device_options: Iterable[str] = (), rig: Path | None = None) -> Scene:
-    """The scene with the rig file's overrides, then the ``--device`` options', applied. SceneError
-    names the file or option, the device and key, and what is accepted."""
+def load_rig_scene(name_or_path: str | Path, device_options: Iterable[str] = (), rig: Path | None = None,
+                   sensing: Iterable[str] | None = None) -> Scene:
+    """The scene with the rig file's overrides, then the ``--device`` options', applied, using only
+    ``sensing`` of what it has (``--sensing``; None: what the scene says). SceneError names the file or
+    option, the device and key, and what is accepted."""
     scene = load_scene(name_or_path)
+    if sensing is not None:
+        scene = scene.with_sensing(sensing)
     if rig is not None:
         scene = apply_overrides(scene, read_rig_file(rig, scene), str(rig))
     overrides: Overrides = {}

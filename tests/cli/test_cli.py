@@ -202,3 +202,10 @@ def test_help_shows_no_type_after_a_flag(command):
     r = runner.invoke(app, [*command, "--help"], env={"COLUMNS": "200"})
     assert r.exit_code == 0 and "--help" in r.output
     assert "<bool>" not in r.output, [line for line in r.output.splitlines() if "<bool>" in line]
+
+
+def test_sensing_a_scene_does_not_have_is_refused_by_name():
+    proc = subprocess.run([*_ftc(), "monitor", "--scene", "ur5e", "--sim", "--sensing", "joint_torques",
+                           "--duration", "1", "--no-view"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1
+    assert "scene 'ur5e' has no joint_torques (it has: base_ft + currents)" in proc.stderr

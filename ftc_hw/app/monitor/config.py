@@ -74,6 +74,7 @@ class MonitorOptions:
     """One monitor run (``ftc monitor``; ``ftc demo`` and ``ftc identify --sim`` run one too)."""
 
     scene: str  # a built-in scene's name or a scene file
+    sensing: tuple[str, ...] | None = None  # which of the scene's sensing to use (None: the scene's own)
     sim: bool = False  # the scene's emulated devices in a simulated world, as ``world`` says
     world: SimOptions = SimOptions()
     duration: float | None = None  # simulated seconds with sim, else wall-clock seconds (None: until Ctrl-C)

@@ -97,7 +97,7 @@ def _wait_idle(monitor: LiveMonitor, timeout: float = 5.0) -> None:
 def run_monitor(cfg: MonitorOptions, console: Console | None = None) -> MonitorOutcome:
     console = console or Console()
     try:
-        scene = load_rig_scene(cfg.scene, cfg.devices.overrides, cfg.devices.rig)
+        scene = load_rig_scene(cfg.scene, cfg.devices.overrides, cfg.devices.rig, cfg.sensing)
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
     _check_remote(cfg)
