@@ -2,7 +2,8 @@
 content, the columns read in SI units, the sensing the columns allow, bad rows counted by reason and
 never used, timing from 500 Hz down to 100 Hz with jittered steps, malformed files refused by name and
 line. ``tests/data/recordings/ur5e-sweep-ur_rtde.csv`` was written by ur_rtde 1.6.5's own
-``startFileRecording`` from the emulated ur5e (tests/record/ur_recording.py): the real format."""
+``startFileRecording`` from the emulated ur5e (tests/record/ur_recording.py; 120 rows as written, from
+the middle of a 2 s recording): the real format."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,7 +23,7 @@ from ftc_hw.record.ur_csv import (
     ur_csv_text,
     write_ur_csv,
 )
-from tests.record.ur_recording import with_bad_rows
+from tests.record.ur_bad_rows import with_bad_rows
 
 pytestmark = pytest.mark.compute  # files written and read: nothing against the wall clock
 
@@ -78,6 +79,9 @@ def test_the_format_is_told_from_the_content_not_the_name(tmp_path):
     client.write_text(ur_csv_text(cols, style=UR_CLIENT))
     rtde.write_text(ur_csv_text(cols, style=UR_RTDE))
     assert read_ur_csv(client).format == UR_CLIENT and read_ur_csv(rtde).format == UR_RTDE
+    bom = tmp_path / "saved_by_an_editor.csv"  # a byte-order mark before the header
+    bom.write_text("\ufeff" + ur_csv_text(cols, style=UR_RTDE), encoding="utf-8")
+    assert np.array_equal(read_ur_csv(bom).t, read_ur_csv(rtde).t)
 
 
 def test_urs_client_writer_form_exactly(tmp_path):
@@ -127,7 +131,8 @@ def test_bad_rows_are_counted_by_reason_and_never_used(style):
     more = [variant("actual_current_2", "inf"), variant("actual_current_0", "1000.0"),  # 1000 A: not physical
             variant("ft_raw_wrench_4", "-nan"), variant("joint_temperatures_1", "abc"),
             sep.join(row + ["0.5"]) + end, "\r\n" if style == UR_CLIENT else "\n",
-            variant("timestamp", "1234.0")]  # before the file's first row: time going backwards
+            variant("timestamp", "1234.0"),  # before the file's first row: time going backwards
+            variant("timestamp", "5.0e8")]  # one corrupted time far ahead: the rows after it are used
     lines[41:41] = more
     # a column the reader does not use (actual_TCP_pose) is not checked: that row is used
     lines[50] = variant("actual_TCP_pose_3", "nan", lines[50].rstrip("\r\n").split(sep))
@@ -135,7 +140,7 @@ def test_bad_rows_are_counted_by_reason_and_never_used(style):
     rec = parse_ur_csv("".join(lines) + cut_end, path="bad.csv")
     expected = {**expected, "not_finite:actual_current": 1, "out_of_range:actual_current": 1,
                 "not_finite:ft_raw_wrench": 1, "unparsable:joint_temperatures": 1, "too_many_fields": 1,
-                "blank": 1, "time_backwards": 1, "unterminated": 1}
+                "blank": 1, "time_backwards": 1, "unterminated": 1, "time_jump": 1}
     assert dict(rec.skipped) == expected
     good = parse_ur_csv(clean, path="clean.csv")  # every clean row kept, none of the bad ones
     for name in ("t", "q", "qd", "current", "ft_raw_wrench", "joint_temperatures", "target_moment"):

@@ -3,7 +3,7 @@ UR emulator fed by the simulated world (a :class:`WorldHost`, ur5e's sweep), rea
 (the real client library). ur_rtde's own ``startFileRecording`` writes one file (the real ur_rtde
 format); what ur_rtde received, polled here, goes through our writer of UR's RTDE client format (UR's
 client library is not on the package index: ``UrRtde``, ``rtde``, ``RTDE_Python_Client_Library``,
-``ur-rtde-client`` are not found). Also the bad rows real logs have, put into a file's text."""
+``ur-rtde-client`` are not found)."""
 from __future__ import annotations
 
 import time
@@ -54,7 +54,7 @@ def _poll(r, ring, n_joints: int, seconds: float) -> tuple[list[dict], list[Join
             s = _state(r)
             if s is not None:
                 states.append(s)
-        if time.monotonic() - drained > 0.1:
+        if time.monotonic() - drained > 0.02:
             world += [JointRecord.from_row(row.copy(), n_joints) for row in ring.new()]
             drained = time.monotonic()
         time.sleep(0.0003)
@@ -81,21 +81,3 @@ def record_emulated_arm(folder: Path, *, seconds: float = 2.0) -> EmulatedRecord
                 for name in GETTERS}
     client_file = write_ur_csv(folder / "ur_client.csv", received, style=UR_CLIENT)
     return EmulatedRecording(rtde_file, client_file, received, world_rows)
-
-
-def with_bad_rows(text: str, *, at: int = 20) -> tuple[str, dict[str, int]]:
-    """``text`` (a recording) with the bad rows real logs have put in after data row ``at``: a value of
-    1e300, a NaN, a row cut short, a repeated timestamp (the previous row again). Returns the text and
-    what the reader should count, by reason."""
-    lines = text.splitlines(keepends=True)
-    end = lines[1][len(lines[1].rstrip("\r\n")):]
-    sep = "," if "," in lines[0] else " "
-    row = lines[1 + at].rstrip("\r\n").split(sep)
-    q0 = lines[0].split(sep).index("actual_q_0")
-    huge, nan = list(row), list(row)
-    huge[q0 + 1] = str(1e300) if sep == " " else f"{1e300:.6f}"  # as each writer prints 1e300
-    nan[q0] = "nan"
-    cut = sep.join(row[: len(row) // 2])
-    bad = [sep.join(huge) + end, sep.join(nan) + end, cut + end, lines[1 + at]]
-    lines[2 + at:2 + at] = bad
-    return "".join(lines), {"out_of_range:actual_q": 1, "not_finite:actual_q": 1, "cut_short": 1, "time_repeated": 1}

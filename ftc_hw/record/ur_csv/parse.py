@@ -16,6 +16,7 @@ def parse_ur_csv(text: str, *, path: Path | str, bounds: PhysicalBounds = DEFAUL
     file cannot be used at all: no header, no ``timestamp``, no ``actual_q``/``actual_qd``, fewer than
     two usable rows."""
     path = Path(path)
+    text = text.removeprefix("\ufeff")  # a byte-order mark, as editors that saved the file may add
     lines = text.splitlines()
     layout = parse_header(lines[:2], path=str(path))
     rows = parse_rows(lines[1:], layout, first_line=2, terminated=text.endswith(("\n", "\r")), bounds=bounds)

@@ -1,17 +1,19 @@
 """A UR recording's data lines to arrays: rows that cannot be used are counted by reason and left
 out, never used. Pure: lines in, :class:`Rows` out.
 
-Reasons (``Rows.skipped`` keys): ``cut_short`` (fewer fields than the header), ``too_many_fields``,
-``unterminated`` (the last line has no line end: the writer stopped inside it), ``unparsable:<field>``
-(a value that is not a number), ``not_finite:<field>``, ``out_of_range:<field>`` (past
-:class:`PhysicalBounds`), ``time_repeated`` and ``time_backwards`` (a ``timestamp`` not after the
-newest kept row's), ``blank``. A row is counted once, for the first check it fails, in that order.
+Reasons (``Rows.skipped`` keys), in the order a row is checked (it counts once, for the first it
+fails): ``blank``, ``unterminated`` (the last line has no line end: the writer stopped inside it),
+``cut_short`` / ``too_many_fields`` (fewer / more fields than the header), ``unparsable:<field>`` (a value
+that is not a number), ``not_finite:<field>``, ``out_of_range:<field>`` (past :class:`PhysicalBounds`),
+``time_jump`` (one row's ``timestamp`` ahead of the next row's while the rows around it are in order),
+``time_repeated`` / ``time_backwards`` (a ``timestamp`` equal to / before the newest kept row's).
 """
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
+from operator import itemgetter
 
 import numpy as np
 
@@ -31,11 +33,12 @@ class Rows:
 
 
 def _tokens(lines: Sequence[str], first_line: int, layout: Layout, terminated: bool,
-            skipped: Counter[str]) -> tuple[list[list[str]], list[int]]:
-    """The used fields' tokens of each line with the header's field count, and its line number."""
-    used = [c for cols in layout.fields.values() for c in cols]
+            skipped: Counter[str]) -> tuple[list[str], list[int]]:
+    """The used fields' tokens of the lines with the header's field count, flat (k a row), and each
+    such line's number."""
+    pick = itemgetter(*[c for cols in layout.fields.values() for c in cols])
     n_cols = len(layout.columns)
-    out: list[list[str]] = []
+    out: list[str] = []
     numbers: list[int] = []
     for k, line in enumerate(lines):
         if not line.strip():
@@ -48,23 +51,25 @@ def _tokens(lines: Sequence[str], first_line: int, layout: Layout, terminated: b
         if len(parts) != n_cols:
             skipped["cut_short" if len(parts) < n_cols else "too_many_fields"] += 1
             continue
-        out.append([parts[c] for c in used])
+        out.extend(pick(parts))
         numbers.append(first_line + k)
     return out, numbers
 
 
-def _floats(tokens: list[list[str]], layout: Layout, skipped: Counter[str]) -> tuple[np.ndarray, np.ndarray]:
-    """(m, k) floats of the rows that parse, and which rows those are (mask over ``tokens``)."""
+def _floats(tokens: list[str], layout: Layout, skipped: Counter[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(m, k) floats of the rows that parse, and which rows those are (mask over the m rows)."""
     width = sum(len(c) for c in layout.fields.values())
-    try:  # the common case, in numpy's C loop
-        return np.array(tokens, dtype=float).reshape(len(tokens), width), np.ones(len(tokens), dtype=bool)
+    m = len(tokens) // width
+    try:  # the common case: every token a number
+        return np.fromiter(map(float, tokens), dtype=float, count=len(tokens)).reshape(m, width), np.ones(m, bool)
     except ValueError:
         pass
-    out = np.zeros((len(tokens), width))
-    ok = np.ones(len(tokens), dtype=bool)
-    for i, row in enumerate(tokens):
+    out = np.zeros((m, width))
+    ok = np.ones(m, dtype=bool)
+    for i in range(m):
+        row = tokens[i * width:(i + 1) * width]
         try:
-            out[i] = np.array(row, dtype=float)
+            out[i] = [float(x) for x in row]
         except ValueError:
             ok[i] = False
             skipped[f"unparsable:{_first_bad(row, layout)}"] += 1
@@ -95,10 +100,24 @@ def _check(values: dict[str, np.ndarray], keep: np.ndarray, bounds: PhysicalBoun
                 keep &= ~bad
 
 
+def _spikes(t: np.ndarray) -> np.ndarray:
+    """Single rows whose time is ahead of the next row's while the rows around them are in order (a
+    corrupted timestamp): without them, every later row would count as going backwards."""
+    out = np.zeros(len(t), dtype=bool)
+    if len(t) >= 3:
+        out[1:-1] = (t[1:-1] > t[2:]) & (t[:-2] < t[2:])
+        out[0] = t[0] > t[1] and t[1] < t[2]
+    return out
+
+
 def _in_time_order(t: np.ndarray, keep: np.ndarray, skipped: Counter[str]) -> None:
     """Keeps a row only if its time is after every earlier kept row's (the running maximum: a row not
-    kept never raised it)."""
+    kept never raised it); a lone row ahead of its neighbours goes first (``time_jump``)."""
     idx = np.flatnonzero(keep)
+    spike = _spikes(t[idx])
+    skipped["time_jump"] += int(spike.sum())
+    keep[idx[spike]] = False
+    idx = idx[~spike]
     if idx.size < 2:
         return
     tk = t[idx]
