@@ -3,7 +3,7 @@ UR emulator fed by the simulated world (a :class:`WorldHost`, ur5e's sweep), rea
 (the real client library). ur_rtde's own ``startFileRecording`` writes one file (the real ur_rtde
 format); what ur_rtde received, polled here, goes through our writer of UR's RTDE client format (UR's
 client library is not on the package index: ``UrRtde``, ``rtde``, ``RTDE_Python_Client_Library``,
-``ur-rtde-client`` are not found)."""
+``ur-rtde-client``, ``UrRtdeClient`` are not found)."""
 from __future__ import annotations
 
 import time
