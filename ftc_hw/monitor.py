@@ -55,7 +55,7 @@ from .bus import (
     joints_topic,
     wrench_topic,
 )
-from .pipeline import ContactPipeline, FrameResult, PipelineSettings
+from .pipeline import FrameResult, PipelineSettings, pipeline_for
 from .scene import Scene
 
 MONITOR_INPUT = "monitor/input"
@@ -70,8 +70,11 @@ LOST_S = 0.25  # default: a stream silent this long is lost (shorter gaps: frame
 
 @dataclass(frozen=True, slots=True, eq=False)
 class PipelineInput:
-    """One F/T sample as the pipeline consumed it. ``t_host_ns``: the sample's aligned host time (the
-    pipeline's ``t_ns``); ``seq``/``source``: the F/T frame's; ``tare``: it went to the tare."""
+    """One sample as the pipeline consumed it: an F/T sample with the joint state at its time, or (a
+    scene sensed without a base F/T sensor) a joint sample with the F/T reading at its time, if used.
+    ``t_host_ns``: the sample's aligned host time (the pipeline's ``t_ns``); ``seq``/``source``: the
+    driving frame's; ``wrench`` (6,) or, no F/T sensor used, (0,); ``tau_j`` the joint torque sensors'
+    reading (N m) where used; ``tare``: it went to the tare."""
 
     t_host_ns: int
     t_device_ns: int | None
@@ -84,6 +87,7 @@ class PipelineInput:
     saturated: bool = False
     tare: bool = False
     joint_gap_ns: int = 0  # > 0: the joint state spans missed joint samples (this long between its samples)
+    tau_j: np.ndarray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,19 +98,27 @@ class MonitoredFrame:
 
 
 class LiveMonitor:
+    """The pipeline on the bus. Which stream drives it follows the scene's sensing: each F/T frame,
+    with the joint state at its time, when a base F/T sensor is used (``driver == "ft"``); else each
+    joint frame, with the (flange) F/T reading at its time where one is used (``driver == "joints"``:
+    motor currents, joint torques). The other stream is the side stream, sampled at the driver's times."""
+
     def __init__(self, bus: Bus, scene: Scene, *, ft_source: str = "ft", arm_source: str = "arm",
                  tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
                  max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, ft_lost_s: float = LOST_S,
                  arm_lost_s: float = LOST_S, settings: PipelineSettings | None = None) -> None:
         self.bus = bus
         self.scene = scene
-        self.pipeline = ContactPipeline(scene, settings)
+        self.pipeline = pipeline_for(scene, settings)
+        sensing = scene.sensing
+        self.driver = "ft" if sensing.ft == "base" else "joints"
+        self.uses_ft = sensing.ft is not None
         self.ft_topic = wrench_topic(ft_source)
         self.joint_topic = joints_topic(arm_source)
-        self.tare_s = tare_s
-        # a frame waits for the joint stream to pass it as long as a joint gap may last: on a loaded
-        # host the joint reader can be late by several periods, and extrapolating over that span near
-        # a reversal of the motion reads as a contact (normally the wait is under a joint period)
+        self.tare_s = tare_s if self.uses_ft else None  # nothing to tare without an F/T sensor
+        # a frame waits for the side stream to pass it as long as a gap may last: on a loaded host the
+        # side reader can be late by several periods, and extrapolating over that span near a reversal
+        # of the motion reads as a contact (normally the wait is under a period)
         self.wait_s = max_gap_ms / 1e3
         self.keep_frames = keep_frames
         self.publish_inputs = publish_inputs
@@ -118,30 +130,47 @@ class LiveMonitor:
         self._stop = threading.Event()
         self._tare_buf: list[tuple[np.ndarray, np.ndarray]] = []
         self._tare_until_ns: int | None = None
-        self.tared = tare_s is None
+        self.tared = self.tare_s is None
         self._ft_clock = ClockAligner()
         self._arm_clock = ClockAligner()
+        policy = SamplingPolicy(int(max_gap_ms * 1e6), "linear", int(max_extrapolate_ms * 1e6))
         # the joint state at each F/T sample: interpolated, or extrapolated a little past the newest
         # joint sample (holding would lag the arm, which the dynamics compensation reads as a contact)
-        self.joints = StateHistory(SamplingPolicy(int(max_gap_ms * 1e6), "linear", int(max_extrapolate_ms * 1e6)),
-                                   maxlen=4096, period_samples=JOINT_PERIOD_SAMPLES)
-        self._joint_sub = None
+        self.joints = StateHistory(policy, maxlen=4096, period_samples=JOINT_PERIOD_SAMPLES)
+        # joint-driven: the F/T reading (6) and its saturation (1) at each joint sample
+        self.wrenches = StateHistory(policy, maxlen=4096, period_samples=JOINT_PERIOD_SAMPLES)
+        self._side_sub = None
         self._lags: deque[int] = deque(maxlen=20_000)  # ns from a frame's arrival to its judgement
         self.lag_ns = 0  # the newest judged frame's (how far behind its input the monitor is now)
-        self._waiting: deque = deque()  # the worker's F/T frames waiting for the joint stream
+        self._waiting: deque = deque()  # the worker's driving frames waiting for the side stream
+        self._driving = "sensor" if self.driver == "ft" else "arm"
+        self._side = ("arm" if self.driver == "ft" else "sensor" if self.uses_ft else None)
         self.lost_after_ns = {"sensor": int(ft_lost_s * 1e9), "arm": int(arm_lost_s * 1e9)}
+        if not self.uses_ft:
+            del self.lost_after_ns["sensor"]
         self._rx_ns: dict[str, int | None] = {"sensor": None, "arm": None}  # host time of the newest frame
-        self._arm_back_t: int | None = None  # aligned time of the first joint sample after a loss
+        self._side_back_t: int | None = None  # aligned time of the side stream's first sample after a loss
+        self._last_driving_t: int | None = None  # joint-driven: the previous joint sample's aligned time
         self.lost: set[str] = set()
         self.losses: list[list] = []  # [stream, t_lost_ns, t_back_ns or None]
         self._source = {"sensor": ft_source, "arm": arm_source}
 
-    def backlog(self) -> int: return self._sub.pending if self._sub is not None else 0  # F/T frames to take
+    def backlog(self) -> int: return self._sub.pending if self._sub is not None else 0  # driving frames to take
+
+    @property
+    def side(self) -> StateHistory | None:
+        """The side stream's history: the joints (F/T-driven), the F/T readings (joint-driven), or None."""
+        return self.joints if self._side == "arm" else self.wrenches if self._side == "sensor" else None
 
     def start(self) -> LiveMonitor:
         if self._thread is None:
-            self._joint_sub = self.bus.subscribe(self.joint_topic, callback=self.on_joints)
-            self._sub = self.bus.subscribe(self.ft_topic, maxsize=4096)
+            if self.driver == "ft":
+                self._side_sub = self.bus.subscribe(self.joint_topic, callback=self.on_joints)
+                self._sub = self.bus.subscribe(self.ft_topic, maxsize=4096)
+            else:
+                if self.uses_ft:
+                    self._side_sub = self.bus.subscribe(self.ft_topic, callback=self.on_wrench)
+                self._sub = self.bus.subscribe(self.joint_topic, maxsize=4096)
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name="contact-monitor", daemon=True)
             self._thread.start()
@@ -152,13 +181,15 @@ class LiveMonitor:
             return
         self._stop.set()
         self._sub.close()
-        self._joint_sub.close()
+        if self._side_sub is not None:
+            self._side_sub.close()
         self._thread.join(timeout=5.0)
         self._thread = None
-        self.counters["ft_frames_dropped"] = self._sub.drops
+        prefix = "ft" if self.driver == "ft" else "joint"
+        self.counters[f"{prefix}_frames_dropped"] = self._sub.drops
         unjudged = self._sub.pending + len(self._waiting)  # a backlog the run ended with: never judged
         if unjudged:
-            self.counters["ft_frames_unjudged_at_stop"] = unjudged
+            self.counters[f"{prefix}_frames_unjudged_at_stop"] = unjudged
         if self._lags:  # from a frame's arrival to its judgement (the recent ones)
             lags = np.array(self._lags) / 1e6
             self.counters["judge_lag_ms_p50"] = round(float(np.median(lags)))
@@ -174,13 +205,17 @@ class LiveMonitor:
         self.stop()
 
     def _run(self) -> None:
-        # An F/T frame waits (at most wait_s) until the joint stream has passed its time, so the
-        # joint state is interpolated rather than extrapolated; the onset time does not change.
+        # A driving frame waits (at most wait_s) until the side stream has passed its time, so the
+        # side state is interpolated rather than extrapolated; the onset time does not change.
         # The wait is in the worker's time: frames queued behind a waiting one wait with it.
         # Frames are taken as they queued up, all at once: at 7 kHz the stream checks and the wake-up
         # are paid per batch, not per frame.
         pending: deque = deque()
         self._waiting = pending
+        clock = self._ft_clock if self.driver == "ft" else self._arm_clock
+        late = "ft_frames_late" if self.driver == "ft" else "joint_frames_late"
+        backlog = "ft_frames_backlog" if self.driver == "ft" else "joint_frames_backlog"
+        side = self.side
         while not self._stop.is_set():
             try:
                 batch = [self._sub.get(timeout=0.001 if pending else 0.01)]
@@ -192,16 +227,16 @@ class LiveMonitor:
             if batch:
                 arrived = time.monotonic()
                 for frame in batch:
-                    t_frame = self._aligned(self._ft_clock, frame)
+                    t_frame = self._aligned(clock, frame)
                     if frame.t_host_ns - t_frame > LATE_NS:  # a backlog between the device and us
-                        self.counters["ft_frames_late"] += 1
+                        self.counters[late] += 1
                     pending.append((arrived, t_frame, frame))
-                self._received("sensor", pending[-len(batch)][1])  # back (after a loss) from the first
+                self._received(self._driving, pending[-len(batch)][1])  # back (after a loss) from the first
             self._check_streams()
             now = time.monotonic()
             while pending:
                 arrived, t, frame = pending[0]
-                newest = self.joints.newest()
+                newest = side.newest() if side is not None and self._side not in self.lost else None
                 if newest is not None and newest < t and now - arrived < self.wait_s:
                     break
                 pending.popleft()
@@ -209,17 +244,17 @@ class LiveMonitor:
                 self._lags.append(lag)
                 self.lag_ns = lag
                 if lag > BACKLOG_NS:  # we fell behind our own reader
-                    self.counters["ft_frames_backlog"] += 1
+                    self.counters[backlog] += 1
                 try:
                     self.handle(frame, t)
                 except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor
                     self.counters["errors"] += 1
                     self.counters[f"error:{type(exc).__name__}"] += 1
 
-    # -- lost streams (the worker's thread; the joint callback only notes the time) ----------------------
+    # -- lost streams (the worker's thread; the side stream's callback only notes the time) --------------
     def _received(self, stream: str, t_frame: int) -> None:
         self._rx_ns[stream] = time.monotonic_ns()
-        if stream in self.lost and stream == "sensor":
+        if stream in self.lost and stream == self._driving:
             self._back(stream, t_frame)  # back from this sample's time: every later sample is after it
 
     def _check_streams(self) -> None:
@@ -230,9 +265,9 @@ class LiveMonitor:
                 continue
             if stream not in self.lost and now - rx > after:
                 self._lose(stream, now, rx)
-            elif stream == "arm" and stream in self.lost and now - rx <= after:
-                back = self._arm_back_t if self._arm_back_t is not None else rx
-                self._arm_back_t = None
+            elif stream == self._side and stream in self.lost and now - rx <= after:
+                back = self._side_back_t if self._side_back_t is not None else rx
+                self._side_back_t = None
                 self._back(stream, min(back, now))
 
     def _lose(self, stream: str, now: int, rx: int) -> None:
@@ -241,9 +276,14 @@ class LiveMonitor:
         self.counters[f"{stream}_lost"] += 1
         what = "F/T" if stream == "sensor" else "joint"
         self._stream_event(now, stream, f"{stream}_lost", f"no {what} frame for {(now - rx) / 1e9:.3f} s: "
-                           + ("no contact can be judged" if stream == "sensor" else
-                              "blind: F/T frames are dropped unjudged until joint state returns"))
+                           + self._loss_consequence(stream))
 
+    def _loss_consequence(self, stream: str) -> str:
+        if stream == self._driving:
+            return "no contact can be judged"
+        if stream == "arm":
+            return "blind: F/T frames are dropped unjudged until joint state returns"
+        return "contacts are judged from the joints alone until it returns (the F/T sensor's links blind)"
     def _back(self, stream: str, t_ns: int) -> None:
         """The stream is back from host time t_ns (its first sample's; never before the loss)."""
         self.lost.discard(stream)
@@ -281,12 +321,21 @@ class LiveMonitor:
         return clock.to_host(frame.t_device_ns)
 
     def on_joints(self, frame) -> None:
-        """A JointFrame: kept with its aligned time for interpolation at the F/T samples."""
+        """A JointFrame (F/T-driven): kept with its aligned time for interpolation at the F/T samples."""
         self._rx_ns["arm"] = time.monotonic_ns()  # the worker's check sees it back
         t = self._aligned(self._arm_clock, frame)
-        if "arm" in self.lost and self._arm_back_t is None:
-            self._arm_back_t = t  # back from this sample's time: F/T frames after it are judged with it
+        if "arm" in self.lost and self._side_back_t is None:
+            self._side_back_t = t  # back from this sample's time: F/T frames after it are judged with it
         self.joints.add(t, np.concatenate([frame.q, frame.qd, frame.current]))  # out of order: dropped
+
+    def on_wrench(self, frame) -> None:
+        """A WrenchFrame (joint-driven): kept with its aligned time for interpolation at the joint samples."""
+        self._rx_ns["sensor"] = time.monotonic_ns()
+        t = self._aligned(self._ft_clock, frame)
+        if "sensor" in self.lost and self._side_back_t is None:
+            self._side_back_t = t
+        saturated = 1.0 if frame.flags & WrenchFlag.SATURATED else 0.0
+        self.wrenches.add(t, np.append(frame.wrench, saturated))
 
     def _gap(self, span_ns: int) -> int:
         """``span_ns`` when it is more than 1.5 joint periods (missed samples), else 0."""
@@ -294,7 +343,10 @@ class LiveMonitor:
         return span_ns if period is not None and 2 * span_ns > 3 * period else 0
 
     def handle(self, frame, t: int | None = None) -> MonitoredFrame | None:
-        """Process one WrenchFrame; ``t``: its aligned time when already computed."""
+        """Process one driving frame (a WrenchFrame, or joint-driven a JointFrame); ``t``: its aligned
+        time when already computed."""
+        if self.driver == "joints":
+            return self._handle_joints(frame, t)
         if t is None:
             t = self._aligned(self._ft_clock, frame)
         joints = self.joints.at(t)
@@ -319,15 +371,46 @@ class LiveMonitor:
             self.bus.publish(MONITOR_INPUT, inp)
         return self.consume(inp)
 
+    def _handle_joints(self, frame, t: int | None) -> MonitoredFrame | None:
+        """One JointFrame (joint-driven), with the F/T reading at its time where one is used."""
+        if t is None:
+            t = self._aligned(self._arm_clock, frame)
+        gap = self._joint_gap(t, frame)
+        wrench, saturated = np.zeros(0), False
+        if self.uses_ft and "sensor" not in self.lost:
+            sampled = self.wrenches.at(t)
+            if isinstance(sampled, str):  # no F/T reading at this time: judged from the joints alone
+                self.counters[f"no_ft_state_{sampled}"] += 1
+            else:
+                wrench, saturated = sampled[0][:6], bool(sampled[0][6] > 0.0)
+        elif self.uses_ft:
+            self.counters["frames_without_ft"] += 1
+        if gap:
+            self.counters["joint_gap_frames"] += 1
+        tau_j = frame.tau if self.scene.sensing.joint_torques else None
+        if self.scene.sensing.joint_torques and tau_j is None:
+            self.counters["no_joint_torques"] += 1
+            return None
+        inp = PipelineInput(t, frame.t_device_ns, frame.seq, frame.source, wrench, frame.q, frame.qd, frame.current,
+                            saturated, tare=not self.tared and wrench.size > 0, joint_gap_ns=gap, tau_j=tau_j)
+        if self.publish_inputs:
+            self.bus.publish(MONITOR_INPUT, inp)
+        return self.consume(inp)
+
+    def _joint_gap(self, t: int, frame) -> int:
+        """Joint-driven: the span since the previous joint sample when samples were missed, else 0
+        (the joint history keeps the stream's period, as it does F/T-driven)."""
+        last, self._last_driving_t = self._last_driving_t, t
+        self.joints.add(t, np.concatenate([frame.q, frame.qd, frame.current]))
+        return 0 if last is None or t <= last else self._gap(t - last)
+
     def consume(self, inp: PipelineInput) -> MonitoredFrame | None:
         """One pipeline input (live, or from a recording): the tare or the pipeline; events go on the bus."""
         if inp.tare:
             self._tare(inp.t_host_ns, inp.wrench, inp.q)
             return None
         try:
-            result = self.pipeline.process(inp.t_host_ns, inp.wrench, inp.q, inp.qd, inp.current,
-                                           saturated=inp.saturated, t_device_ns=inp.t_device_ns,
-                                           joint_gap_ns=inp.joint_gap_ns)
+            result = self._process(inp)
         except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor (nor a replay)
             self.counters["errors"] += 1
             self.counters[f"error:{type(exc).__name__}"] += 1
@@ -341,6 +424,18 @@ class LiveMonitor:
         if self.keep_frames:
             self.frames.append(mf)
         return mf
+
+    def _process(self, inp: PipelineInput) -> FrameResult:
+        if self.driver == "ft":
+            return self.pipeline.process(inp.t_host_ns, inp.wrench, inp.q, inp.qd, inp.current,
+                                         saturated=inp.saturated, t_device_ns=inp.t_device_ns,
+                                         joint_gap_ns=inp.joint_gap_ns)
+        sensing = self.scene.sensing
+        return self.pipeline.process_joints(inp.t_host_ns, inp.q, inp.qd,
+                                            current=inp.current if sensing.currents else None,
+                                            tau_j=inp.tau_j if sensing.joint_torques else None,
+                                            wrench=inp.wrench if inp.wrench.size else None,
+                                            t_device_ns=inp.t_device_ns, joint_gap_ns=inp.joint_gap_ns)
 
     def _tare(self, t: int, wrench, q) -> None:
         if self._tare_until_ns is None:

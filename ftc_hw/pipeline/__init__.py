@@ -3,6 +3,7 @@ from .contact import ContactPipeline, FrameResult, corrected_scene
 from .events import ContactEvents, PreviousFrame, gain_std_of
 from .localization import LocalizationStage
 from .motion import Compensated, MotionStage
+from .select import pipeline_for
 from .settings import (
     SECTION_TYPES,
     Corrections,
@@ -20,5 +21,5 @@ __all__ = [
     "NO_CLOCK", "SECTION_TYPES", "STAGES", "Compensated", "ContactEvents", "ContactPipeline", "Corrections",
     "DetectionSettings", "EventSettings", "FrameResult", "LocalizationSettings", "LocalizationStage", "ModelErrorSpec",
     "MotionSettings", "MotionStage", "PipelineSettings", "PreviousFrame", "SettingsError", "StageClock",
-    "corrected_scene", "gain_std_of",
+    "corrected_scene", "gain_std_of", "pipeline_for",
 ]

@@ -58,14 +58,19 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "ftc_hw.DeviceEvent": _schema("ftc_hw.DeviceEvent", "device or stream event", {
         "t_host_ns": _HOST, "source": _STR, "kind": _STR, "message": _STR,
         "counters": {"type": "object", "additionalProperties": _NUM}}),
-    "ftc_hw.PipelineInput": _schema("ftc_hw.PipelineInput", "one F/T sample as the contact pipeline consumed it: "
-                                    "aligned time, raw wrench, joint state interpolated at that time", {
+    "ftc_hw.PipelineInput": _schema("ftc_hw.PipelineInput", "one sample as the contact pipeline consumed it: "
+                                    "aligned time, raw wrench, joint state interpolated at that time (or, a scene "
+                                    "sensed without a base F/T sensor, a joint sample and the F/T reading there)", {
         "t_host_ns": {"type": "integer", "description": "the sample's aligned host time, ns"},
-        "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR, "wrench": _vec(6, "N, N m"),
+        "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR,
+        "wrench": _vec(None, "N, N m: 6 values, or none where no F/T sensor is used"),
         "q": _vec(None, "rad"), "qd": _vec(None, "rad/s"), "current": _vec(None, "A"),
         "saturated": {"type": "boolean"}, "tare": {"type": "boolean"},
         "joint_gap_ns": {"type": "integer", "description": "> 0: the joint state spans missed joint samples "
-                         "(ns between them); absent in older recordings"}}),
+                         "(ns between them); absent in older recordings"},
+        "tau_j": {"type": ["array", "null"], "items": _NUM,
+                  "description": "N m, the joint torque sensors' reading where used; absent in older recordings"}},
+        optional=("joint_gap_ns", "tau_j")),
 }
 
 
@@ -106,7 +111,8 @@ def encode(frame: Any) -> tuple[str, bytes]:
                                            "seq": frame.seq, "source": frame.source, "wrench": _list(frame.wrench),
                                            "q": _list(frame.q), "qd": _list(frame.qd),
                                            "current": _list(frame.current), "saturated": bool(frame.saturated),
-                                           "tare": bool(frame.tare), "joint_gap_ns": int(frame.joint_gap_ns)}
+                                           "tare": bool(frame.tare), "joint_gap_ns": int(frame.joint_gap_ns),
+                                           "tau_j": None if frame.tau_j is None else _list(frame.tau_j)}
     else:
         raise TypeError(f"no schema for {type(frame).__name__}")
     try:
@@ -159,7 +165,10 @@ def decode(schema: str, data: bytes) -> Any:
                 raise ValueError(f"PipelineInput.{k}: expected a finite vector")
             return a
 
-        return PipelineInput(int(d["t_host_ns"]), d["t_device_ns"], int(d["seq"]), str(d["source"]), arr("wrench"),
+        wrench = arr("wrench")
+        if wrench.shape[0] not in (0, 6):
+            raise ValueError(f"PipelineInput.wrench: expected 6 values or none, got {wrench.shape[0]}")
+        return PipelineInput(int(d["t_host_ns"]), d["t_device_ns"], int(d["seq"]), str(d["source"]), wrench,
                              arr("q"), arr("qd"), arr("current"), bool(d["saturated"]), bool(d["tare"]),
-                             int(d.get("joint_gap_ns", 0)))
+                             int(d.get("joint_gap_ns", 0)), None if d.get("tau_j") is None else arr("tau_j"))
     raise ValueError(f"unknown schema {schema!r}")
