@@ -322,7 +322,8 @@ def monitor(
 
 @app.command()
 def replay(
-    path: Annotated[Path, typer.Argument(help="An MCAP file recorded by ftc monitor --record.")],
+    path: Annotated[Path, typer.Argument(help="An MCAP file recorded by ftc monitor --record, or a UR recording "
+                                         "(the CSV of UR's RTDE client or of ur_rtde; with --scene).")],
     speed: Annotated[float, typer.Option(min=0.0, help="Pace: 1 = as recorded, 0 = as fast as possible.")] = 1.0,
     events: Annotated[Optional[Path], typer.Option(help="Write the replayed events, one JSON line each.")] = None,  # noqa: UP045
     calibration: Annotated[Optional[Path], typer.Option(help="Replay with this calibration instead.")] = None,  # noqa: UP045
@@ -337,13 +338,17 @@ def replay(
     view_hz: Annotated[float, typer.Option(min=0.5, max=60.0, help=(
         "With --view web: the page's updates a second of the recording's time (the arm's pose; the plots and "
         "text once a second)."))] = 10.0,
+    scene: Annotated[Optional[str], typer.Option(help="A UR recording's scene (ur10e, ur5e, ... or a file).")] = None,  # noqa: UP045
+    sensing: SensingOption = None,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
     from ftc_hw.app.monitor.config import ReplayOptions  # lazy: CLI start-up
+    from ftc_hw.cli.common import sensing_kinds  # lazy: CLI start-up
     from ftc_hw.cli.monitor import replay_exit_code, view_options  # lazy: CLI start-up
 
     shown = view_options((View.none if no_view else view).value, host, port, view_hz)
-    raise typer.Exit(replay_exit_code(ReplayOptions(path, speed, events, calibration, shown), check))
+    options = ReplayOptions(path, speed, events, calibration, shown, scene=scene, sensing=sensing_kinds(sensing))
+    raise typer.Exit(replay_exit_code(options, check))
 
 
 @bench_app.command("solver")

@@ -10,6 +10,7 @@ import typer
 
 from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, ReplayOptions, ViewOptions
 from ftc_hw.app.monitor.replay import run_replay
+from ftc_hw.app.monitor.replay_csv import is_mcap, run_csv_replay
 from ftc_hw.app.monitor.view import make_console
 from ftc_hw.app.web.feed import WebOptions
 from ftc_hw.record.replay import ReplayError
@@ -54,10 +55,21 @@ def outcome_or_exit(run: Callable[[], T]) -> T:
 
 
 def replay_exit_code(options: ReplayOptions, check: bool) -> int:
-    """``ftc replay``: 1 when it cannot read or replay, and with ``check`` when the events differ; else 0."""
+    """``ftc replay``: 1 when it cannot read or replay, and with ``check`` when the events differ; else 0.
+    A UR recording (not MCAP) replays through ``--scene``'s monitor; it holds no events to check."""
     try:
+        if not is_mcap(options.recording):
+            if check:
+                typer.echo("error: --check compares with recorded events: a UR recording holds none", err=True)
+                return 2
+            run_csv_replay(options, make_console())
+            return 0
+        if options.scene is not None or options.sensing is not None:
+            typer.echo("error: --scene and --sensing are for UR recordings: an MCAP recording holds its own",
+                       err=True)
+            return 2
         result = run_replay(options, make_console())
-    except (MonitorSetupError, ReplayError) as exc:
+    except (MonitorSetupError, ReplayError, OSError) as exc:
         typer.echo(f"error: {exc}", err=True)
         return 1
     return 1 if check and not result.identical else 0
