@@ -18,15 +18,16 @@ recipe's period (1/frequency) is sent to that recipe's clients: ``timestamp`` is
 sample and ``actual_q/qd/current`` its values, bit for bit. ``target_*`` report the actual values.
 ``joint_temperatures`` come from a thermal model on the world's currents (``thermal.py``).
 F/T (sim_devices/SOURCES.md, "UR F/T"): with a flange sensor (the scene's ``[sensor] mount = "flange"``,
-an e-Series' built-in one; its site must be the ``[robot] flange`` frame) ``ft_raw_wrench`` is that
-sensor's reading from the world's F/T ring -- the newest sample at or before the packet's time
-(``ur_ft.py``), as the scene's sensor reports it (frame, sign, noise, bias, range) -- and
-``actual_TCP_force`` the external wrench it implies, in base axes (``ur_model.flange_wrench_base``).
-Without one (a base sensor, which no UR has, or none) ``actual_TCP_force`` is the controller's
-current-based estimate at the TCP (base axes) and ``ft_raw_wrench`` the same wrench in the flange
-frame (``ur_model.py``). Counted in the stats: ``ft_missing`` (none published yet: zeros sent),
-``ft_not_at_time`` (no F/T sample at or before the packet's time: the oldest held one was sent) and
-``ft_late`` (the one sent is more than two sensor periods old).
+an e-Series' built-in one: ``controller_version`` 5.9 or later and its site the ``[robot] flange``
+frame, refused otherwise) ``ft_raw_wrench`` is that sensor's reading from the world's F/T ring -- the
+newest sample at or before the packet's time (``ur_ft.py``), as the scene's sensor reports it (frame,
+sign, noise, bias, range) -- and ``actual_TCP_force`` the external wrench it implies, in base axes
+(``ur_model.flange_wrench_base``). Without one (a base sensor, which no UR has, or none)
+``actual_TCP_force`` is the controller's current-based estimate at the TCP (base axes) and
+``ft_raw_wrench`` the same wrench in the flange frame (``ur_model.py``). Counted in the stats:
+``ft_missing`` (none published yet: zeros sent), ``ft_not_at_time`` (no F/T sample at or before the
+packet's time: the oldest held one was sent) and ``ft_late`` (the one sent is more than two sensor
+periods old).
 Not modelled: momentum, tool I/O, euromap (0).
 
 Options: ``address``, ``rtde_port``, ``dashboard_port``, ``controller_version`` and ``frequency``
@@ -539,6 +540,9 @@ class UREmulator(Emulator):
         sensor = scene.sensor
         self.flange_ft = sensor is not None and sensor.mount == "flange"
         if self.flange_ft:
+            if self.version[:2] < (5, 9):  # ft_raw_wrench came with PolyScope 5.9 (UR's RTDE guide)
+                raise ValueError(f"controller_version {'.'.join(map(str, self.version))}: a flange F/T sensor "
+                                 "is an e-Series' and RTDE reports it (ft_raw_wrench) from 5.9")
             self.kin.check_flange_sensor(sensor.site)
         self.ft_sign = sensor.reading_sign if sensor is not None else 1.0
         super().__init__(device, scene, link, options)

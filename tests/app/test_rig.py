@@ -55,6 +55,8 @@ def test_a_ur_reading_its_flange_sensor_is_the_rig_s_f_t_sensor_and_its_arm(tmp_
     scene = flange_scene(tmp_path)  # a flange sensor the pipeline uses, no F/T device of its own
     arm = pick_device(scene, "arm")
     assert pick_device(scene, "ft") is arm and roles_of(arm, scene) == {"ft", "arm"}
+    with pytest.raises(RigError, match=r"^no address for device 'arm' \(ur-rtde: [^)]*\): give it with"):
+        build_rig(scene)  # named once
     rig = build_rig(scene, endpoints={"arm": {"address": "192.0.2.10"}})  # both roles: one adapter
     assert len(rig.adapters) == 1 and rig.ft is rig.arm and isinstance(rig.arm, URArm)
     assert rig.arm.topics == ("joints/arm", "wrench/arm") and "ft_raw_wrench" in rig.arm.variables

@@ -106,4 +106,8 @@ def test_a_flange_sensor_elsewhere_than_the_flange_frame_is_refused(scene):
     nowhere = dataclasses.replace(scene, sensor=dataclasses.replace(scene.sensor, site="no_such_site"))
     with pytest.raises(ValueError, match="no site 'no_such_site'"):  # ArmModel's SceneError
         UREmulator(device, nowhere, None, {"address": "127.0.0.41"})
+    for version in ("3.15", "5.8"):  # a CB3 has no flange sensor; RTDE has ft_raw_wrench from 5.9
+        with pytest.raises(ValueError, match="from 5.9"):
+            UREmulator(device, scene, None, {"address": "127.0.0.41", "controller_version": version,
+                                             "frequency": 125.0})
     assert D.OUTPUTS["ft_raw_wrench"] == "VECTOR6D"

@@ -44,7 +44,8 @@ def require_device(scene: Scene, role: Role) -> DeviceSpec:
 def check_located(specs: Iterable[DeviceSpec], endpoints: Mapping[str, Any] | None = None) -> None:
     """RigError naming every device with neither an emulator's endpoint nor an address (or locator)."""
     endpoints = endpoints or {}
-    unlocated = [s for s in specs if not endpoints.get(s.name) and s.kind in KINDS
+    unique = {s.name: s for s in specs}  # a device filling two roles is named once
+    unlocated = [s for s in unique.values() if not endpoints.get(s.name) and s.kind in KINDS
                  and not located(s.kind, s.address, s.params)]
     if unlocated:
         raise RigError(missing_address(unlocated))
