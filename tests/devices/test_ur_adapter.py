@@ -77,11 +77,20 @@ def test_the_flange_sensor_comes_on_the_same_connection_with_every_500_hz_packet
     assert adapter.roles == {"arm", "ft"}
     ring = world.ft_reader()
     wrenches, joints = bus.subscribe("wrench/arm", maxsize=10_000), bus.subscribe("joints/arm", maxsize=10_000)
-    time.sleep(1.0)
-    got, js = wrenches.drain(), joints.drain()
+    got: list = []
+    js: list = []
+    end = time.monotonic() + 5.0
+    while len(got) < 250 and time.monotonic() < end:  # about 0.5 s, longer on a loaded host
+        time.sleep(0.1)
+        got += wrenches.drain()
+        js += joints.drain()
+    js += joints.drain()
     records = ring.new()
     t_ring = np.array([r[0] for r in records])
-    assert len(got) >= 200 and [f.t_device_ns for f in got] == [j.t_device_ns for j in js]
+    by_time = {j.t_device_ns: j for j in js}
+    assert len(got) >= 200 and sum(f.t_device_ns not in by_time for f in got) <= 1  # (one around subscribing)
+    assert all((f.seq, f.t_host_ns) == (by_time[f.t_device_ns].seq, by_time[f.t_device_ns].t_host_ns)
+               for f in got if f.t_device_ns in by_time)  # each packet's two frames
     for f in got[-100:]:
         k = int(np.searchsorted(t_ring, f.t_device_ns / 1e9 + 1e-9)) - 1
         assert k >= 0 and f.t_device_ns / 1e9 - t_ring[k] < 0.002 + 1e-9  # within one sensor period
@@ -92,8 +101,8 @@ def test_the_flange_sensor_comes_on_the_same_connection_with_every_500_hz_packet
     assert np.array_equal(seqs * 2_000_000, [f.t_device_ns for f in got])  # the 500 Hz grid
     steps = np.diff(seqs)
     assert [bool(f.flags & WrenchFlag.SEQ_GAP) for f in got[1:]] == list(steps > 1)  # a gap, flagged where it is
-    assert int((steps - 1).sum()) <= adapter.counters["missed_packets"]  # and counted
-    assert len(got) >= 0.5 * (seqs[-1] - seqs[0] + 1)  # delivered: at least half the packets on a loaded host
+    assert int((steps - 1).sum()) <= adapter.counters["missed_packets"]  # and counted (every packet of the grid
+    # is sent: tests/sim/test_ur_emulator.py; ur_rtde keeps only the newest, so a slow poller misses some)
 
 
 def test_stop_and_pause_through_the_dashboard(world, arm):
