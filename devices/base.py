@@ -82,6 +82,16 @@ class Adapter(ABC):
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    @property
+    def roles(self) -> frozenset[str]:
+        """The rig roles it fills: its ``role``; an arm that also reads its own F/T sensor says both."""
+        return frozenset({self.role}) if self.role else frozenset()
+
+    @property
+    def topics(self) -> tuple[str, ...]:
+        """The bus topics it publishes frames on (one per kind of frame)."""
+        return (self.topic,)
+
     def wait_connected(self, timeout: float) -> bool:
         return self.connected.wait(timeout)
 

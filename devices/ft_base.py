@@ -29,6 +29,12 @@ STATUS_SATURATION_MASK = 0x3F
 STATUS_ERROR_MASK = 0x80 | 1 << 31  # the status bits of a device error (the stream formats' and CAN's)
 
 
+def at_range(wrench: Sequence[float], full_scale: np.ndarray) -> bool:
+    """Whether any axis of ``wrench`` (SI, 6) reached the device's full scale (6): a reading clipped there
+    is a lower bound (flagged ``SATURATED``) when the device sends no saturation bits."""
+    return bool(np.any(np.abs(np.asarray(wrench, dtype=float)) >= full_scale * (1 - 1e-9)))
+
+
 class Unwrapper:
     """Unwraps a counter of period ``modulus``: forward steps of less than half a period are kept,
     anything else is a reset (the next value starts a new epoch)."""
@@ -168,7 +174,7 @@ class FTAdapter(Adapter):
             if errors or self._status_error:
                 flags |= self._check_status(errors)
         elif self.range is not None:
-            sat = int(np.any(np.abs(np.asarray(wrench, dtype=float)) >= self.range * (1 - 1e-9)))
+            sat = int(at_range(wrench, self.range))
         else:
             sat = 0
         if sat:

@@ -12,6 +12,10 @@ the scene sensor's), and per kind: ``ft300``: ``mode`` (stream | poll), ``device
 read theirs in their ``from_spec``.
 Every kind's params, with types, ranges and defaults: :data:`ftc_hw.scene.device_params.KINDS`
 (the scene loader checks them).
+
+Roles: a device fills its kind's role, and an arm that reads its own F/T sensor fills the ``ft`` role
+too (:func:`roles_of`): a UR e-Series reading its flange sensor (``ur-rtde``'s ``ft`` param, by default
+on when the scene's pipeline uses a flange sensor and no device of an F/T kind is declared).
 """
 from __future__ import annotations
 
@@ -30,7 +34,7 @@ from .ft_base import FTAdapter
 from .modbus_ft import ModbusFTAdapter
 from .netft_rdt import RdtFTAdapter
 from .serial_stream import SerialStreamFTAdapter
-from .ur import URArm
+from .ur import URArm, reads_flange_ft
 
 
 def _where(device: DeviceSpec, ep: Mapping[str, Any]) -> str:
@@ -138,11 +142,16 @@ Role = Literal["ft", "arm"]
 Build = Callable[[DeviceSpec, Bus, Any, "Scene | None", dict[str, Any]], Adapter]
 
 
+ReadsFT = Callable[[DeviceSpec, "Scene | None", bool], bool]
+
+
 @dataclass(frozen=True)
 class AdapterKind:
     role: Role
     build: Build  # (device, bus, endpoint, scene, overrides) -> the adapter, not opened
     moves_on_goals: bool = False  # an arm whose protocol takes goal positions (the wizard and ftc identify move it)
+    # an arm that can read its own F/T sensor: (device, scene, another F/T device declared) -> it does
+    reads_ft: ReadsFT | None = None
 
 
 def _ft(build: Callable[[DeviceSpec, Bus, Mapping[str, Any], dict[str, Any]], FTAdapter]) -> AdapterKind:
@@ -152,11 +161,13 @@ def _ft(build: Callable[[DeviceSpec, Bus, Mapping[str, Any], dict[str, Any]], FT
     return AdapterKind("ft", make)
 
 
-def _arm(cls: type[DynamixelArm] | type[URArm]) -> AdapterKind:
+def _arm(cls: type[DynamixelArm] | type[URArm], reads_ft: ReadsFT | None = None) -> AdapterKind:
     def make(device: DeviceSpec, bus: Bus, endpoint: Any, scene: Scene | None, overrides: dict[str, Any]) -> Adapter:
+        if reads_ft is not None:
+            overrides = {"ft": "ft" in roles_of(device, scene), **overrides}
         return cls.from_spec(device, bus, endpoint, scene=scene, **overrides)
 
-    return AdapterKind("arm", make, cls.moves_on_goals)
+    return AdapterKind("arm", make, cls.moves_on_goals, reads_ft)
 
 
 ADAPTERS: dict[str, AdapterKind] = {
@@ -166,7 +177,7 @@ ADAPTERS: dict[str, AdapterKind] = {
     "ft-can": _ft(_can),
     "ft-rdt": _ft(_rdt),
     "dynamixel": _arm(DynamixelArm),
-    "ur-rtde": _arm(URArm),
+    "ur-rtde": _arm(URArm, reads_flange_ft),
 }
 
 
@@ -182,8 +193,21 @@ def moves_on_goals(kind: str) -> bool:
 
 
 def role_of(kind: str) -> Role | None:
+    """The role of a device kind (an arm kind's device may fill the ``ft`` role too: :func:`roles_of`)."""
     entry = ADAPTERS.get(kind)
     return entry.role if entry is not None else None
+
+
+def roles_of(device: DeviceSpec, scene: Scene | None = None) -> frozenset[Role]:
+    """The roles ``device`` fills in ``scene``'s rig: its kind's, and ``ft`` for an arm that reads its own
+    F/T sensor (a UR's flange sensor; see the module doc)."""
+    entry = ADAPTERS.get(device.kind)
+    if entry is None:
+        return frozenset()
+    if entry.reads_ft is None:
+        return frozenset({entry.role})
+    other = scene is not None and any(role_of(d.kind) == "ft" for d in scene.devices)
+    return frozenset({entry.role, "ft"}) if entry.reads_ft(device, scene, other) else frozenset({entry.role})
 
 
 def make_adapter(device: DeviceSpec, bus: Bus, endpoint: Mapping[str, Any] | str | None = None, *,

@@ -6,6 +6,17 @@ controller periods (``round(timestamp * frequency)``, so a packet the poller mis
 gap, flagged ``SEQ_GAP``), ``tau = torque_constant * current`` when torque constants are known
 (device ``torque_constant`` or the scene's ``[robot] torque_constant``), else None.
 
+The e-Series' built-in flange F/T sensor (``ft``; default: on when the scene's pipeline uses a flange
+sensor, ``[sensor] mount = "flange"``, and the scene declares no F/T device of its own): the same RTDE
+recipe also asks ``ft_raw_wrench`` (UR: the raw wrench of the sensor in the tool flange frame, not
+compensated for the payload; sim_devices/SOURCES.md, "UR F/T"), and every packet publishes a
+``WrenchFrame`` on ``wrench/<name>`` too: the sensor frame (the scene's sensor site, which must be the
+flange frame), SI, the same ``t_device_ns``, ``seq`` and gap / clock flags as the packet's JointFrame,
+``SATURATED`` when an axis reaches the sensor's range (``ft_range``, else the scene's ``[sensor]
+range``), as for the F/T adapters without status bits. The device then fills the rig's F/T role as well
+as its arm role (``roles``). A wrench that is not finite is counted (``ft_bad``) and not published.
+``actual_TCP_force`` (the controller's wrench at the TCP, base axes) is not read: nothing consumes it.
+
 ur_rtde keeps serving the last values when the controller goes away and only ``isConnected()``
 says so; this adapter polls the timestamp and checks ``isConnected()`` itself: no new packet for
 ``stale_after`` s (default max(50 ms, 10 periods)) publishes ``stale``, the next one ``recovered``;
@@ -39,13 +50,16 @@ from typing import Any
 import numpy as np
 import rtde_receive
 
-from ftc_hw.bus import Bus, JointFlag, JointFrame, joints_topic
+from ftc_hw.bus import Bus, JointFlag, JointFrame, WrenchFlag, WrenchFrame, joints_topic, wrench_topic
+from ftc_hw.scene import DeviceSpec, Scene
 
 from .arm_base import ArmAdapter
 from .base import DeviceError, DeviceIOError
+from .ft_base import at_range
 
 RTDE_PORT = 30004
 VARIABLES = ["timestamp", "actual_q", "actual_qd", "actual_current", "robot_mode", "safety_mode", "runtime_state"]
+FT_VARIABLES = ["ft_raw_wrench"]  # e-Series, from PolyScope 5.9 (UR's RTDE guide)
 DASHBOARD_WELCOME = "Connected: Universal Robots Dashboard Server"
 PROGRAM_STATES = ("STOPPED", "PLAYING", "PAUSED")
 
@@ -145,15 +159,28 @@ def _retire(rtde: Any) -> None:
     threading.Thread(target=run, name="ur-rtde-retire", daemon=True).start()
 
 
+def reads_flange_ft(device: DeviceSpec, scene: Scene | None, other_ft_device: bool) -> bool:
+    """Whether a ``ur-rtde`` device reads its flange F/T sensor: its ``ft`` param, else whether the scene's
+    pipeline uses a flange sensor and no other device of the scene (``other_ft_device``) reads it."""
+    if "ft" in device.params:
+        return bool(device.params["ft"])
+    return scene is not None and scene.sensing.ft == "flange" and not other_ft_device
+
+
 class URArm(ArmAdapter):
     kind = "ur-rtde"
 
     def __init__(self, name: str, bus: Bus, host: str, *, frequency: float = 500.0,
                  torque_constant: Sequence[float] | None = None, stale_after: float | None = None,
                  dead_after: float = 0.5, dashboard_port: int = 29999, probe_timeout: float = 0.3,
-                 reconnect_backoff: tuple[float, float] = (0.05, 0.5)) -> None:
+                 reconnect_backoff: tuple[float, float] = (0.05, 0.5), ft: bool = False,
+                 ft_range: Sequence[float] | None = None) -> None:
         super().__init__(name, bus, reconnect_backoff=reconnect_backoff)
         self.host = host
+        self.ft = bool(ft)
+        self.ft_topic = wrench_topic(name) if self.ft else None
+        self.ft_range = None if ft_range is None else np.asarray(ft_range, dtype=float)
+        self.variables = VARIABLES + (FT_VARIABLES if self.ft else [])
         self.rate = float(frequency)
         self.period = 1.0 / self.rate
         self.torque_constant = None if torque_constant is None else np.asarray(torque_constant, dtype=float)
@@ -180,16 +207,27 @@ class URArm(ArmAdapter):
         if not host:
             raise DeviceError(f"device {spec.name!r}: no controller address")
         kwargs: dict[str, Any] = {k: p[k] for k in ("frequency", "torque_constant", "stale_after", "dead_after",
-                                                    "dashboard_port") if k in p}
+                                                    "dashboard_port", "ft", "ft_range") if k in p}
         if "torque_constant" not in kwargs and scene is not None:
             kwargs["torque_constant"] = list(scene.robot.torque_constant)
+        if "ft_range" not in kwargs and scene is not None and scene.sensor is not None \
+                and scene.sensor.mount == "flange":  # a base sensor's range is not the flange sensor's
+            kwargs["ft_range"] = list(scene.sensor.range)
         if isinstance(endpoint, dict) and "dashboard_port" in endpoint:
             kwargs.setdefault("dashboard_port", endpoint["dashboard_port"])
         kwargs.update(overrides)
         return cls(spec.name, bus, host, **kwargs)
 
     def describe(self) -> str:
-        return f"{self.kind} {self.host} at {self.rate:g} Hz"
+        return f"{self.kind} {self.host} at {self.rate:g} Hz" + (" with its flange F/T sensor" if self.ft else "")
+
+    @property
+    def roles(self) -> frozenset[str]:
+        return frozenset({"arm", "ft"}) if self.ft else frozenset({"arm"})
+
+    @property
+    def topics(self) -> tuple[str, ...]:
+        return (self.topic,) if self.ft_topic is None else (self.topic, self.ft_topic)
 
     # -- link -------------------------------------------------------------------------------------------
     def _connect(self) -> None:
@@ -202,7 +240,7 @@ class URArm(ArmAdapter):
                 if rtde is not None:  # connected but silent: a hung controller
                     _retire(rtde)
                 self._rtde = rtde = None
-                rtde = rtde_receive.RTDEReceiveInterface(self.host, self.rate, VARIABLES)
+                rtde = rtde_receive.RTDEReceiveInterface(self.host, self.rate, self.variables)
                 self._rtde = rtde
         except RuntimeError as exc:
             raise DeviceIOError(f"ur_rtde: {exc}") from exc
@@ -257,6 +295,7 @@ class URArm(ArmAdapter):
     def _publish(self, rtde: Any, ts: float) -> None:
         for _ in range(3):  # the getters are separate calls: make sure they saw the same packet
             q, qd, cur = rtde.getActualQ(), rtde.getActualQd(), rtde.getActualCurrent()
+            wrench = rtde.getFtRawWrench() if self.ft else None
             ts2 = rtde.getTimestamp()
             if ts2 == ts:
                 break
@@ -280,7 +319,23 @@ class URArm(ArmAdapter):
         self._last_ts, self._last_seq, self._last_new = ts, seq, time.monotonic()
         self.counters["frames"] += 1
         self.bus.publish(self.topic, frame)
+        if wrench is not None:
+            self._publish_wrench(frame, wrench)
         self._mark_fresh("RTDE packets again")
+
+    def _publish_wrench(self, joints: JointFrame, wrench: Sequence[float]) -> None:
+        """The flange sensor's reading of the packet ``joints`` came in, as a WrenchFrame of its times."""
+        w = np.asarray(wrench, dtype=float)
+        if w.shape != (6,) or not np.all(np.isfinite(w)):
+            self.counters["ft_bad"] += 1
+            return
+        flags = WrenchFlag(int(joints.flags) & int(WrenchFlag.SEQ_GAP | WrenchFlag.CLOCK_SUSPECT))
+        if self.ft_range is not None and at_range(w, self.ft_range):
+            flags |= WrenchFlag.SATURATED
+            self.counters["saturated"] += 1
+        self.bus.publish(self.ft_topic, WrenchFrame.make(joints.t_host_ns, w, source=self.name, seq=joints.seq,
+                                                         t_device_ns=joints.t_device_ns, flags=flags))
+        self.counters["ft_frames"] += 1
 
     # -- commands ----------------------------------------------------------------------------------------
     def _dashboard(self, command: str, ok: str, already: str) -> None:

@@ -16,10 +16,19 @@ digital/analog outputs, speed slider and input registers, which output recipes t
 Stream: paced by the world's clock. Each world joint sample whose time crosses a multiple of a
 recipe's period (1/frequency) is sent to that recipe's clients: ``timestamp`` is the world time of the
 sample and ``actual_q/qd/current`` its values, bit for bit. ``target_*`` report the actual values.
-``joint_temperatures`` come from a thermal model on the world's currents (``thermal.py``);
-``actual_TCP_force`` is the controller's own current-based estimate of the external wrench at the TCP
-(base frame) and ``ft_raw_wrench`` the same wrench in the flange frame (``ur_model.py``: the world's
-F/T ring holds the base sensor, which no UR has). Not modelled: momentum, tool I/O, euromap (0).
+``joint_temperatures`` come from a thermal model on the world's currents (``thermal.py``).
+F/T (sim_devices/SOURCES.md, "UR F/T"): with a flange sensor (the scene's ``[sensor] mount = "flange"``,
+an e-Series' built-in one: ``controller_version`` 5.9 or later and its site the ``[robot] flange``
+frame, refused otherwise) ``ft_raw_wrench`` is that sensor's reading from the world's F/T ring -- the
+newest sample at or before the packet's time (``ur_ft.py``), as the scene's sensor reports it (frame,
+sign, noise, bias, range) -- and ``actual_TCP_force`` the external wrench it implies, in base axes
+(``ur_model.flange_wrench_base``). Without one (a base sensor, which no UR has, or none)
+``actual_TCP_force`` is the controller's current-based estimate at the TCP (base axes) and
+``ft_raw_wrench`` the same wrench in the flange frame (``ur_model.py``). Counted in the stats:
+``ft_missing`` (none published yet: zeros sent), ``ft_not_at_time`` (no F/T sample at or before the
+packet's time: the oldest held one was sent) and ``ft_late`` (the one sent is more than two sensor
+periods old).
+Not modelled: momentum, tool I/O, euromap (0).
 
 Options: ``address``, ``rtde_port``, ``dashboard_port``, ``controller_version`` and ``frequency``
 (override the device's), ``resume_after_s`` (below).
@@ -56,7 +65,8 @@ from .link import Command, JointRecord
 from .loopback import check_loopback
 from .thermal import ThermalModel
 from .ur_dashboard import answer, serve_connection
-from .ur_model import URKinematics
+from .ur_ft import FlangeSamples
+from .ur_model import URKinematics, flange_wrench_base
 
 
 def parse_version(text: str) -> tuple[int, int, int, int]:
@@ -182,11 +192,16 @@ class Controller:
 
 # -- one stream sample and the value of every output variable ----------------------------------------------
 class Tick:
+    """One packet's values. ``ft``: the flange sensor's reading (shape (6,), sensor = flange frame, the
+    scene's convention), None without a flange sensor; ``ft_sign``: the scene sensor's ``reading_sign``."""
+
     def __init__(self, joints: JointRecord, ctl: Controller, kin: URKinematics | None,
-                 temperatures: np.ndarray, exec_ms: float) -> None:
+                 temperatures: np.ndarray, exec_ms: float, ft: np.ndarray | None = None,
+                 ft_sign: float = 1.0) -> None:
         self.t, self.q, self.qd, self.qdd = joints.t, joints.q, joints.qd, joints.qdd
         self.current, self.tau = joints.current, joints.tau
         self.ctl, self.kin, self.temperatures, self.exec_ms = ctl, kin, temperatures, exec_ms
+        self.ft, self.ft_sign = ft, ft_sign
 
     @cached_property
     def _kin(self) -> URKinematics:
@@ -205,10 +220,14 @@ class Tick:
 
     @cached_property
     def tcp_force(self) -> np.ndarray:
+        if self.ft is not None:
+            return flange_wrench_base(self.ft, self.ft_sign, self._kin.tcp_rotation())
         return self._kin.tcp_wrench(self.qd, self.tau)
 
     @cached_property
     def ft_raw(self) -> np.ndarray:
+        if self.ft is not None:
+            return self.ft
         r = self._kin.tcp_rotation()
         return np.concatenate([r.T @ self.tcp_force[:3], r.T @ self.tcp_force[3:]])
 
@@ -517,12 +536,20 @@ class UREmulator(Emulator):
         resume = options.get("resume_after_s")
         if resume is not None and not 0.0 <= float(resume) <= 3600.0:
             raise ValueError(f"resume_after_s {resume!r}: expected seconds in [0, 3600]")
+        self.kin = URKinematics(scene)
+        sensor = scene.sensor
+        self.flange_ft = sensor is not None and sensor.mount == "flange"
+        if self.flange_ft:
+            if self.version[:2] < (5, 9):  # ft_raw_wrench came with PolyScope 5.9 (UR's RTDE guide)
+                raise ValueError(f"controller_version {'.'.join(map(str, self.version))}: a flange F/T sensor "
+                                 "is an e-Series' and RTDE reports it (ft_raw_wrench) from 5.9")
+            self.kin.check_flange_sensor(sensor.site)
+        self.ft_sign = sensor.reading_sign if sensor is not None else 1.0
         super().__init__(device, scene, link, options)
         self.n = scene.n_joints
         self.controller = Controller(self.version, self.side, device.name, str(p.get("serial", "20205500001")),
                                      str(p.get("robot_model", "UR5")),
                                      resume_after_s=None if resume is None else float(resume))
-        self.kin = URKinematics(scene)
         self.thermal = ThermalModel(self.n, ambient_c=25.0, gain_c_per_a2=0.5, tau_s=900.0)
         self.rtde_port = int(self.options.get("rtde_port", D.RTDE_PORT))
         self.dashboard_port = int(self.options.get("dashboard_port", D.DASHBOARD_PORT))
@@ -536,6 +563,9 @@ class UREmulator(Emulator):
 
     def loop(self) -> None:
         reader = self.side.joint_reader()
+        ft = FlangeSamples(self.side.ft_reader(), self.scene.sensor.rate_hz) if self.flange_ft else None
+        if ft is not None:
+            self.extra_stats = ft.counts  # written with the stats
         latest = reader.latest()  # start at the next grid point, never mid-period
         last_k = math.floor(JointRecord.from_row(latest, self.n).t * self.rate + 1e-6) if latest is not None else None
         exec_ms = 0.0
@@ -556,7 +586,8 @@ class UREmulator(Emulator):
                 last_k = k
                 t0 = time.perf_counter()
                 temps = self.thermal.update(joints.t, joints.current)
-                self.rtde.stream(Tick(joints, self.controller, self.kin, temps, exec_ms))
+                wrench = None if ft is None else ft.at(joints.t)
+                self.rtde.stream(Tick(joints, self.controller, self.kin, temps, exec_ms, wrench, self.ft_sign))
                 exec_ms = (time.perf_counter() - t0) * 1e3
             time.sleep(self._pause(t_seen, last_k))
 

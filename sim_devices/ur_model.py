@@ -1,14 +1,19 @@
-"""What a UR controller computes from its joints: TCP pose and speed, elbow, and its own estimate of the
+"""What a UR controller computes from its joints and its sensors: TCP pose and speed, elbow, and the
 external wrench at the TCP.
 
-The estimate is the controller's kind (current-based, as on a CB3): the joint torques the motors
-deliver beyond what the rigid-body model needs for the measured motion are external,
-``J(q)^T w = M(q) qdd + c(q, qd) + f_viscous(qd) - tau_motor``, solved for ``w`` by damped least
+Without a flange F/T sensor the wrench is the controller's current-based estimate (a CB3's kind): the
+joint torques the motors deliver beyond what the rigid-body model needs for the measured motion are
+external, ``J(q)^T w = M(q) qdd + c(q, qd) + f_viscous(qd) - tau_motor``, solved for ``w`` by damped least
 squares with ``J`` the 6 x n geometric Jacobian of the TCP (the scene's ``[robot] flange`` site).
 ``w = (f, m)``: the wrench the environment applies to the arm at the TCP (N, N m), base frame.
 Coulomb friction is not modelled (its sign is unknown at rest): it shows as up to the scene's
 ``friction_coulomb`` N m of spurious joint torque, about 5-10 N at the TCP of a UR5e -- the same order
 as a real UR's current-based estimate. A payload not declared to the controller shows as a force.
+
+With a flange sensor (an e-Series' built-in one: ``[sensor] mount = "flange"``, its site the tool flange
+frame) the wrench is the sensor's (:func:`flange_wrench_base`): UR's RTDE guide calls ``actual_TCP_force``
+the generalized forces at the TCP that compensate "the measurement" for the payload, and UR's own ROS
+drivers read it on e-Series as a flange wrench in base axes (sim_devices/SOURCES.md, "UR F/T").
 """
 from __future__ import annotations
 
@@ -30,6 +35,16 @@ def rotation_vector(rot: np.ndarray) -> np.ndarray:
     if s < 1e-12:
         return 2.0 * v
     return v * (2.0 * np.arctan2(s, w) / s)
+
+
+def flange_wrench_base(reading: np.ndarray, reading_sign: float, rotation: np.ndarray) -> np.ndarray:
+    """The wrench the environment applies to the bodies beyond a flange sensor, base axes, about the sensor's
+    origin (N, N m; shape (6,)), from its ``reading`` (shape (6,), sensor frame, the scene's convention:
+    ``reading = reading_sign * (the mount's wrench on those bodies)``, which at rest is minus the external
+    loads on them, their weight included). ``rotation``: base_R_sensor (3 x 3). The controller's declared
+    payload (RTDE ``payload``, 0 here) would be subtracted; an undeclared one shows as a force, as on a UR."""
+    external = -reading_sign * np.asarray(reading, dtype=float)
+    return np.concatenate([rotation @ external[:3], rotation @ external[3:]])
 
 
 class URKinematics:
@@ -83,6 +98,20 @@ class URKinematics:
         tau_ext = self.d.qfrc_inverse[self.dadr] + self.viscous * qd - tau_motor
         jac = self.jacobian
         return np.linalg.solve(jac @ jac.T + self.damping2 * np.eye(6), jac @ tau_ext)
+
+    def check_flange_sensor(self, site: str) -> None:
+        """ValueError unless ``site`` is the TCP's frame (the ``[robot] flange`` site: same body, position
+        and axes): a UR's built-in sensor measures in the tool flange frame, which the emulator's
+        ``ft_raw_wrench`` and the adapter's frames then share with the scene's sensor frame."""
+        m = self.m
+        sid = m.site(site).id  # the scene's sensor site: ArmModel checked that the model has it
+        if self.site is None:
+            raise ValueError("a flange F/T sensor needs the scene's [robot] flange site (the tool flange frame)")
+        same_axes = abs(float(np.dot(m.site_quat[sid], m.site_quat[self.site]))) > 1.0 - 1e-12
+        if (m.site_bodyid[sid] != m.site_bodyid[self.site] or not same_axes
+                or not np.allclose(m.site_pos[sid], m.site_pos[self.site], rtol=0.0, atol=1e-9)):
+            raise ValueError(f"flange sensor site {site!r} is not the tool flange frame "
+                             f"({m.site(self.site).name!r}): a UR's built-in sensor measures in that frame")
 
     def accelerometer(self) -> np.ndarray:
         """Tool accelerometer at rest: minus gravity in the flange frame (m/s^2); motion not included."""

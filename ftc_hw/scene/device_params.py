@@ -195,6 +195,11 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
         Param("dashboard_port", "int", "dashboard server port", 29999, *PORT),
         Param("serial", "str", "the emulator's serial number", "20205500001"),
         Param("robot_model", "str", "the emulator's robot model", "UR5"),
+        Param("ft", "bool", "read the e-Series' built-in flange F/T sensor (ft_raw_wrench) on the same RTDE "
+              "connection and publish it as the rig's F/T stream (default: when the scene's pipeline uses a "
+              "flange sensor, [sensor] mount = \"flange\", and no F/T device is declared)"),
+        Param("ft_range", "numbers", "the flange sensor's saturation limits Fx Fy Fz (N) Tx Ty Tz (N m), "
+              "default the scene sensor's range", lo=0.0, above=True, length=6),
     )),
 )}
 

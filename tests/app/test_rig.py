@@ -9,12 +9,13 @@ from ftc_hw.app.setup.rig import RigError, build_rig, pick_device
 from ftc_hw.devices.can_ft import CanFTAdapter
 from ftc_hw.devices.dynamixel import DynamixelArm
 from ftc_hw.devices.ft300 import FT300Adapter
-from ftc_hw.devices.registry import kinds
+from ftc_hw.devices.registry import kinds, roles_of
 from ftc_hw.devices.serial_stream import SerialStreamFTAdapter
 from ftc_hw.devices.ur import URArm
 from ftc_hw.scene import DeviceSpec, load_rig_scene, load_scene
 from ftc_hw.sim_devices.emulator import sample_number
 from ftc_hw.sim_devices.host import WorldHost
+from tests.ur_flange import flange_scene
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -47,6 +48,31 @@ def test_overrides_put_the_rig_where_they_say():
     rig = build_rig(scene)
     assert rig.ft.channel == "/dev/ttyFTC1" and rig.ft.codec.base_id == 9 and rig.arm.host == "192.0.2.10"
     rig.close()
+
+
+@pytest.mark.compute
+def test_a_ur_reading_its_flange_sensor_is_the_rig_s_f_t_sensor_and_its_arm(tmp_path):
+    scene = flange_scene(tmp_path)  # a flange sensor the pipeline uses, no F/T device of its own
+    arm = pick_device(scene, "arm")
+    assert pick_device(scene, "ft") is arm and roles_of(arm, scene) == {"ft", "arm"}
+    with pytest.raises(RigError, match=r"^no address for device 'arm' \(ur-rtde: [^)]*\): give it with"):
+        build_rig(scene)  # named once
+    rig = build_rig(scene, endpoints={"arm": {"address": "192.0.2.10"}})  # both roles: one adapter
+    assert len(rig.adapters) == 1 and rig.ft is rig.arm and isinstance(rig.arm, URArm)
+    assert rig.arm.topics == ("joints/arm", "wrench/arm") and "ft_raw_wrench" in rig.arm.variables
+    assert list(rig.arm.ft_range) == list(scene.sensor.range)
+    # the device's own say, the sensing the pipeline uses, and an F/T device of the scene's own each win
+    off = replace(scene, devices=(replace(arm, params={**arm.params, "ft": False}),))
+    narrowed = scene.with_sensing(["currents"])
+    own_ft = replace(scene, devices=(load_scene("ur5e").devices[0], arm))
+    for other in (off, narrowed, own_ft):
+        assert roles_of(other.devices[-1], other) == {"arm"}
+    with pytest.raises(RigError, match="declares no F/T sensor device"):
+        build_rig(off, endpoints={"arm": {"address": "192.0.2.10"}})
+    assert pick_device(own_ft, "ft").kind == "ft-can"
+    assert not build_rig(narrowed, roles=("arm",), endpoints={"arm": {"address": "192.0.2.10"}}).arm.ft
+    ur5e = load_scene("ur5e")
+    assert roles_of(ur5e.devices[1], ur5e) == {"arm"} and pick_device(ur5e, "ft").kind == "ft-can"
 
 
 @pytest.mark.compute

@@ -1,5 +1,7 @@
 """The UR arm adapter against the emulator (separate processes, loopback address 127.0.0.43): JointFrames
-with device timestamps, stop()/pause() through the dashboard, and dead / hung / restarted controllers."""
+with device timestamps, the flange F/T sensor's WrenchFrames on the same RTDE connection (the module's
+world is ur5e with an e-Series flange sensor, tests/ur_flange.py), stop()/pause() through the
+dashboard, and dead / hung / restarted controllers."""
 from __future__ import annotations
 
 import time
@@ -7,13 +9,14 @@ import time
 import numpy as np
 import pytest
 
-from ftc_hw.bus import Bus, JointFlag
+from ftc_hw.bus import Bus, JointFlag, WrenchFlag
 from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.registry import make_adapter
 from ftc_hw.devices.ur import DashboardLink, URArm, probe_rtde
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost
 from ftc_hw.sim_devices.link import JointRecord
+from tests.ur_flange import flange_scene
 
 pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
@@ -23,16 +26,22 @@ DEVICE = next(d for d in SCENE.devices if d.kind == "ur-rtde")
 
 
 @pytest.fixture(scope="module")
-def world():
-    with WorldHost(SCENE, "sweep", devices=["arm"], options={"arm": {"address": ADDRESS}}, noise=False) as w:
+def flange(tmp_path_factory):
+    """ur5e whose F/T sensor is its flange sensor, read by the arm device (same joints, same arm device)."""
+    return flange_scene(tmp_path_factory.mktemp("ur-flange"))
+
+
+@pytest.fixture(scope="module")
+def world(flange):
+    with WorldHost(flange, "sweep", devices=["arm"], options={"arm": {"address": ADDRESS}}, noise=False) as w:
         yield w
 
 
 @pytest.fixture(scope="module")
-def arm(world):
+def arm(world, flange):
     bus = Bus()
     events = bus.subscribe("events/", maxsize=10_000)
-    adapter = make_adapter(DEVICE, bus, world.endpoint("arm"), scene=SCENE, dead_after=0.3)
+    adapter = make_adapter(flange.devices[0], bus, world.endpoint("arm"), scene=flange, dead_after=0.3)
     with adapter:
         assert adapter.wait_connected(10.0)
         yield adapter, bus, events
@@ -58,6 +67,42 @@ def test_frames_carry_the_controller_timestamp_and_the_world_values(world, arm):
     assert all(b.seq > a.seq for a, b in zip(got, got[1:], strict=False))
     gaps = [f for f in got if f.flags & JointFlag.SEQ_GAP]
     assert len(gaps) <= adapter.counters["missed_packets"]
+
+
+def test_the_flange_sensor_comes_on_the_same_connection_with_every_500_hz_packet(world, arm):
+    """Each packet's WrenchFrame is the world's flange reading at the packet's time (the newest F/T sample
+    at or before it, bit for bit through ur_rtde), beside the packet's JointFrame; packets on the 500 Hz
+    grid, every controller period either delivered or counted missed."""
+    adapter, bus, _ = arm
+    assert adapter.roles == {"arm", "ft"}
+    ring = world.ft_reader()
+    wrenches, joints = bus.subscribe("wrench/arm", maxsize=10_000), bus.subscribe("joints/arm", maxsize=10_000)
+    got: list = []
+    js: list = []
+    end = time.monotonic() + 5.0
+    while len(got) < 250 and time.monotonic() < end:  # about 0.5 s, longer on a loaded host
+        time.sleep(0.1)
+        got += wrenches.drain()
+        js += joints.drain()
+    js += joints.drain()
+    records = ring.new()
+    t_ring = np.array([r[0] for r in records])
+    by_time = {j.t_device_ns: j for j in js}
+    assert len(got) >= 200 and sum(f.t_device_ns not in by_time for f in got) <= 1  # (one around subscribing)
+    assert all((f.seq, f.t_host_ns) == (by_time[f.t_device_ns].seq, by_time[f.t_device_ns].t_host_ns)
+               for f in got if f.t_device_ns in by_time)  # each packet's two frames
+    for f in got[-100:]:
+        k = int(np.searchsorted(t_ring, f.t_device_ns / 1e9 + 1e-9)) - 1
+        assert k >= 0 and f.t_device_ns / 1e9 - t_ring[k] < 0.002 + 1e-9  # within one sensor period
+        assert np.array_equal(f.wrench, records[k][1:7])
+        assert not f.flags & WrenchFlag.SATURATED  # a sweep without a contact on the tool: within 100 N / 10 N m
+    assert any(np.abs(f.wrench).max() > 0.1 for f in got)  # the reading is there, not zeros
+    seqs = np.array([f.seq for f in got])
+    assert np.array_equal(seqs * 2_000_000, [f.t_device_ns for f in got])  # the 500 Hz grid
+    steps = np.diff(seqs)
+    assert [bool(f.flags & WrenchFlag.SEQ_GAP) for f in got[1:]] == list(steps > 1)  # a gap, flagged where it is
+    assert int((steps - 1).sum()) <= adapter.counters["missed_packets"]  # and counted (every packet of the grid
+    # is sent: tests/sim/test_ur_emulator.py; ur_rtde keeps only the newest, so a slow poller misses some)
 
 
 def test_stop_and_pause_through_the_dashboard(world, arm):

@@ -208,6 +208,28 @@ def test_raw_protocol_refusals_and_text_messages(world):
         b.close()
 
 
+def test_an_e_series_recipe_at_500_hz_gets_every_packet_of_the_500_hz_grid(world):
+    """Read off the socket (ur_rtde keeps only the newest packet): one packet per 2 ms of controller time,
+    none skipped, with the F/T outputs of the recipe in each."""
+    raw = RawRTDE()
+    try:
+        raw.ask("V", struct.pack(">H", 2))
+        assert raw.ask("O", struct.pack(">d", 500.0) + b"timestamp,ft_raw_wrench,actual_TCP_force")[1][0] == 1
+        raw.ask("S")
+        rows = []
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            cmd, data = raw.recv()
+            assert cmd == "U"
+            rows.append(struct.unpack(">B13d", data))
+    finally:
+        raw.close()
+    ticks = np.array([r[1] for r in rows]) * 500.0
+    assert len(rows) > 150 and np.allclose(ticks, np.round(ticks), atol=1e-6)
+    assert np.array_equal(np.diff(np.round(ticks)), np.ones(len(rows) - 1))
+    assert np.all(np.isfinite(np.array([r[2:] for r in rows])))
+
+
 def test_cb3_controller_streams_at_125_hz(world):
     world.restart("arm", {"address": ADDRESS, "controller_version": "3.15", "frequency": 125.0})
     try:

@@ -2,7 +2,9 @@
 
 One way to do it for every caller: the monitor session, the calibration wizard's session and the
 device benches. By default a scene's rig is its first F/T sensor and its first arm device (the role
-of each kind is in :data:`ftc_hw.devices.registry.ADAPTERS`); a caller may name its own device specs.
+of each kind is in :data:`ftc_hw.devices.registry.ADAPTERS`; an arm that reads its own F/T sensor, a
+UR's flange sensor, fills both roles with one adapter: :func:`~ftc_hw.devices.registry.roles_of`); a
+caller may name its own device specs (one adapter per device name).
 With a simulated world, ``endpoints`` (:attr:`ftc_hw.sim_devices.host.WorldHost.endpoints`) says
 where each emulated device listens; without, each device's ``address`` in the scene does (or its
 kind's locator param, ``channel`` for CAN), as the scene file, a rig file or ``--device`` options
@@ -17,7 +19,7 @@ from typing import Any
 
 from ftc_hw.bus import Bus
 from ftc_hw.devices.base import Adapter, DeviceError
-from ftc_hw.devices.registry import Role, kinds, make_adapter, role_of
+from ftc_hw.devices.registry import Role, kinds, make_adapter, roles_of
 from ftc_hw.scene import DeviceSpec, Scene
 from ftc_hw.scene.device_params import KINDS, located, locator_key
 
@@ -28,7 +30,7 @@ class RigError(RuntimeError):
 
 def pick_device(scene: Scene, role: Role) -> DeviceSpec | None:
     """The scene's first device of ``role`` (``ft`` or ``arm``), or None."""
-    return next((d for d in scene.devices if role_of(d.kind) == role), None)
+    return next((d for d in scene.devices if role in roles_of(d, scene)), None)
 
 
 def require_device(scene: Scene, role: Role) -> DeviceSpec:
@@ -42,7 +44,8 @@ def require_device(scene: Scene, role: Role) -> DeviceSpec:
 def check_located(specs: Iterable[DeviceSpec], endpoints: Mapping[str, Any] | None = None) -> None:
     """RigError naming every device with neither an emulator's endpoint nor an address (or locator)."""
     endpoints = endpoints or {}
-    unlocated = [s for s in specs if not endpoints.get(s.name) and s.kind in KINDS
+    unique = {s.name: s for s in specs}  # a device filling two roles is named once
+    unlocated = [s for s in unique.values() if not endpoints.get(s.name) and s.kind in KINDS
                  and not located(s.kind, s.address, s.params)]
     if unlocated:
         raise RigError(missing_address(unlocated))
@@ -80,7 +83,7 @@ class Rig:
         raise KeyError(f"no device {name!r} in the rig ({', '.join(a.name for a in self.adapters)})")
 
     def first(self, role: Role) -> Adapter | None:
-        return next((a for a in self.adapters if a.role == role), None)
+        return next((a for a in self.adapters if role in a.roles), None)
 
     @property
     def ft(self) -> Adapter | None:
@@ -103,9 +106,12 @@ class Rig:
         for a in self.adapters:
             if not a.wait_connected(max(0.0, end - time.monotonic())):
                 raise RigError(f"{a.name} ({a.kind}) did not connect within {timeout:g} s: {dict(a.counters)}")
-        while data and time.monotonic() < end and any(self.bus.latest(a.topic) is None for a in self.adapters):
+        def quiet(a: Adapter) -> bool:
+            return any(self.bus.latest(topic) is None for topic in a.topics)
+
+        while data and time.monotonic() < end and any(quiet(a) for a in self.adapters):
             time.sleep(0.02)
-        silent = [a.name for a in self.adapters if data and self.bus.latest(a.topic) is None]
+        silent = [a.name for a in self.adapters if data and quiet(a)]
         if silent:
             raise RigError(f"connected, but no data arrives from {', '.join(silent)} within {timeout:g} s")
 
@@ -133,6 +139,10 @@ def build_rig(scene: Scene, *, bus: Bus | None = None, devices: Iterable[DeviceS
     not opened. ``endpoints``: by device name, where an emulated device listens. ``overrides``: by
     device name, keyword arguments for its adapter class."""
     specs = list(devices) if devices is not None else [require_device(scene, r) for r in roles]
+    unique: dict[str, DeviceSpec] = {}
+    for spec in specs:  # a device that fills two roles gets one adapter
+        unique.setdefault(spec.name, spec)
+    specs = list(unique.values())
     endpoints = endpoints or {}
     check_located(specs, endpoints)
     overrides = overrides or {}
