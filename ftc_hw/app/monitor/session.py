@@ -74,13 +74,14 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[Corrections, di
     return corrections, meta
 
 
-def _devices(scene: Scene, sim: bool, remote: bool = False) -> tuple[DeviceSpec, DeviceSpec | None]:
-    """The scene's F/T sensor and arm devices; without an arm device only a simulated world will do."""
+def _devices(scene: Scene, sim: bool, remote: bool = False) -> tuple[DeviceSpec | None, DeviceSpec | None]:
+    """The scene's F/T sensor (None where its sensing uses none) and arm devices (one device may be both:
+    a UR reading its flange sensor); without an arm device only a simulated world will do."""
     try:
-        ft = require_device(scene, "ft")
+        ft = require_device(scene, "ft") if scene.sensing.ft is not None else None
         arm = pick_device(scene, "arm") if sim else require_device(scene, "arm")
         if not sim and not remote:  # said before anything loads: the devices must say where they are
-            check_located([ft, arm])
+            check_located([d for d in (ft, arm) if d is not None])
         return ft, arm
     except RigError as exc:
         hint = ": with --sim the world's joint state is used" if "arm device" in str(exc) else ""
@@ -265,7 +266,7 @@ class _EventPump:
                     self._writer.write(ev)
 
 
-def _run(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
+def _run(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec | None, arm_dev: DeviceSpec | None,
          corrections: Corrections | None, cal_meta: dict[str, str] | None, out: MonitorOutcome,
          faults: list[Fault]) -> MonitorOutcome:
     with contextlib.ExitStack() as stack:
@@ -281,7 +282,7 @@ def _run(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec
     return out
 
 
-def _start(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec, arm_dev: DeviceSpec | None,
+def _start(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec | None, arm_dev: DeviceSpec | None,
            corrections: Corrections | None, cal_meta: dict[str, str] | None, out: MonitorOutcome, faults: list[Fault],
            stack: contextlib.ExitStack) -> _Live:
     """The page, the world, the bus, the monitor, the recorder, the events file and the rig (not opened yet)."""
@@ -292,18 +293,19 @@ def _start(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSp
         plan = FaultPlan(faults, world, bus) if faults and world is not None else None
     except FaultError as exc:
         raise MonitorSetupError(str(exc)) from None
-    ft_name, arm_name = ft_dev.name, arm_dev.name if arm_dev is not None else "arm"
-    topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]
+    ft_name, arm_name = ft_dev.name if ft_dev is not None else "ft", arm_dev.name if arm_dev is not None else "arm"
+    topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]  # no frames on the first: no F/T
     ev_sub = bus.subscribe("events/", maxsize=None)
     monitor, recorder = _start_monitor(cfg, console, scene, bus, ft_name, arm_name, corrections, cal_meta, stack)
     events_file = stack.enter_context(open(cfg.events, "w", encoding="utf-8")) if cfg.events else None  # noqa: SIM115 - the stack closes it
     writer = EventWriter(events_file) if events_file is not None else None
     if world is None:
         monitor.start()  # on hardware the arm must be still now: the tare takes the first 0.1 s
-    console.print(f"connecting to {ft_dev.name}" + (f" and {arm_dev.name}" if arm_dev is not None else "")
+    devices = list({d.name: d for d in (ft_dev, arm_dev) if d is not None}.values())  # one may fill both roles
+    console.print(f"connecting to {' and '.join(d.name for d in devices) or 'the world'}"
                   + (f" served at {cfg.devices.remote}" if cfg.devices.remote else "") + " ...")
     try:
-        rig = _make_rig(cfg, scene, bus, [d for d in (ft_dev, arm_dev) if d is not None], topics[:2], world)
+        rig = _make_rig(cfg, scene, bus, devices, topics[:2] if ft_dev is not None else topics[1:2], world)
     except RigError as exc:
         raise MonitorSetupError(str(exc)) from None
     if arm_dev is None:
