@@ -76,7 +76,8 @@ def test_masses_are_urs(name):
     m = _model(name)
     assert [m.body(link).mass[0] for link in LINKS] == pytest.approx(link_masses, abs=1e-9)
     # the base's mass is the published weight less the links' (SOURCES.md): the sum is the arm's weight
-    assert m.body_mass.sum() == pytest.approx(weight, abs=0.05)
+    tool = m.body("tool").mass[0] if "tool" in [m.body(i).name for i in range(m.nbody)] else 0.0
+    assert m.body_mass.sum() - tool == pytest.approx(weight, abs=0.05)
     assert m.body("base").mass[0] > 0.5  # a real base housing, not a rounding remainder
 
 
@@ -104,7 +105,11 @@ def test_touchable_links_have_surfaces_and_the_flange_sensor_its_site(name):
         assert sum(1 for g in range(m.ngeom) if m.geom_bodyid[g] == b and m.geom_group[g] == 1) >= 1, t["link"]
     site = m.site(scene["sensor"]["site"])
     assert scene["sensor"]["mount"] == "flange"
-    assert m.body(site.bodyid[0]).name == "wrist_3"
+    # between wrist 3 and what is mounted on it: on the tool's body (ur10e: it carries a tool) or on wrist 3
+    body = m.body(site.bodyid[0])
+    assert body.name == "wrist_3" or (body.name == "tool" and m.body(body.parentid[0]).name == "wrist_3"
+                                      and m.body_jntnum[body.id] == 0)
+    assert site.bodyid[0] == m.site("flange").bodyid[0]
     assert np.allclose(site.pos, m.site("flange").pos) and np.allclose(site.quat, m.site("flange").quat)
     assert scene["sensor"]["rate_hz"] == 500.0 and [d["kind"] for d in scene["devices"]] == ["ur-rtde"]
 
