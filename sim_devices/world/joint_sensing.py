@@ -74,28 +74,26 @@ class MotorModel:
         ratio = np.full(n, DEFAULT_GEAR_RATIO) if w.gear_ratio is None else np.asarray(w.gear_ratio, dtype=float)
         self.ratio = ratio
         self.offset = np.zeros(n) if w.motor_angle_offset is None else np.asarray(w.motor_angle_offset, dtype=float)
+        # (amplitude, periods per joint radian, phase): sin(P th) = sin(P N q + P th0), per step one fused sine
         self.ripple = None if w.current_ripple is None or not np.any(w.current_ripple) else (
-            np.asarray(w.current_ripple, dtype=float), RIPPLE_PER_REV)
+            np.asarray(w.current_ripple, dtype=float), RIPPLE_PER_REV * ratio, RIPPLE_PER_REV * self.offset)
         self.cogging = None if w.cogging_torque is None or not np.any(w.cogging_torque) else (
-            np.asarray(w.cogging_torque, dtype=float), COGGING_PER_REV)
+            np.asarray(w.cogging_torque, dtype=float), COGGING_PER_REV * ratio, COGGING_PER_REV * self.offset)
+        self._kt_now = self.kt  # at the windings' last temperature (set_temperature)
 
-    @property
-    def plain(self) -> bool:
-        return self.ripple is None and self.cogging is None and not self.per_K
+    def set_temperature(self, rise: np.ndarray) -> None:
+        """The windings' temperature above the model's (K per joint), for the currents from now on."""
+        if self.per_K:
+            self._kt_now = self.kt * (1.0 + self.per_K * rise)
 
-    def current(self, tau: np.ndarray, q: np.ndarray, rise: np.ndarray | None) -> np.ndarray:
-        if self.plain:
-            return tau / self.kt
-        kt = self.kt if rise is None or not self.per_K else self.kt * (1.0 + self.per_K * rise)
-        if self.ripple is None and self.cogging is None:
-            return tau / kt
-        motor = self.ratio * q + self.offset
+    def current(self, tau: np.ndarray, q: np.ndarray) -> np.ndarray:
+        kt = self._kt_now
         if self.ripple is not None:
-            amp, per_rev = self.ripple
-            kt = kt * (1.0 + amp * np.sin(per_rev * motor))
+            amp, freq, phase = self.ripple
+            kt = kt * (1.0 + amp * np.sin(freq * q + phase))
         if self.cogging is not None:
-            amp, per_rev = self.cogging
-            tau = tau - amp * np.sin(per_rev * motor)
+            amp, freq, phase = self.cogging
+            tau = tau - amp * np.sin(freq * q + phase)
         return tau / kt
 
 

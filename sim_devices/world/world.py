@@ -156,6 +156,8 @@ class World:
         self.torque_constant = r.torque_constant if w.torque_constant is None else w.torque_constant
         self.motors = MotorModel(scene, self.torque_constant)
         self.thermal = JointThermal(scene.n_joints, w) if w.joint_thermal else None
+        if self.thermal is not None:
+            self.motors.set_temperature(self.thermal.rise)
         self.joint_torque_sensors = None if scene.joint_torque is None else JointTorqueSensors(
             scene.joint_torque, w, self.rng, noise)
         # MuJoCo's friction loss is a soft constraint: its default softness lets joints creep at a
@@ -342,11 +344,11 @@ class World:
         if self._to_withdraw and ts is not None and any(ts >= o.until_s for _, o in self._to_withdraw):
             self._withdraw_obstacles(ts)
         wrench = self._wrench()
-        rise = None if self.thermal is None else self.thermal.rise
-        current = self.motors.current(tau, q, rise)
+        current = self.motors.current(tau, q)
         tau_j = None if self.joint_torque_sensors is None else self._transmitted(tau, stribeck)
-        if self.thermal is not None and self.thermal.update(t, current):
-            self.friction.apply(self.thermal.rise)  # from the next step on
+        if self.thermal is not None and self.thermal.update(t, current):  # for the steps from the next on
+            self.friction.apply(self.thermal.rise)
+            self.motors.set_temperature(self.thermal.rise)
         contacts = self._obstacle_contacts() if d.ncon else ()
         return WorldState(t=t, q=q, qd=qd, qdd=self._joints(self._qacc, d.qacc), tau=tau, current=current,
                           wrench=wrench, contacts=probes + contacts if probes else contacts, tau_j=tau_j)
