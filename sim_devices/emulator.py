@@ -239,10 +239,11 @@ class FTEmulator(Emulator):
 
     def __init__(self, device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict[str, Any]) -> None:
         super().__init__(device, scene, link, options)
+        sensor = scene.require_ft(f"the F/T emulator of device {device.name!r}")
         self.reader = self.side.ft_reader()
         mf = self.options.get("max_frames")
         self.max_frames = None if mf is None else int(mf)
-        self.rate_hz = float(scene.sensor.rate_hz)
+        self.rate_hz = float(sensor.rate_hz)
         self.samples = 0  # samples sent (or attempted: faults included)
         self._last_n: int | None = None
         self.done = False

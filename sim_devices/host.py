@@ -21,7 +21,8 @@ its emulators and ``t_due_ns`` the host time at which it was due (the same, unle
 
 Steering: halt the arm, set its joint targets, kill, restart, suspend (SIGSTOP: a hung device) and
 resume an emulator, the commands the world applied (with host and world times), the world's time,
-and its joint and F/T samples from the shared-memory rings.
+and its joint and F/T samples from the shared-memory rings (no F/T ring when the scene has no F/T
+sensor; samples then come at the joints' rate: ``ftc_hw.model.sample_rate_hz``).
 """
 from __future__ import annotations
 
@@ -41,12 +42,12 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.model import Payload
+from ftc_hw.model import Payload, sample_rate_hz
 from ftc_hw.model.true_arm import true_arm_spec
 from ftc_hw.priority import name_process
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
-from .link import Command, JointRecord, Ring, RingReader
+from .link import FT_WIDTH, Command, JointRecord, NoFTRingError, Ring, RingReader
 from .runner import AppliedCommand, SimRunner
 from .world import Hold, Reality, with_reality
 from .world.truth import truth_line
@@ -230,8 +231,8 @@ def _main(conn: Any, plan: _Plan) -> None:
     child = _Child(conn, plan, runner)
     try:
         child.reply("ready", {"endpoints": endpoints, "joint_ring": runner.link.joints.name,
-                              "ft_ring": runner.link.ft.name, "n_joints": plan.scene.n_joints,
-                              "sample_period_s": 1.0 / plan.scene.sensor.rate_hz,
+                              "ft_ring": runner.link.info.ft_ring, "n_joints": plan.scene.n_joints,
+                              "sample_period_s": 1.0 / runner.world.sample_rate_hz,
                               "startup_s": {"world": world_s, **{e.device.name: e.started_s
                                                                   for e in runner.emulators}}})
         child.serve()
@@ -290,7 +291,7 @@ class WorldHost:
         self._conn: Any = None
         self._rings: dict[str, Ring] = {}
         self.endpoints: dict[str, dict[str, Any]] = {}
-        self.sample_period_s = 1.0 / scene.sensor.rate_hz
+        self.sample_period_s = 1.0 / sample_rate_hz(scene)
         self.result: dict[str, Any] | None = None
         self._pipe_lock = threading.RLock()
         self.startup_s: dict[str, float] = {}  # seconds to build the world ("world"), to start each emulator
@@ -314,8 +315,9 @@ class WorldHost:
             raise WorldHostError(f"the simulated world failed to start: {info}")
         self.endpoints = {e["name"]: e for e in info["endpoints"]}
         n = info["n_joints"]
-        self._rings = {"joints": Ring(JointRecord.width(n), name=info["joint_ring"], create=False),
-                       "ft": Ring(12, name=info["ft_ring"], create=False)}
+        self._rings = {"joints": Ring(JointRecord.width(n), name=info["joint_ring"], create=False)}
+        if info["ft_ring"] is not None:  # None: the scene has no F/T sensor
+            self._rings["ft"] = Ring(FT_WIDTH, name=info["ft_ring"], create=False)
         self.sample_period_s = info["sample_period_s"]
         self.startup_s = info["startup_s"]
         return self.endpoints
@@ -467,7 +469,10 @@ class WorldHost:
         return RingReader(self._ring("joints"), from_start=from_start)
 
     def ft_reader(self, from_start: bool = False) -> RingReader:
-        """Records ``[t, wrench (6, sensor frame, as the device reports it), saturated (6)]``."""
+        """Records ``[t, wrench (6, sensor frame, as the device reports it), saturated (6)]``; a
+        :class:`NoFTRingError` when the scene has no F/T sensor."""
+        if self._plan.scene.sensor is None:
+            raise NoFTRingError(f"scene {self.scene.name!r} has no F/T sensor: its world has no F/T ring")
         return RingReader(self._ring("ft"), from_start=from_start)
 
     def _ring(self, which: str) -> Ring:

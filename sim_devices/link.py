@@ -1,10 +1,10 @@
 """The link between the physics world's process and the protocol emulators' processes.
 
 The world process owns a :class:`WorldLink`: shared-memory rings that it appends every F/T sample
-and every joint sample to, and a command socket. Each emulator process attaches to the rings by
-name (:class:`EmulatorSide`), reads what is new with a :class:`RingReader` (never misses a sample
-unless it falls a whole ring behind, which it counts), and sends commands (:class:`Command`) back:
-goal positions, stop, torque on/off.
+(when the scene has an F/T sensor) and every joint sample to, and a command socket. Each emulator
+process attaches to the rings by name (:class:`EmulatorSide`), reads what is new with a
+:class:`RingReader` (never misses a sample unless it falls a whole ring behind, which it counts), and
+sends commands (:class:`Command`) back: goal positions, stop, torque on/off.
 
 Commands travel as JSON datagrams on a Unix socket in a private (0700) directory: any number of
 senders, one message per datagram, sent from the emulator's own thread (no feeder thread, unlike a
@@ -61,6 +61,10 @@ class Command:
         q = d.get("q")
         return cls(d["source"], d["kind"], None if q is None else tuple(float(x) for x in q), d.get("on"),
                    dict(d.get("extra") or {}), int(d.get("t_sent_ns", 0)))
+
+
+class NoFTRingError(LookupError):
+    """An F/T ring was asked of a world whose scene has no F/T sensor."""
 
 
 class CommandLinkError(ConnectionError):
@@ -174,7 +178,7 @@ class RingReader:
 class LinkInfo:
     """What an emulator process needs to attach: ring names and widths, the command socket's path."""
 
-    ft_ring: str
+    ft_ring: str | None  # None: the scene has no F/T sensor (no F/T ring)
     joint_ring: str
     n_joints: int
     commands: str  # the world's command socket (AF_UNIX, SOCK_DGRAM)
@@ -186,10 +190,13 @@ FT_WIDTH = 12  # wrench (6, sensor frame, scene convention, as the device report
 @dataclass(frozen=True, slots=True)
 class JointRecord:
     """One sample of the world's joint ring, by name. The one place that says its layout: a record
-    (what a :class:`RingReader` returns) is ``[t, q (n), qd (n), qdd (n), current (n), tau (n)]`` --
-    the world's time (s), then for each of the ``n`` joints, in the scene's order, its angle (rad),
-    velocity (rad/s), acceleration (rad/s^2), motor current (A) and motor torque (N m). The world
-    writes it (:meth:`WorldLink.publish_joints`); ``from_row`` reads it, its arrays views of the row."""
+    (what a :class:`RingReader` returns) is ``[t, q (n), qd (n), qdd (n), current (n), tau (n),
+    tau_j (n)]`` -- the world's time (s), then for each of the ``n`` joints, in the scene's order, its
+    angle (rad), velocity (rad/s), acceleration (rad/s^2), motor current (A, as the motor's sensor reads
+    it), motor torque (N m) and the joint torque sensor's reading (N m: the torque the joint transmits
+    on the link side of its gear, i.e. the motor torque less the joint's friction, with the sensor's
+    offset and noise; zeros where the scene has no joint torque sensors). The world writes it
+    (:meth:`WorldLink.publish_joints`); ``from_row`` reads it, its arrays views of the row."""
 
     t: float
     q: np.ndarray
@@ -197,16 +204,18 @@ class JointRecord:
     qdd: np.ndarray
     current: np.ndarray
     tau: np.ndarray
+    tau_j: np.ndarray
+
+    FIELDS = 6  # arrays of n per record
 
     @staticmethod
     def width(n: int) -> int:
         """The ring's payload width for ``n`` joints (the record without its time)."""
-        return 5 * n
+        return JointRecord.FIELDS * n
 
     @classmethod
     def from_row(cls, row: np.ndarray, n: int) -> JointRecord:
-        return cls(float(row[0]), row[1:1 + n], row[1 + n:1 + 2 * n], row[1 + 2 * n:1 + 3 * n],
-                   row[1 + 3 * n:1 + 4 * n], row[1 + 4 * n:1 + 5 * n])
+        return cls(float(row[0]), *(row[1 + k * n:1 + (k + 1) * n] for k in range(JointRecord.FIELDS)))
 
 
 MAX_COMMAND_BYTES = 65536
@@ -216,10 +225,11 @@ SEND_TIMEOUT_S = 1.0  # a world that drains nothing for this long is hung
 class WorldLink:
     """Created in the world's process. ``info`` goes to each emulator process (picklable)."""
 
-    def __init__(self, n_joints: int, ctx: mp.context.BaseContext | None = None) -> None:
+    def __init__(self, n_joints: int, ctx: mp.context.BaseContext | None = None, *, ft: bool = True) -> None:
+        """``ft``: the scene has an F/T sensor (else no F/T ring: :attr:`ft` is None)."""
         # ctx: accepted for compatibility; nothing here needs a multiprocessing context any more
         self.n_joints = n_joints
-        self.ft = Ring(FT_WIDTH)
+        self.ft = Ring(FT_WIDTH) if ft else None
         self.joints = Ring(JointRecord.width(n_joints))
         self._dir = tempfile.mkdtemp(prefix="ftc-link-")  # 0700: only this user's processes can send
         self.command_path = os.path.join(self._dir, "commands")
@@ -229,14 +239,15 @@ class WorldLink:
         self._ready = select.poll()
         self._ready.register(self._commands, select.POLLIN)
         self.bad_commands = 0  # datagrams that were no Command (counted, dropped)
-        self.info = LinkInfo(self.ft.name, self.joints.name, n_joints, self.command_path)
+        self.info = LinkInfo(None if self.ft is None else self.ft.name, self.joints.name, n_joints,
+                             self.command_path)
 
     def publish_ft(self, t: float, wrench: np.ndarray, saturated: np.ndarray) -> None:
         self.ft.append_parts(t, (wrench, saturated))  # bools stored as 0.0 / 1.0
 
-    def publish_joints(self, t: float, q, qd, qdd, current, tau) -> None:
+    def publish_joints(self, t: float, q, qd, qdd, current, tau, tau_j) -> None:
         """Append one :class:`JointRecord` (its fields in its order)."""
-        self.joints.append_parts(t, (q, qd, qdd, current, tau))
+        self.joints.append_parts(t, (q, qd, qdd, current, tau, tau_j))
 
     def drain_commands(self, limit: int = 100) -> list[Command]:
         if not self._ready.poll(0):  # the common case, every step: a poll is cheaper than a failed recv
@@ -259,7 +270,8 @@ class WorldLink:
         return bool(ready)
 
     def close(self) -> None:
-        self.ft.close()
+        if self.ft is not None:
+            self.ft.close()
         self.joints.close()
         self._commands.close()
         shutil.rmtree(self._dir, ignore_errors=True)
@@ -270,12 +282,15 @@ class EmulatorSide:
 
     def __init__(self, info: LinkInfo) -> None:
         self.info = info
-        self.ft = Ring(FT_WIDTH, name=info.ft_ring, create=False)
+        self.ft = None if info.ft_ring is None else Ring(FT_WIDTH, name=info.ft_ring, create=False)
         self.joints = Ring(JointRecord.width(info.n_joints), name=info.joint_ring, create=False)
         self._commands = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self._commands.settimeout(SEND_TIMEOUT_S)
 
     def ft_reader(self) -> RingReader:
+        """The F/T ring's reader; a :class:`NoFTRingError` when the world has no F/T sensor."""
+        if self.ft is None:
+            raise NoFTRingError("the world has no F/T sensor (its scene has no [sensor]): no F/T ring to read")
         return RingReader(self.ft)
 
     def joint_reader(self) -> RingReader:
@@ -295,7 +310,8 @@ class EmulatorSide:
             raise CommandLinkError(f"world command socket {self.info.commands}: {exc}") from exc
 
     def close(self) -> None:
-        self.ft.close()
+        if self.ft is not None:
+            self.ft.close()
         self.joints.close()
         with contextlib.suppress(OSError):
             self._commands.close()

@@ -49,7 +49,7 @@ class SimRunner:
         if payload is not None:  # a payload the devices' clients do not know about (calibration tests)
             setup = dataclasses.replace(setup, payload=payload)
         self.world = World(scene, setup, seed=seed, noise=noise)
-        self.link = WorldLink(scene.n_joints)
+        self.link = WorldLink(scene.n_joints, ft=scene.sensor is not None)
         self.devices = tuple(devices)
         self.options = options or {}
         self.emulators: list[EmulatorProcess] = []
@@ -77,11 +77,13 @@ class SimRunner:
         return [e.endpoint for e in self.emulators]
 
     def _publish(self, state: WorldState, with_ft: bool) -> None:
+        """The joint sample (every step) and, ``with_ft`` and where the scene has an F/T sensor, its reading."""
         w = self.world
-        if with_ft:
+        if with_ft and w.sensor is not None:
             reading = w.read_sensor(state)
             self.link.publish_ft(state.t, reading.wrench, reading.saturated)
-        self.link.publish_joints(state.t, state.q, state.qd, state.qdd, w.read_current(state), state.tau)
+        self.link.publish_joints(state.t, state.q, state.qd, state.qdd, w.read_current(state), state.tau,
+                                 w.read_joint_torques(state))
 
     def emulator(self, name: str) -> EmulatorProcess:
         for e in self.emulators:
@@ -134,7 +136,7 @@ class SimRunner:
         return wall0_ns + round((t - t0) * 1e9)
 
     def run(self, realtime: bool = True, on_sample=None) -> None:
-        """Until ``duration`` simulated seconds; ``on_sample(state)`` at each sensor sample.
+        """Until ``duration`` simulated seconds; ``on_sample(state)`` at each sample (the world's sample rate).
 
         Real time: a step is computed when the host clock reaches its start time (states are never
         published ahead of their time), and while waiting for it the world wakes on every command

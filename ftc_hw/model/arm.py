@@ -13,7 +13,16 @@ import mujoco
 import numpy as np
 
 from ..scene import CompensationLevel, Scene, SceneError
-from .build import FORCE_SENSOR, TORQUE_SENSOR, Payload, add_ft_sensors, attach_payload, descends, load_spec_and_fits
+from .build import (
+    FORCE_SENSOR,
+    TORQUE_SENSOR,
+    Payload,
+    add_ft_sensors,
+    attach_payload,
+    descends,
+    ft_site_id,
+    load_spec_and_fits,
+)
 from .inertials import body_params, set_body_params
 from .joint_map import JointMap
 from .mesh_fit import SURFACE_GROUP
@@ -97,12 +106,15 @@ class ArmModel:
                 b = m.body(body).id
                 set_body_params(m, b, body_params(m, b) + np.asarray(delta, dtype=float), nearest=True)
             self.set_const()
-        self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
-        self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
-        # the sensor's wrench in sensordata: one gather per frame instead of two slices
-        self._wrench_adr = np.r_[self._force_adr:self._force_adr + 3, self._torque_adr:self._torque_adr + 3]
-        self.site_id = m.site(scene.sensor.site).id
-        self.sensor_body = int(m.site_bodyid[self.site_id])
+        # the F/T sensor, if the scene has one (None: the wrench predictions raise a SceneError). A flange
+        # sensor's body carries only what hangs beyond it (build.add_ft_sensors): its subtree is its load
+        self.site_id = ft_site_id(m, scene)
+        self.sensor_body = None if self.site_id is None else int(m.site_bodyid[self.site_id])
+        if self.site_id is not None:
+            self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
+            self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
+            # the sensor's wrench in sensordata: one gather per frame instead of two slices
+            self._wrench_adr = np.r_[self._force_adr:self._force_adr + 3, self._torque_adr:self._torque_adr + 3]
 
         self.joint_names = scene.robot.joints
         self.n_joints = len(self.joint_names)
@@ -114,8 +126,9 @@ class ArmModel:
         self._forces_applied = False
         self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
         self.surfaces = self._collect_surfaces()
-        self.sign = scene.sensor.reading_sign
-        self.total_mass = float(m.body_subtreemass[self.sensor_body])
+        self.sign = 1.0 if scene.sensor is None else scene.sensor.reading_sign
+        # the mass the F/T sensor carries (without one: the whole arm's)
+        self.total_mass = float(m.body_subtreemass[0 if self.sensor_body is None else self.sensor_body])
         self._posed = b""  # the q (bytes) whose kinematics the data holds (b"": none known)
         self._sensor_q = b""  # the q (bytes) of _sensor_T, the last base_T_sensor
         self._sensor_T = np.eye(4)
@@ -174,6 +187,10 @@ class ArmModel:
         mujoco.mj_setConst(self.model, self.data)
         self._posed = b""
 
+    def _require_ft(self) -> None:
+        if self.site_id is None:
+            self.scene.require_ft("a predicted sensor wrench")
+
     # -- state ----------------------------------------------------------------------------------------
     def _set(self, q: Sequence[float] | np.ndarray, qd=None, qdd=None) -> np.ndarray:
         q = np.asarray(q, dtype=float)
@@ -227,6 +244,7 @@ class ArmModel:
         q = np.asarray(q, dtype=float)
         key = q.tobytes()
         if key != self._sensor_q:
+            self._require_ft()
             if key != self._posed:  # else the frame's arm_loads has posed the data at q
                 self._set(q)
                 mujoco.mj_kinematics(self.model, self.data)
@@ -288,6 +306,7 @@ class ArmModel:
         static weight of the arm, ``dynamics`` weight plus inertial, Coriolis and centrifugal terms
         from (q, qd, qdd). The sensor's bias is not included.
         """
+        self._require_ft()
         self._inverse(q, qd, qdd, level, contacts)
         d = self.data
         out = np.empty(6)
@@ -313,6 +332,8 @@ class ArmModel:
         recursive Newton-Euler at rest for the joint torques), ``dynamics`` MuJoCo's inverse dynamics.
         """
         m, d = self.model, self.data
+        if self.site_id is None:
+            self._require_ft()
         if level == "bias":
             return np.zeros(6), (np.zeros(self.n_joints) if joint_torques else None)
         if level == "dynamics":
@@ -347,6 +368,7 @@ class ArmModel:
         ``arm_loads``/``predicted_wrench`` call: the subtree's linear momentum Jacobian (mass times
         the centre-of-mass Jacobian) and its angular one about the sensor origin. The wrench is
         linear in qdd, so this maps an acceleration error to the wrench error it causes."""
+        self._require_ft()
         m, d = self.model, self.data
         b = self.sensor_body
         jcom = np.zeros((3, m.nv))

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..geometry.arrays import project
 from ..scene import Scene
+from .rates import sample_rate_hz
 
 SURFACE_GROUP = 1  # MJCF geom group that holds the touchable surfaces (ftc_hw.model.arm re-exports it)
 _KINDS = {mujoco.mjtGeom.mjGEOM_CAPSULE: "capsule", mujoco.mjtGeom.mjGEOM_CYLINDER: "cylinder",
@@ -47,8 +48,9 @@ def prepare_user_model(spec: mujoco.MjSpec, scene: Scene, urdf: bool) -> None:
     if urdf:
         spec.compiler.fusestatic = False  # MuJoCo's URDF default merges joint-less links (the base) away
         # a URDF sets no physics step: ~0.5 ms, a whole number of steps per sensor sample
-        spec.option.timestep = 1.0 / (scene.sensor.rate_hz * max(1, round(1.0 / (scene.sensor.rate_hz * 5e-4))))
-        for name in (scene.sensor.site, scene.robot.flange):
+        rate = sample_rate_hz(scene)
+        spec.option.timestep = 1.0 / (rate * max(1, round(1.0 / (rate * 5e-4))))
+        for name in (scene.sensor.site if scene.sensor is not None else None, scene.robot.flange):
             if name and spec.site(name) is None and spec.body(name) is not None:
                 spec.body(name).add_site(name=name)
     touchable = {t.link for t in scene.touchable}

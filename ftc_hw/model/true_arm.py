@@ -13,7 +13,7 @@ import numpy as np
 from ..scene import Scene, SceneError
 from ..scene.vendor import shell_fetched
 from ..scene.world_spec import WorldSpec
-from .build import descends, load_spec, parse_spec
+from .build import arm_bodies, ft_site_id, load_spec, parse_spec
 from .mesh_fit import SURFACE_GROUP, prepare_user_model
 from .vendor_shell import attach_vendor_shell
 
@@ -71,7 +71,7 @@ def _check_same_arm(scene: Scene, spec: mujoco.MjSpec) -> None:
     for t in scene.touchable:
         if spec.body(t.link) is None:
             raise SceneError(scene.path, "world.model", f"{name} has no body {t.link!r} (a touchable link)")
-    if spec.site(scene.sensor.site) is None:
+    if scene.sensor is not None and spec.site(scene.sensor.site) is None:
         raise SceneError(scene.path, "world.model", f"{name} has no site {scene.sensor.site!r} (the sensor)")
     for body in spec.bodies:
         if body.explicitinertial and (body.mass < 0 or np.any(np.asarray(body.inertia) < 0)):
@@ -79,14 +79,14 @@ def _check_same_arm(scene: Scene, spec: mujoco.MjSpec) -> None:
 
 
 def compile_true_arm(scene: Scene, spec: mujoco.MjSpec) -> mujoco.MjModel:
-    """Compile ``spec`` as the true arm: the shells of the bodies the sensor carries inflated (their
-    inertials kept as the uninflated model's), then the inertial and sensor-mount differences applied."""
+    """Compile ``spec`` as the true arm: the shells of the arm's bodies (:func:`.build.arm_bodies`: those a
+    base sensor carries) inflated (their inertials kept as the uninflated model's), then the inertial
+    and sensor-mount differences applied."""
     world = scene.world
     try:
         reference = spec.compile()
-        sensor_body = int(reference.site_bodyid[reference.site(scene.sensor.site).id])
-        arm_bodies = {reference.body(b).name for b in range(reference.nbody) if descends(reference, b, sensor_body)}
-        _inflate_shells(spec, world, arm_bodies)
+        arm = {reference.body(b).name for b in arm_bodies(reference, scene)}
+        _inflate_shells(spec, world, arm)
         m = spec.compile()
     except ValueError as exc:
         key = "world.model" if world.model_path else "robot.model"
@@ -119,7 +119,9 @@ def _inflate_shells(spec: mujoco.MjSpec, world: WorldSpec, arm_bodies: set[str])
 def _move_sensor(m: mujoco.MjModel, scene: Scene) -> None:
     """The sensor's true mount: moved by ``sensor_offset`` (its own frame) and turned by ``sensor_rotation``."""
     w = scene.world
-    sid = m.site(scene.sensor.site).id
+    sid = ft_site_id(m, scene)
+    if sid is None:
+        return
     if np.any(w.sensor_offset):
         r = np.empty(9)
         mujoco.mju_quat2Mat(r, m.site_quat[sid])

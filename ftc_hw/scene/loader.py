@@ -105,6 +105,11 @@ def _merged(base: dict, over: dict) -> dict:
     return out
 
 
+_JOINT_SENSING_KEYS = ("gear_ratio", "motor_angle_offset", "current_ripple", "cogging_torque",
+                       "torque_constant_per_K", "friction_per_K", "winding_start_K", "winding_heating_K_per_A2",
+                       "winding_tau_s", "joint_torque_offset", "joint_torque_drift_per_K")
+
+
 class _Parser:
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -330,7 +335,7 @@ class _Parser:
                               "stribeck_velocity", "torque_constant", "sensor_offset_m", "sensor_rotation_rad",
                               "sensor_gain", "coloured_noise_std", "coloured_noise_tau_s", "temperature_drift",
                               "temperature_rise_K", "temperature_tau_s", "shell_offset_m",
-                              "vendor_shell", "vendor_shell_shift_m"}, p)
+                              "vendor_shell", "vendor_shell_shift_m", *_JOINT_SENSING_KEYS}, p)
         model_path = self.model_file(t, p) if "model" in t else None
 
         def joint_vector(key: str, **kw) -> Any:
@@ -356,7 +361,30 @@ class _Parser:
             temperature_tau_s=self.number(t, "temperature_tau_s", p, positive=True, default=600.0),
             shell_offset=shell, vendor_shell=self.vendor_shell(t, p),
             vendor_shell_shift=self.shifts(self.get(t, "vendor_shell_shift_m", p, dict, {}),
-                                           p + "vendor_shell_shift_m."))
+                                           p + "vendor_shell_shift_m."),
+            **self.joint_sensing(t, p, joint_vector))
+
+    def joint_sensing(self, t: dict, p: str, joint_vector) -> dict[str, Any]:
+        """``[world]``'s joint sensing keys (docs/reality.md): motor ripple and cogging, temperature
+        coefficients, the windings' thermal model, joint torque sensors' offsets and drift."""
+        out = {"gear_ratio": joint_vector("gear_ratio", positive=True),
+               "motor_angle_offset": joint_vector("motor_angle_offset"),
+               "current_ripple": joint_vector("current_ripple", nonneg=True),
+               "cogging_torque": joint_vector("cogging_torque", nonneg=True),
+               "winding_start_K": joint_vector("winding_start_K"),
+               "joint_torque_offset": joint_vector("joint_torque_offset"),
+               "joint_torque_drift_per_K": joint_vector("joint_torque_drift_per_K")}
+        if out["current_ripple"] is not None and np.any(out["current_ripple"] >= 0.5):
+            raise self.fail(p + "current_ripple", "expected amplitudes below 0.5 (a fraction of the torque)")
+        for key, limit in (("torque_constant_per_K", 0.01), ("friction_per_K", 0.05)):
+            out[key] = self.number(t, key, p, default=0.0)
+            if abs(out[key]) > limit:
+                raise self.fail(p + key, f"expected -{limit} to {limit} per K, got {out[key]}")
+        out["winding_heating_K_per_A2"] = self.number(t, "winding_heating_K_per_A2", p, default=0.0)
+        if out["winding_heating_K_per_A2"] < 0:
+            raise self.fail(p + "winding_heating_K_per_A2", "expected a number >= 0")
+        out["winding_tau_s"] = self.number(t, "winding_tau_s", p, positive=True, default=900.0)
+        return out
 
     def shifts(self, table: dict, p: str) -> Any:
         """``vendor_shell_shift_m``: per body, where its real shell lies off the vendor's meshes (m, body frame)."""

@@ -57,6 +57,25 @@ class WorldSpec:
     vendor_shell: str | None = None  # the vendor's meshes (ftc_hw.scene.vendor) are the touched surface
     vendor_shell_shift: Mapping[str, np.ndarray] = field(default_factory=dict)  # m, per body (its frame): the
     # real shell's offset from the vendor's meshes (casting and assembly tolerance)
+    # joint sensing (sim_devices/world/joint_sensing.py; None: as modelled, i.e. none of it)
+    gear_ratio: np.ndarray | None = None  # motor turns per joint turn, per scene joint (None: 100, ESTIMATE)
+    motor_angle_offset: np.ndarray | None = None  # rad: each rotor's angle at joint angle 0 (the ripple's phase)
+    current_ripple: np.ndarray | None = None  # relative torque-per-amp ripple amplitude, periodic in the motor angle
+    cogging_torque: np.ndarray | None = None  # N m at the joint: cogging amplitude, periodic in the motor angle
+    torque_constant_per_K: float = 0.0  # relative change of the torque constants per K of winding temperature
+    friction_per_K: float = 0.0  # relative change of joint friction (Coulomb, viscous, Stribeck) per K
+    winding_start_K: np.ndarray | None = None  # K per joint: the windings at the start, above the model's temperature
+    winding_heating_K_per_A2: float = 0.0  # K per A^2: a winding's steady rise above the model's temperature
+    winding_tau_s: float = 900.0  # s: the windings' thermal time constant
+    joint_torque_offset: np.ndarray | None = None  # N m per joint, added to the [joint_torque] sensors' offsets
+    joint_torque_drift_per_K: np.ndarray | None = None  # N m per K of winding temperature, per joint
+
+    @property
+    def joint_thermal(self) -> bool:
+        """The windings' temperature changes something: the torque constants, the friction or the
+        joint torque sensors' offsets."""
+        return bool(self.torque_constant_per_K or self.friction_per_K or (
+            self.joint_torque_drift_per_K is not None and np.any(self.joint_torque_drift_per_K)))
 
     @property
     def is_ideal(self) -> bool:
@@ -68,7 +87,14 @@ class WorldSpec:
                 and not np.any(self.coloured_noise_std)
                 and not (np.any(self.temperature_drift) and self.temperature_rise_K)
                 and self.shell_offset == 0.0 and not any(self.shell_offsets.values())
-                and self.vendor_shell is None)
+                and self.vendor_shell is None and not self.joint_sensing_differs)
+
+    @property
+    def joint_sensing_differs(self) -> bool:
+        """Motor currents or joint torque readings differ from the model's (ripple, cogging, temperature,
+        torque-sensor offsets)."""
+        return bool(self.joint_thermal or any(v is not None and np.any(v) for v in (
+            self.current_ripple, self.cogging_torque, self.joint_torque_offset)))
 
     def shell_of(self, geom: str) -> float:
         """The shell offset (m) of one geom: its own if given, else the common one."""

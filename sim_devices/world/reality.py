@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from ftc_hw.model.arm import SURFACE_GROUP
-from ftc_hw.model.build import descends, moves
+from ftc_hw.model.build import arm_bodies, moves
 from ftc_hw.model.true_arm import true_arm_spec, world_vendor_shell
 from ftc_hw.scene import Scene
 from ftc_hw.scene.vendor import VENDOR_SHELLS, shell_fetched
@@ -49,6 +49,16 @@ class Tolerances:
     thermal_rel_per_K: float  # thermal drift per K, +- this x the white noise std
     shell_m: float  # each touchable geom's true surface lies 0.5 .. 1 x this outside its primitive
     vendor_shift_m: float  # each axis of each body's true shell off the vendor's meshes, where it has them
+    # joint sensing (JOINT_DIFFERENCES; docs/reality.md): uniform between the two bounds of a pair
+    ripple_rel: float  # each motor's torque ripple amplitude, 0 .. this (a fraction of the torque)
+    cogging_rel: float  # each motor's cogging amplitude at the joint, 0 .. this x its Coulomb friction
+    torque_constant_per_K: tuple[float, float]  # the torque constants' relative change per K (the magnets')
+    friction_per_K: tuple[float, float]  # joint friction's relative change per K (the gears' grease)
+    winding_start_K: float  # each winding starts +- this (K) off the temperature the model's values hold at
+    winding_heating_K_per_A2: float  # the windings' steady rise per A^2 (not drawn: the reality's value)
+    winding_tau_s: float  # their thermal time constant (not drawn)
+    torque_offset_rel: float  # each joint torque sensor's offset, +- this x its range
+    torque_drift_rel_per_K: float  # its drift per K of winding temperature, +- this x its range
 
 
 TOLERANCES: dict[Reality, Tolerances] = {
@@ -56,21 +66,31 @@ TOLERANCES: dict[Reality, Tolerances] = {
                                 torque_constant_rel=0.05, mount_m=0.001, mount_rad=math.radians(0.3),
                                 gain_rel=0.01, crosstalk_rel=0.005, coloured_rel=0.5, coloured_tau_s=1.0,
                                 temperature_rise_K=3.0, thermal_rel_per_K=0.3, shell_m=0.003,
-                                vendor_shift_m=0.001),
+                                vendor_shift_m=0.001, ripple_rel=0.02, cogging_rel=0.1,
+                                torque_constant_per_K=(-0.0012, -0.0009), friction_per_K=(-0.015, -0.005),
+                                winding_start_K=5.0, winding_heating_K_per_A2=0.5, winding_tau_s=900.0,
+                                torque_offset_rel=0.002, torque_drift_rel_per_K=2e-4),
     Reality.HARSH: Tolerances(mass_rel=0.08, com_m=0.008, inertia_rel=0.25, friction_rel=0.60, stribeck_rel=0.6,
                               torque_constant_rel=0.10, mount_m=0.003, mount_rad=math.radians(1.0),
                               gain_rel=0.025, crosstalk_rel=0.015, coloured_rel=1.0, coloured_tau_s=3.0,
                               temperature_rise_K=8.0, thermal_rel_per_K=0.6, shell_m=0.005,
-                              vendor_shift_m=0.002),
+                              vendor_shift_m=0.002, ripple_rel=0.05, cogging_rel=0.25,
+                              torque_constant_per_K=(-0.0012, -0.0009), friction_per_K=(-0.025, -0.01),
+                              winding_start_K=15.0, winding_heating_K_per_A2=1.0, winding_tau_s=600.0,
+                              torque_offset_rel=0.005, torque_drift_rel_per_K=5e-4),
 }
 
 DIFFERENCES = ("inertials", "friction", "torque_constant", "mount", "gain", "coloured_noise", "thermal", "shell")
+# what only the joint signals see (currents, joint torques): drawn with the rest, not columns of
+# `ftc bench reality` (its F/T pipeline reads none of them)
+JOINT_DIFFERENCES = ("motor_ripple", "joint_thermal", "torque_sensor_offsets")
+ALL_DIFFERENCES = DIFFERENCES + JOINT_DIFFERENCES
 
 
 def with_reality(scene: Scene, reality: Reality | str, seed: int = 0,
                  only: tuple[str, ...] | None = None) -> Scene:
     """The scene whose ``world`` is a draw of ``reality`` (seeded) on top of its own ``[world]``.
-    ``only``: draw just these of :data:`DIFFERENCES` (the rest stay as the scene has them)."""
+    ``only``: draw just these of :data:`ALL_DIFFERENCES` (the rest stay as the scene has them)."""
     reality = Reality(reality)
     if reality is Reality.IDEAL:
         return scene
@@ -79,10 +99,10 @@ def with_reality(scene: Scene, reality: Reality | str, seed: int = 0,
     arm = _moving_bodies_and_shells(scene)  # the true arm compiled once for the draw and the shell
     drawn = _draw(scene, tol, rng, arm)  # every difference drawn, so a subset keeps the same values
     base = scene.world
-    keep = set(DIFFERENCES) if only is None else set(only)
-    unknown = keep - set(DIFFERENCES)
+    keep = set(ALL_DIFFERENCES) if only is None else set(only)
+    unknown = keep - set(ALL_DIFFERENCES)
     if unknown:
-        raise ValueError(f"unknown differences {sorted(unknown)} (known: {', '.join(DIFFERENCES)})")
+        raise ValueError(f"unknown differences {sorted(unknown)} (known: {', '.join(ALL_DIFFERENCES)})")
     changes: dict = {}
     for name in keep:
         changes.update(_compose(name, base, drawn))
@@ -130,10 +150,10 @@ def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator,
                                   1.0 + rng.uniform(-tol.inertia_rel, tol.inertia_rel)) for b in bodies}
     gain = np.diag(1.0 + rng.uniform(-tol.gain_rel, tol.gain_rel, 6))
     # crosstalk is specified in per cent of full scale: term (i, j) in units of range_i / range_j
-    full = np.asarray(s.range, dtype=float)
+    full = np.ones(6) if s is None else np.asarray(s.range, dtype=float)  # no F/T sensor: drawn, not used
     cross = rng.uniform(-tol.crosstalk_rel, tol.crosstalk_rel, (6, 6)) * full[:, None] / full[None, :]
     np.fill_diagonal(cross, 0.0)
-    white = np.sqrt(np.diag(s.noise_cov))
+    white = np.zeros(6) if s is None else np.sqrt(np.diag(s.noise_cov))
     drawn = WorldSpec(
         inertials=inertials,
         friction_coulomb=coulomb * (1.0 + rng.uniform(-tol.friction_rel, tol.friction_rel, n)),
@@ -151,7 +171,24 @@ def _draw(scene: Scene, tol: Tolerances, rng: np.random.Generator,
     )
     # drawn last, so the draws above are what they were before this difference existed
     shifts = {b: rng.uniform(-tol.vendor_shift_m, tol.vendor_shift_m, 3) for b in _shell_bodies(scene)}
-    return dataclasses.replace(drawn, vendor_shell_shift=shifts)
+    return dataclasses.replace(drawn, vendor_shell_shift=shifts, **_draw_joint_sensing(scene, tol, rng, coulomb))
+
+
+def _draw_joint_sensing(scene: Scene, tol: Tolerances, rng: np.random.Generator, coulomb: np.ndarray) -> dict:
+    """The joint sensing's differences (drawn after all the others, which so keep their values)."""
+    n = scene.n_joints
+    out = {"current_ripple": rng.uniform(0.0, tol.ripple_rel, n),
+           "cogging_torque": coulomb * rng.uniform(0.0, tol.cogging_rel, n),
+           "motor_angle_offset": rng.uniform(0.0, 2 * math.pi, n),
+           "torque_constant_per_K": float(rng.uniform(*tol.torque_constant_per_K)),
+           "friction_per_K": float(rng.uniform(*tol.friction_per_K)),
+           "winding_start_K": rng.uniform(-tol.winding_start_K, tol.winding_start_K, n),
+           "winding_heating_K_per_A2": tol.winding_heating_K_per_A2, "winding_tau_s": tol.winding_tau_s}
+    jt = scene.joint_torque
+    full = np.ones(n) if jt is None else np.asarray(jt.range, dtype=float)  # drawn alike with or without sensors
+    out["joint_torque_offset"] = full * rng.uniform(-tol.torque_offset_rel, tol.torque_offset_rel, n)
+    out["joint_torque_drift_per_K"] = full * rng.uniform(-tol.torque_drift_rel_per_K, tol.torque_drift_rel_per_K, n)
+    return out
 
 
 def _shell_bodies(scene: Scene) -> list[str]:
@@ -185,15 +222,29 @@ def _compose(name: str, base: WorldSpec, d: WorldSpec) -> dict:
     if name == "thermal":
         return {"temperature_drift": base.temperature_drift + d.temperature_drift,
                 "temperature_rise_K": max(base.temperature_rise_K, d.temperature_rise_K)}
+    if name == "motor_ripple":
+        phase = d.motor_angle_offset if base.motor_angle_offset is None else base.motor_angle_offset
+        return {"current_ripple": d.current_ripple, "cogging_torque": d.cogging_torque, "motor_angle_offset": phase}
+    if name == "joint_thermal":
+        start = d.winding_start_K if base.winding_start_K is None else base.winding_start_K + d.winding_start_K
+        return {"torque_constant_per_K": base.torque_constant_per_K or d.torque_constant_per_K,
+                "friction_per_K": base.friction_per_K or d.friction_per_K, "winding_start_K": start,
+                "winding_heating_K_per_A2": base.winding_heating_K_per_A2 or d.winding_heating_K_per_A2,
+                "winding_tau_s": d.winding_tau_s if base.winding_heating_K_per_A2 == 0.0 else base.winding_tau_s}
+    if name == "torque_sensor_offsets":
+        offset = d.joint_torque_offset if base.joint_torque_offset is None else (
+            base.joint_torque_offset + d.joint_torque_offset)
+        drift = d.joint_torque_drift_per_K if base.joint_torque_drift_per_K is None else (
+            base.joint_torque_drift_per_K + d.joint_torque_drift_per_K)
+        return {"joint_torque_offset": offset, "joint_torque_drift_per_K": drift}
     return {"shell_offsets": {g: base.shell_of(g) + v for g, v in d.shell_offsets.items()}}
 
 
 def _moving_bodies_and_shells(scene: Scene) -> tuple[list[str], dict[str, str]]:
-    """The bodies the sensor carries that a joint moves, and the touchable primitive geoms of the
-    bodies it carries (geom -> body)."""
+    """The arm's bodies (a base sensor's: those it carries) that a joint moves, and the touchable
+    primitive geoms of the arm's bodies (geom -> body)."""
     m = true_arm_spec(scene, shell="none").compile()  # the primitives, as the draw has always seen them
-    sensor_body = int(m.site_bodyid[m.site(scene.sensor.site).id])
-    arm = [b for b in range(1, m.nbody) if descends(m, b, sensor_body)]
+    arm = arm_bodies(m, scene)
     bodies = [m.body(b).name for b in arm if moves(m, b)]
     geoms = {m.geom(g).name: m.body(int(m.geom_bodyid[g])).name for g in range(m.ngeom)
              if m.geom_group[g] == SURFACE_GROUP and int(m.geom_bodyid[g]) in arm

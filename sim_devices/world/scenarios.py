@@ -29,8 +29,10 @@ class ScenarioInfo:
 
 
 def poke_force_limit(scene: Scene) -> float:
-    """Largest poke (N): a fifth of the sensor's smallest force range, at most 100 N."""
-    return float(min(100.0, 0.2 * scene.sensor.range[:3].min()))
+    """Largest poke (N): a fifth of a base F/T sensor's smallest force range, at most 100 N (a flange
+    sensor does not carry the arm's pokes: 100 N)."""
+    s = scene.sensor
+    return float(min(100.0, 0.2 * s.range[:3].min())) if s is not None and s.mount == "base" else 100.0
 
 
 def random_pokes(model: ArmModel, q, rng: np.random.Generator, count: int, t0: float = 0.2,

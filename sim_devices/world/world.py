@@ -21,13 +21,16 @@ from ftc_hw.model import (
     JointMap,
     Payload,
     add_ft_sensors,
+    arm_bodies,
     attach_payload,
-    descends,
+    ft_site_id,
+    sample_rate_hz,
 )
 from ftc_hw.model.arm import GEOM_KINDS
 from ftc_hw.model.true_arm import compile_true_arm, true_arm_spec
 from ftc_hw.scene import Scene
 
+from .joint_sensing import JointFriction, JointThermal, JointTorqueSensors, MotorModel, friction_torques
 from .sensor_model import FTSensorModel, SensorReading
 from .trajectory import Hold, Trajectory
 from .true_shell import mesh_point, shell_meshes
@@ -107,13 +110,20 @@ class WorldState:
     qd: np.ndarray
     qdd: np.ndarray
     tau: np.ndarray  # motor torques at the joints, N m
-    current: np.ndarray  # motor currents, A
-    wrench: np.ndarray  # noise-free sensor wrench without bias (sensor frame, scene sign convention)
+    current: np.ndarray  # motor currents, A (noise-free: the joint torques through the motors' model)
+    wrench: np.ndarray | None  # noise-free F/T wrench, no bias (sensor frame, scene convention); None: no F/T sensor
     contacts: tuple[ContactTruth, ...]
+    tau_j: np.ndarray | None = None  # N m: the torque each joint transmits (motor torque less the friction
+    # applied this step: what a link-side joint torque sensor reads, noise-free); None: the scene has no such sensors
 
 
 class World:
-    """A scene simulated in MuJoCo under joint control, with scripted contacts and a sensor model."""
+    """A scene simulated in MuJoCo under joint control, with scripted contacts and the scene's sensing:
+    its F/T sensor (if any: at its base or at the flange), motor currents, joint torque sensors (if any).
+
+    Samples come at :attr:`sample_rate_hz` (``ftc_hw.model.sample_rate_hz``: the F/T sensor's rate; without
+    one the joint torque sensors', else the arm device's ``frequency``, else 1000 Hz); the joint state is
+    there at every physics step."""
 
     def __init__(self, scene: Scene, setup: ScenarioSetup, seed: int = 0, noise: bool = True) -> None:
         self.scene = scene
@@ -134,17 +144,22 @@ class World:
         self.data = mujoco.MjData(m)
         r, w = scene.robot, scene.world
         self.joints = jm = JointMap(m, scene)
-        # each scene joint's friction on the dof its motor drives (a coupling's first driven joint:
-        # the others are tied to it), in that dof's units: b / ratio^2, f_c / |ratio|
-        dofs, ratio = jm.dadr[jm.lead], jm.ratio[jm.lead]
+        # each scene joint's friction on the dof its motor drives (a coupling's first driven joint: the
+        # others are tied to it), scaled by the gears' temperature where the world says so
         viscous = r.friction_viscous if w.friction_viscous is None else w.friction_viscous
         coulomb = r.friction_coulomb if w.friction_coulomb is None else w.friction_coulomb
-        m.dof_damping[dofs] = viscous / ratio**2
-        m.dof_frictionloss[dofs] = coulomb / np.abs(ratio)
-        self._stribeck_dofs = dofs
-        self._stribeck = None if w.friction_stribeck is None or not np.any(w.friction_stribeck) else (
+        ratio = jm.ratio[jm.lead]
+        stribeck = None if w.friction_stribeck is None or not np.any(w.friction_stribeck) else (
             w.friction_stribeck / np.abs(ratio), w.stribeck_velocity * np.abs(ratio))
+        self.friction = JointFriction(m, jm, viscous, coulomb, stribeck, w.friction_per_K)
+        dofs = self.friction.dofs
         self.torque_constant = r.torque_constant if w.torque_constant is None else w.torque_constant
+        self.motors = MotorModel(scene, self.torque_constant)
+        self.thermal = JointThermal(scene.n_joints, w) if w.joint_thermal else None
+        if self.thermal is not None:
+            self.motors.set_temperature(self.thermal.rise)
+        self.joint_torque_sensors = None if scene.joint_torque is None else JointTorqueSensors(
+            scene.joint_torque, w, self.rng, noise)
         # MuJoCo's friction loss is a soft constraint: its default softness lets joints creep at a
         # fraction of the friction torque. The stiffest stable setting makes it Coulomb-like.
         m.dof_solref[dofs, 0] = 2.0 * m.opt.timestep
@@ -153,21 +168,24 @@ class World:
         m.dof_solimp[dofs, 0] = 0.999
         m.dof_solimp[dofs, 1] = 0.9999
         mujoco.mj_setConst(m, self.data)  # the differences applied to the compiled model reach its constants
-        self._fadr = m.sensor(FORCE_SENSOR).adr[0]
-        self._tadr = m.sensor(TORQUE_SENSOR).adr[0]
-        self._sign = scene.sensor.reading_sign
-        sensor_body = m.site_bodyid[m.site(scene.sensor.site).id]
-        self._arm_bodies = {b for b in range(m.nbody) if descends(m, b, sensor_body)}
+        site = ft_site_id(m, scene)
+        self._fadr = None if site is None else m.sensor(FORCE_SENSOR).adr[0]
+        self._tadr = None if site is None else m.sensor(TORQUE_SENSOR).adr[0]
+        self._sign = 1.0 if scene.sensor is None else scene.sensor.reading_sign
+        # contacts' truth: every contact on the arm (a base sensor's subtree, else every arm body)
+        obstacles = {m.body(b).id for b in self._obstacle_bodies}
+        self._arm_bodies = set(arm_bodies(m, scene)) - obstacles
         # per geom, what the contacts' truth asks of it every step in contact (model lookups cost more)
         self._geom_on_arm = [int(b) in self._arm_bodies for b in m.geom_bodyid]
         self._geom_link = [m.body(int(b)).name for b in m.geom_bodyid]
         self._geom_kind = [GEOM_KINDS.get(int(k)) for k in m.geom_type]
         self._geom_is_mesh = [int(k) == mujoco.mjtGeom.mjGEOM_MESH for k in m.geom_type]
-        self.sensor = FTSensorModel(scene.sensor, self.rng, noise=noise, world=w)
+        self.sensor = None if scene.sensor is None else FTSensorModel(scene.sensor, self.rng, noise=noise, world=w)
         self.dt = float(m.opt.timestep)
-        ratio = 1.0 / (scene.sensor.rate_hz * self.dt)
+        self.sample_rate_hz = sample_rate_hz(scene)
+        ratio = 1.0 / (self.sample_rate_hz * self.dt)
         if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
-            raise ValueError(f"sensor rate {scene.sensor.rate_hz} Hz is not a divisor of the physics rate "
+            raise ValueError(f"sample rate {self.sample_rate_hz} Hz is not a divisor of the physics rate "
                              f"{1 / self.dt:g} Hz")
         self.steps_per_sample = int(round(ratio))
         # the first obstacle contact comes in real time: compile (or load) the ray kernel now, not then
@@ -235,7 +253,8 @@ class World:
         self._bias = _run_view(d.qfrc_bias, jm.dadr) if plain else None
         self._inertial_joints = _run_view(self._inertial, jm.dadr) if plain else None
         f, t = self._fadr, self._tadr
-        self._ft = d.sensordata[f:f + 6] if t == f + 3 else None  # force then torque, one run
+        self._ft = d.sensordata[f:f + 6] if f is not None and t == f + 3 else None  # force then torque, one run
+        self._friction_dofs = np.zeros(m.nv)  # the joint friction applied at a step (joint torque sensors)
         self._body_id = {p.link: m.body(p.link).id for p in self.setup.probes}
         std = self.scene.robot.current_noise_std
         self._current_noise = std if self.noise and np.any(std > 0) else None
@@ -314,8 +333,9 @@ class World:
             tau = np.zeros_like(tau)
         d.qfrc_applied[:] = 0.0
         jm.to_dofs(tau, d.qfrc_applied)
-        if self._stribeck is not None:
-            self._apply_stribeck()
+        stribeck = self.friction.stribeck_force(d.qvel)
+        if stribeck is not None:
+            d.qfrc_applied[self.friction.dofs] += stribeck
         d.xfrc_applied[:] = 0.0
         ts = None if self._script_t0 is None else t - self._script_t0  # scenario time
         probes = self._press_probes(ts) if ts is not None and self.setup.probes else ()
@@ -323,17 +343,34 @@ class World:
         self.steps += 1
         if self._to_withdraw and ts is not None and any(ts >= o.until_s for _, o in self._to_withdraw):
             self._withdraw_obstacles(ts)
-        if self._ft is not None:
-            wrench = self._sign * self._ft
-        else:
-            wrench = np.empty(6)
-            wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
-            wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
-            wrench = self._sign * wrench
-        current = tau / self.torque_constant
+        wrench = self._wrench()
+        current = self.motors.current(tau, q)
+        tau_j = None if self.joint_torque_sensors is None else self._transmitted(tau, stribeck)
+        if self.thermal is not None and self.thermal.update(t, current):  # for the steps from the next on
+            self.friction.apply(self.thermal.rise)
+            self.motors.set_temperature(self.thermal.rise)
         contacts = self._obstacle_contacts() if d.ncon else ()
         return WorldState(t=t, q=q, qd=qd, qdd=self._joints(self._qacc, d.qacc), tau=tau, current=current,
-                          wrench=wrench, contacts=probes + contacts if probes else contacts)
+                          wrench=wrench, contacts=probes + contacts if probes else contacts, tau_j=tau_j)
+
+    def _wrench(self) -> np.ndarray | None:
+        if self._ft is not None:
+            return self._sign * self._ft
+        if self._fadr is None:
+            return None
+        d = self.data
+        wrench = np.empty(6)
+        wrench[:3] = d.sensordata[self._fadr:self._fadr + 3]
+        wrench[3:] = d.sensordata[self._tadr:self._tadr + 3]
+        return self._sign * wrench
+
+    def _transmitted(self, tau: np.ndarray, stribeck: np.ndarray | None) -> np.ndarray:
+        """The torque each joint transmits at the step just taken: the motor torque plus the friction
+        MuJoCo applied (damping, friction loss, the Stribeck excess: all against the motion)."""
+        fr = friction_torques(self.model, self.data, self._friction_dofs)
+        if stribeck is not None:
+            fr[self.friction.dofs] += stribeck
+        return tau + self.joints.from_dofs(fr)
 
     def _press_probes(self, ts: float) -> tuple[ContactTruth, ...]:
         """The scripted probes' forces at scenario time ``ts`` on ``xfrc_applied``; their truth."""
@@ -354,13 +391,6 @@ class World:
             d.xfrc_applied[bid, 3:] += np.cross(point - d.xipos[bid], force)
             probes.append(ContactTruth(p.link, point, force, "probe"))
         return tuple(probes)
-
-    def _apply_stribeck(self) -> None:
-        """The friction above Coulomb near standstill (Stribeck): ``excess exp(-(v / vs)^2)``, against
-        the motion (smoothed through zero over a twentieth of vs)."""
-        excess, vs = self._stribeck
-        v = self.data.qvel[self._stribeck_dofs]
-        self.data.qfrc_applied[self._stribeck_dofs] -= excess * np.exp(-np.square(v / vs)) * np.tanh(v / (0.05 * vs))
 
     def _withdraw_obstacles(self, ts: float) -> None:
         m, d = self.model, self.data
@@ -417,8 +447,19 @@ class World:
         return self.state
 
     def read_sensor(self, state: WorldState | None = None) -> SensorReading:
+        """The F/T sensor's reading of ``state`` (default: the last); a SceneError without an F/T sensor."""
         s = state or self.state
+        if self.sensor is None:
+            self.scene.require_ft("an F/T reading of the world")
         return self.sensor.read(s.wrench, s.t)
+
+    def read_joint_torques(self, state: WorldState | None = None) -> np.ndarray:
+        """The joint torque sensors' reading (N m per joint: offsets, drift, noise, range); zeros where the
+        scene has none."""
+        s = state or self.state
+        if self.joint_torque_sensors is None:
+            return np.zeros(len(s.q))
+        return self.joint_torque_sensors.read(s.tau_j, None if self.thermal is None else self.thermal.rise)
 
     def read_current(self, state: WorldState | None = None) -> np.ndarray:
         s = state or self.state
@@ -426,10 +467,10 @@ class World:
             return s.current + self.rng.normal(size=s.current.shape) * self._current_noise
         return s.current.copy()
 
-    def run(self, duration: float) -> Iterator[tuple[WorldState, SensorReading]]:
-        """Advance ``duration`` s, yielding (state, sensor reading) at the sensor's rate."""
-        n_samples = int(round(duration * self.scene.sensor.rate_hz))
+    def run(self, duration: float) -> Iterator[tuple[WorldState, SensorReading | None]]:
+        """Advance ``duration`` s, yielding (state, F/T reading; None without an F/T sensor) at the sample rate."""
+        n_samples = int(round(duration * self.sample_rate_hz))
         for _ in range(n_samples):
             for _ in range(self.steps_per_sample):
                 state = self.step()
-            yield state, self.read_sensor(state)
+            yield state, None if self.sensor is None else self.read_sensor(state)

@@ -74,7 +74,7 @@ class SyntheticWorld:
         self._thread: threading.Thread | None = None
         self._closed = False
         z = np.zeros(n_joints)
-        self.link.publish_joints(0.0, z, z, z, z, z)
+        self.link.publish_joints(0.0, z, z, z, z, z, z)
 
     def start(self) -> SyntheticWorld:
         self._thread = threading.Thread(target=self._run, daemon=True)

@@ -8,7 +8,15 @@ import socket
 import numpy as np
 import pytest
 
-from ftc_hw.sim_devices.link import Command, CommandLinkError, EmulatorSide, JointRecord, LinkInfo, WorldLink
+from ftc_hw.sim_devices.link import (
+    Command,
+    CommandLinkError,
+    EmulatorSide,
+    JointRecord,
+    LinkInfo,
+    NoFTRingError,
+    WorldLink,
+)
 
 pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the others on every core
 
@@ -72,14 +80,30 @@ def test_a_joint_record_reads_back_by_name_what_the_world_wrote():
     side = EmulatorSide(link.info)
     try:
         assert side.joint_state() is None
-        q, qd, qdd, current, tau = (np.arange(3) + 10.0 * k for k in range(1, 6))
-        link.publish_joints(1.25, q, qd, qdd, current, tau)
+        q, qd, qdd, current, tau, tau_j = (np.arange(3) + 10.0 * k for k in range(1, 7))
+        link.publish_joints(1.25, q, qd, qdd, current, tau, tau_j)
         rec = side.joint_reader().ring.read(0)
         assert rec.shape == (1 + JointRecord.width(3),)
         for got in (JointRecord.from_row(rec, 3), side.joint_state()):
             assert got.t == 1.25 and isinstance(got.t, float)
-            for name, want in zip(("q", "qd", "qdd", "current", "tau"), (q, qd, qdd, current, tau), strict=True):
+            for name, want in zip(("q", "qd", "qdd", "current", "tau", "tau_j"), (q, qd, qdd, current, tau, tau_j),
+                                  strict=True):
                 assert np.array_equal(getattr(got, name), want), name
+    finally:
+        side.close()
+        link.close()
+
+
+def test_a_world_without_an_f_t_sensor_has_no_f_t_ring_and_says_so():
+    link = WorldLink(2, ft=False)
+    side = EmulatorSide(link.info)
+    try:
+        assert link.info.ft_ring is None and link.ft is None and side.ft is None
+        with pytest.raises(NoFTRingError, match="no F/T sensor"):
+            side.ft_reader()
+        z = np.zeros(2)
+        link.publish_joints(0.5, z, z, z, z, z, z + 1.0)
+        assert np.array_equal(side.joint_state().tau_j, [1.0, 1.0])
     finally:
         side.close()
         link.close()

@@ -2,13 +2,16 @@
 lasts), its end-of-run report, its samples and clock, its emulators killed and restarted."""
 from __future__ import annotations
 
+import dataclasses
 import time
 
+import numpy as np
 import pytest
 
 from ftc_hw.record.events import read_truth
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.host import WorldHost, WorldHostError
+from ftc_hw.sim_devices.link import NoFTRingError
 
 pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
@@ -66,3 +69,15 @@ def test_a_killed_emulator_restarts_at_its_endpoint(tmp_path):
         assert world.endpoints["ft"] == again
         with pytest.raises(KeyError, match="no emulated device 'arm'"):
             world.endpoint("arm")
+
+
+def test_a_world_without_an_f_t_sensor_serves_joints_at_their_rate_and_no_f_t_ring():
+    scene = dataclasses.replace(load_scene("ur5e"), sensor=None)
+    with WorldHost(scene, "hold", devices=[], duration=0.2, noise=False, realtime=False) as world:
+        assert world.sample_period_s == pytest.approx(1 / 500)  # the UR arm's RTDE rate
+        assert world.wait_done(20.0), world.result
+        assert world.result["samples"] == 100
+        with pytest.raises(NoFTRingError, match="no F/T sensor"):
+            world.ft_reader()
+        joints = world.latest_joints()
+        assert joints is not None and np.array_equal(joints.tau_j, np.zeros(6))  # no joint torque sensors
