@@ -141,7 +141,10 @@ class FreeMotionIdentifier:
         self.priors = priors or Priors()
         self.with_gain = gain
         m = arm.model
-        self.body_ids = [b for b in range(1, m.nbody) if descends(m, b, arm.sensor_body) and moves(m, b)]
+        # the moving bodies the sensor carries that have inertia to identify (a flange sensor's own
+        # tool-side body is massless: nothing of it can be told)
+        self.body_ids = [b for b in range(1, m.nbody)
+                         if descends(m, b, arm.sensor_body) and moves(m, b) and m.body_mass[b] > 0]
         self.bodies = [m.body(b).name for b in self.body_ids]
         self.pi0 = np.concatenate([body_params(m, b) for b in self.body_ids])
         self._data = mujoco.MjData(m)

@@ -47,7 +47,7 @@ def test_a_push_on_the_tool_is_the_same_base_wrench_whichever_way_the_sensor_rep
 def _tick(scene, kin, q, ft):
     z = np.zeros(6)
     ctl = Controller((5, 9, 0, 0), None, "arm", "1", "UR5e")
-    return Tick(JointRecord(0.004, q, z, z, z, z), ctl, kin, np.full(6, 25.0), 0.0, ft, scene.sensor.reading_sign)
+    return Tick(JointRecord(0.004, q, z, z, z, z, z), ctl, kin, np.full(6, 25.0), 0.0, ft, scene.sensor.reading_sign)
 
 
 def test_packets_carry_the_flange_reading_and_the_wrench_it_implies_in_base_axes(scene):
@@ -71,7 +71,7 @@ def test_without_a_flange_sensor_both_are_the_current_based_estimate():
     kin.update(q, np.zeros(6), np.zeros(6))
     tau = kin.d.qfrc_inverse[kin.dadr] - kin.jacobian.T @ np.array([0.0, 0.0, -25.0, 0.0, 0.0, 0.0])
     z = np.zeros(6)
-    tick = Tick(JointRecord(0.0, q, z, z, z, tau), Controller((5, 9, 0, 0), None, "arm", "1", "UR5e"), kin,
+    tick = Tick(JointRecord(0.0, q, z, z, z, tau, z), Controller((5, 9, 0, 0), None, "arm", "1", "UR5e"), kin,
                 np.full(6, 25.0), 0.0)
     assert tick.tcp_force == pytest.approx([0.0, 0.0, -25.0, 0.0, 0.0, 0.0], abs=0.05)  # damped least squares
     rot = kin.tcp_rotation()
