@@ -25,6 +25,7 @@ from ftc_hw.scene import DeviceSpec, Scene
 from .base import Adapter, DeviceError
 from .can_ft import CanFTAdapter
 from .dynamixel import DynamixelArm
+from .franka import FrankaArm
 from .ft300 import FT300Adapter
 from .ft_base import FTAdapter
 from .modbus_ft import ModbusFTAdapter
@@ -152,7 +153,7 @@ def _ft(build: Callable[[DeviceSpec, Bus, Mapping[str, Any], dict[str, Any]], FT
     return AdapterKind("ft", make)
 
 
-def _arm(cls: type[DynamixelArm] | type[URArm]) -> AdapterKind:
+def _arm(cls: type[DynamixelArm] | type[URArm] | type[FrankaArm]) -> AdapterKind:
     def make(device: DeviceSpec, bus: Bus, endpoint: Any, scene: Scene | None, overrides: dict[str, Any]) -> Adapter:
         return cls.from_spec(device, bus, endpoint, scene=scene, **overrides)
 
@@ -167,6 +168,7 @@ ADAPTERS: dict[str, AdapterKind] = {
     "ft-rdt": _ft(_rdt),
     "dynamixel": _arm(DynamixelArm),
     "ur-rtde": _arm(URArm),
+    "franka": _arm(FrankaArm),
 }
 
 
