@@ -29,6 +29,7 @@ from ftc_hw.scene import DeviceSpec, Scene
 from .base import Adapter, DeviceError
 from .can_ft import CanFTAdapter
 from .dynamixel import DynamixelArm
+from .franka import FrankaArm
 from .ft300 import FT300Adapter
 from .ft_base import FTAdapter
 from .modbus_ft import ModbusFTAdapter
@@ -161,7 +162,7 @@ def _ft(build: Callable[[DeviceSpec, Bus, Mapping[str, Any], dict[str, Any]], FT
     return AdapterKind("ft", make)
 
 
-def _arm(cls: type[DynamixelArm] | type[URArm], reads_ft: ReadsFT | None = None) -> AdapterKind:
+def _arm(cls: type[DynamixelArm] | type[URArm] | type[FrankaArm], reads_ft: ReadsFT | None = None) -> AdapterKind:
     def make(device: DeviceSpec, bus: Bus, endpoint: Any, scene: Scene | None, overrides: dict[str, Any]) -> Adapter:
         if reads_ft is not None:
             overrides = {"ft": "ft" in roles_of(device, scene), **overrides}
@@ -178,6 +179,7 @@ ADAPTERS: dict[str, AdapterKind] = {
     "ft-rdt": _ft(_rdt),
     "dynamixel": _arm(DynamixelArm),
     "ur-rtde": _arm(URArm, reads_flange_ft),
+    "franka": _arm(FrankaArm),
 }
 
 

@@ -1,8 +1,8 @@
 """Where emulators listen, by device name (``ftc sim --address DEVICE=ADDR``): the emulator options
-that put a UR controller on a loopback IP address (``arm=127.0.0.3``: ur_rtde's ports are fixed, so
-the address is what tells two controllers apart), a Modbus TCP device or a Net F/T box (RDT over UDP)
-on ``host[:port]``, and a
-serial or CAN device's pty symlink at a path. Servers bind loopback addresses only."""
+that put a UR or Franka controller on a loopback IP address (``arm=127.0.0.3``: ur_rtde's and
+libfranka's ports are fixed, so the address is what tells two controllers apart), a Modbus TCP device
+or a Net F/T box (RDT over UDP) on ``host[:port]``, and a serial or CAN device's pty symlink at a path.
+Servers bind loopback addresses only."""
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -33,7 +33,7 @@ def parse_addresses(texts: Iterable[str], scene: Scene) -> dict[str, dict[str, A
 
 def emulator_address(kind: str, transport: str, where: str) -> dict[str, Any]:
     """The emulator options that make a device of ``kind`` over ``transport`` listen at ``where``."""
-    if kind == "ur-rtde":
+    if kind in ("ur-rtde", "franka"):  # ports fixed by their client libraries: the address tells them apart
         return {"address": check_loopback(where)}
     if transport in ("modbus-tcp", "udp"):
         host, _, port = where.rpartition(":") if where.count(":") == 1 else (where, "", "")

@@ -17,4 +17,5 @@ EMULATORS: dict[str, str] = {
     "modbus-ft": "ftc_hw.sim_devices.modbus_ft:serve",
     "dynamixel": "ftc_hw.sim_devices.dynamixel:serve",
     "ur-rtde": "ftc_hw.sim_devices.ur:serve",
+    "franka": "ftc_hw.sim_devices.franka:serve",
 }

@@ -62,6 +62,7 @@ import numpy as np
 from . import ur_data as D
 from .emulator import Emulator, serve_with
 from .link import Command, JointRecord
+from .listener import Listener
 from .loopback import check_loopback
 from .thermal import ThermalModel
 from .ur_dashboard import answer, serve_connection
@@ -434,39 +435,12 @@ class RtdeSession:
             self.counts["data_out"] += 1
 
 
-class _Listener:
-    """A listening TCP socket on a loopback address and an accept thread calling ``on_client``."""
-
-    def __init__(self, address: str, port: int, on_client: Any, name: str) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.sock.bind((address, port))
-        self.sock.listen(8)
-        self.on_client = on_client
-        threading.Thread(target=self._accept, name=name, daemon=True).start()
-
-    def _accept(self) -> None:
-        while True:
-            try:
-                conn, _ = self.sock.accept()
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self.on_client(conn)
-
-    def close(self) -> None:
-        """Stop listening (the shutdown wakes the accept thread, so the port is free at once)."""
-        with contextlib.suppress(OSError):
-            self.sock.shutdown(socket.SHUT_RDWR)
-        self.sock.close()
-
-
 class RtdeServer:
     def __init__(self, controller: Controller, address: str, port: int, max_rate: float) -> None:
         self.controller, self.max_rate = controller, max_rate
         self.sessions: list[RtdeSession] = []
         self.lock = threading.Lock()
-        self.listener = _Listener(address, port, self._client, "rtde-accept")
+        self.listener = Listener(address, port, self._client, "rtde-accept")
 
     def _client(self, conn: socket.socket) -> None:
         conn.settimeout(0.2)  # bounds a send to a client that stopped reading
@@ -500,7 +474,7 @@ class RtdeServer:
 class DashboardServer:
     def __init__(self, controller: Controller, address: str, port: int) -> None:
         self.controller = controller
-        self.listener = _Listener(address, port, self._client, "dashboard-accept")
+        self.listener = Listener(address, port, self._client, "dashboard-accept")
 
     def _client(self, conn: socket.socket) -> None:
         threading.Thread(target=self._serve, args=(conn,), name="dashboard", daemon=True).start()

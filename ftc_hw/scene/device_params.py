@@ -201,6 +201,15 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
         Param("ft_range", "numbers", "the flange sensor's saturation limits Fx Fy Fz (N) Tx Ty Tz (N m), "
               "default the scene sensor's range", lo=0.0, above=True, length=6),
     )),
+    DeviceKind("franka", ("tcp",), "the arm controller's IP address (FCI)", "172.16.0.2", (
+        Param("client", "str", "the client library the arm's system takes: panda-py (libfranka 0.9.2, protocol 5: "
+              "Franka Emika Robot, Panda) or pylibfranka (libfranka 0.21, protocol 10: Franka Research 3); the "
+              "emulator plays that system", "pylibfranka", choices=("panda-py", "pylibfranka")),
+        Param("frequency", "number", "robot state rate, Hz (the controller's 1 kHz; the emulator may send fewer)",
+              1000.0, 0.0, 1000.0, above=True),
+        Param("stop_timeout", "number", "seconds stop() waits for the controller's reply to StopMove", 1.0, 0.0,
+              60.0, above=True),
+    )),
 )}
 
 # The keys of a device beside its params (overrides may set them too).
