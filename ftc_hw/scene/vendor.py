@@ -27,24 +27,29 @@ class VendorShell:
     tolerance_m: float  # 1 sigma per axis: how far a real arm's shell lies from these meshes
 
 
+def _robosuite(robot: str, maker: str, bodies: Mapping[str, str], base_yaw: float) -> VendorShell:
+    """A robot of robosuite 1.5.2's assets: its ``robot.xml`` and visual meshes (what a hand touches;
+    the collision meshes are coarser hulls)."""
+    return VendorShell(
+        name=f"robosuite-{robot}", requirement="robosuite==1.5.2", root=f"robosuite/models/assets/robots/{robot}",
+        model="robot.xml", licence=f"MIT (robosuite 1.5.2; the meshes are {maker} meshes)",
+        licence_file="robosuite-1.5.2.dist-info/licenses/LICENSE", bodies=bodies, base_yaw=base_yaw,
+        # ESTIMATE: cast and machined aluminium housings (and covers) against their CAD, about +-1 mm
+        # (ISO 8062 CT8-CT9 at 100-250 mm), uniform: 1 mm / sqrt(3)
+        tolerance_m=0.001 / math.sqrt(3.0))
+
+
 VENDOR_SHELLS: dict[str, VendorShell] = {
-    "robosuite-ur5e": VendorShell(
-        name="robosuite-ur5e",
-        requirement="robosuite==1.5.2",
-        root="robosuite/models/assets/robots/ur5e",
-        model="robot.xml",
-        licence="MIT (robosuite 1.5.2; the meshes are Universal Robots' UR5e meshes)",
-        licence_file="robosuite-1.5.2.dist-info/licenses/LICENSE",
-        # the visual meshes (what a hand touches); the collision meshes are UR's coarser hulls, up to
-        # 40 mm outside the upper arm's tube
-        bodies={"base": "fixed_base_link", "shoulder": "shoulder_link", "upper_arm": "upper_arm_link",
-                "forearm": "forearm_link", "wrist_1": "wrist_1_link", "wrist_2": "wrist_2_link",
-                "wrist_3": "wrist_3_link"},
-        base_yaw=math.pi,  # ROS-style base_link vs the DH base: joint anchors agree to 0.5 mm turned by pi
-        # ESTIMATE: cast and machined aluminium housings against their CAD, about +-1 mm (ISO 8062 CT8-CT9
-        # at 100-250 mm), uniform: 1 mm / sqrt(3)
-        tolerance_m=0.001 / math.sqrt(3.0),
-    ),
+    # UR's collision meshes are up to 40 mm outside the upper arm's tube.
+    # base_yaw: ROS-style base_link vs the DH base: joint anchors agree to 0.5 mm turned by pi
+    "robosuite-ur5e": _robosuite(
+        "ur5e", "Universal Robots' UR5e",
+        {"base": "fixed_base_link", "shoulder": "shoulder_link", "upper_arm": "upper_arm_link",
+         "forearm": "forearm_link", "wrist_1": "wrist_1_link", "wrist_2": "wrist_2_link", "wrist_3": "wrist_3_link"},
+        base_yaw=math.pi),
+    # base_yaw: its link frames are Franka's modified-DH frames, as ours (they agree to 1e-14 m at any q)
+    "robosuite-panda": _robosuite("panda", "Franka Emika's Panda", {f"link{i}": f"link{i}" for i in range(8)},
+                                  base_yaw=0.0),
 }
 
 
