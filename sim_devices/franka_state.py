@@ -6,9 +6,9 @@ What is filled, and how (sim_devices/SOURCES.md, "Franka"):
 - ``q``, ``dq`` the world's; ``theta``, ``dtheta`` (motor side) the same (rigid gears: the world
   has no joint elasticity); ``q_d``, ``dq_d``, ``ddq_d`` the world's too (the controller's desired
   trajectory is the world's scenario, which it tracks).
-- ``tau_J``: the link-side joint torque sensors. TODO(tau_j): the world's ``JointRecord.tau_j`` lands
-  on main soon; until then its motor torque ``tau`` stands in (it includes joint friction, which a
-  link-side sensor does not see). ``tau_J_d`` = ``tau_J``; ``dtau_J`` its change per second between
+- ``tau_J``: the link-side joint torque sensors, the world's ``JointRecord.tau_j`` (the motor torque
+  less the joint friction, with the sensors' offsets, noise and range: the scene's ``[joint_torque]``;
+  zeros where a scene has none). ``tau_J_d`` = ``tau_J``; ``dtau_J`` its change per second between
   consecutive samples.
 - ``tau_ext_hat_filtered``: Franka's controller does not publish its estimator (libfranka issues #39,
   #91). Modelled roughly as libfranka's own examples use it: ``tau_J`` minus the rigid-body model's
@@ -64,7 +64,7 @@ class StateBuilder:
         """The datagram for one sample (``message_id``: the controller's tick, ms)."""
         s = self.state
         q, qd, qdd = joints.q, joints.qd, joints.qdd
-        tau_j = joints.tau  # TODO(tau_j): joints.tau_j once JointRecord has it (link-side sensors)
+        tau_j = joints.tau_j
         s["message_id"] = message_id
         s["robot_mode"] = robot_mode
         for name, value in (("q", q), ("theta", q), ("q_d", q), ("dq", qd), ("dtheta", qd), ("dq_d", qd),

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,7 +21,7 @@ from ftc_hw.sim_devices.link import JointRecord
 pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
 ADDRESS = "127.0.0.52"
-SCENE = load_scene(Path(__file__).parents[1] / "data" / "franka7" / "franka7.toml")
+SCENE = load_scene("fr3")
 DEVICE = SCENE.devices[0]
 
 
@@ -69,7 +68,7 @@ def test_frames_carry_tau_j_and_the_controller_clock(world, arm):
     for f, j in matched:
         assert f.t_device_ns == f.seq * 1_000_000
         np.testing.assert_allclose(f.q, j.q, rtol=1e-6, atol=1e-6)  # float32 on the wire (protocol 10)
-        np.testing.assert_allclose(f.tau, j.tau, rtol=1e-6, atol=1e-5)  # TODO(tau_j): j.tau_j
+        np.testing.assert_allclose(f.tau, j.tau_j, rtol=1e-6, atol=1e-5)
         assert not f.current.any()
     assert all(b.seq > a.seq for a, b in zip(got, got[1:], strict=False))
     assert adapter.robot_mode == "Move"

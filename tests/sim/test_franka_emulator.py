@@ -1,6 +1,6 @@
 """The Franka emulator read by the real client libraries, each in its own process (panda-python's
-libfranka 0.9.2, protocol 5; pylibfranka's 0.21.3, protocol 10), the world in another, on a 7-joint
-fixture scene (tests/data/franka7). Every emulator of this module binds 127.0.0.51 (libfranka
+libfranka 0.9.2, protocol 5; pylibfranka's 0.21.3, protocol 10), the world in another, on the
+built-in panda scene. Every emulator of this module binds 127.0.0.51 (libfranka
 hard-codes port 1337): other modules use other loopback addresses."""
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from ftc_hw.sim_devices.link import JointRecord
 pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it alone, after the others
 
 ADDRESS = "127.0.0.51"
-SCENE = load_scene(Path(__file__).parents[1] / "data" / "franka7" / "franka7.toml")
+SCENE = load_scene("panda")
 CLIENT = Path(__file__).with_name("franka_client.py")
 
 
@@ -68,7 +68,8 @@ def test_each_client_reads_the_world_joint_ring_and_stops_the_arm(world, client,
     assert len(matched) >= 0.9 * len(states)
     for s, j in matched:
         np.testing.assert_allclose(s[1], j.q, rtol=rtol, atol=1e-6 if rtol else 0.0)
-        np.testing.assert_allclose(s[2], j.tau, rtol=rtol, atol=1e-5 if rtol else 0.0)  # TODO(tau_j): j.tau_j
+        np.testing.assert_allclose(s[2], j.tau_j, rtol=rtol, atol=1e-5 if rtol else 0.0)
+        assert np.any(j.tau_j != 0.0)
     assert states[-1][3].endswith("Move")  # the scenario plays
     assert out["stop"] == "ok" and out["automatic_error_recovery"] == "ok"
     assert [a.kind for a in world.applied()[before:]] == ["stop", "resume"]
