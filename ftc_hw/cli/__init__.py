@@ -503,6 +503,10 @@ def identify(
     gain: Annotated[bool, typer.Option("--gain/--no-gain", help="Also fit the sensor's linear error on the "
                                        "arm's loads (gain, crosstalk, mount).")] = True,
     plot: Annotated[bool, typer.Option("--plot/--no-plot", help=PLOT_HELP)] = True,
+    sensing: Annotated[Optional[str], typer.Option(help="Which of the scene's sensing to use, comma-separated "  # noqa: UP045
+                                                   "(base_ft, flange_ft, joint_torques, currents; default: the "
+                                                   "scene's). Without base_ft the arm is identified from its "
+                                                   "joints.")] = None,
     device: DeviceOption = None,
     rig: RigOption = None,
 ) -> None:
@@ -514,7 +518,8 @@ def identify(
                            gain=gain, plot=plot)
     raise typer.Exit(run_identify_command(recording, scene, sim=sim, plan=plan, plan_file=plan_file,
                                           scenario=scenario, duration=duration, seed=seed, reality=reality.value,
-                                          opts=opts, device_overrides=tuple(device or ()), rig=rig))
+                                          opts=opts, device_overrides=tuple(device or ()), rig=rig,
+                                          sensing=sensing))
 
 
 @app.command()
