@@ -103,9 +103,9 @@ def _held_out_error(fit, true_arm, kt, b, fc) -> tuple[np.ndarray, np.ndarray]:
 def test_currents_give_back_the_torque_constants_friction_and_what_the_inertials_do(ideal_motion):
     true_arm, kt, b, fc, _ = _truth()
     fit = JointIdentifier(ArmModel(UR5E), kinds=["currents"]).fit(ideal_motion)
-    # the common scale is the vendor's masses' and the torque constants' priors' (the true torque
-    # constants average 0.2 % above the scene's, its upper arm is 2.4 % heavier): the ratios between the
-    # joints are the data's (but wrist 3's, whose load is almost all its own friction)
+    # the common scale is what the vendor's masses' gravity torques and the torque constants' priors say
+    # (the true torque constants average 0.2 % above the scene's, the upper arm is 2.4 % heavier): the
+    # ratios between the joints are the data's (but wrist 3's, whose load is almost all its own friction)
     ratio = fit.torque_constant / kt
     assert np.all(np.abs(ratio - 1) < 0.02), ratio
     assert np.ptp(ratio[:5]) < 0.005, ratio
@@ -117,6 +117,8 @@ def test_currents_give_back_the_torque_constants_friction_and_what_the_inertials
     err_id, err_nom = _held_out_error(fit, true_arm, kt, b, fc)
     assert np.all(err_id < 0.05 * err_nom), (err_id, err_nom)
     assert any("common scale" in r for r in fit.reasons)
+    # wrist 3's links take 0.03 % of its motor's torque: its torque constant is the scene's, said
+    assert "kt_scale[5]" in fit.untold and any("wrist_3_joint" in r for r in fit.reasons)
     assert fit.unidentifiable and all(lab.split(".")[0] in fit.bodies for lab in fit.unidentifiable)
 
 
