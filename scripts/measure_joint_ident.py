@@ -13,7 +13,8 @@ import time
 
 import numpy as np
 
-from ftc_hw.calibration.joint_ident import V_EPS, JointIdentifier, JointMotionData
+from ftc_hw.calibration.joint_ident import JointIdentifier
+from ftc_hw.calibration.joint_motion import V_EPS, JointMotionData
 from ftc_hw.model import ArmModel
 from ftc_hw.model.inertials import body_params
 from ftc_hw.model.true_arm import compile_true_arm, true_arm_spec

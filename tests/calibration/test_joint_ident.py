@@ -12,7 +12,8 @@ import pytest
 
 from ftc_hw.calibration.file import Calibration, Identification, load_calibration, save_calibration
 from ftc_hw.calibration.free_motion import IdentificationError
-from ftc_hw.calibration.joint_ident import V_EPS, JointIdentifier, JointMotionData
+from ftc_hw.calibration.joint_ident import JointIdentifier
+from ftc_hw.calibration.joint_motion import V_EPS, JointMotionData
 from ftc_hw.model import ArmModel
 from ftc_hw.model.build import moves
 from ftc_hw.model.inertials import body_params, joint_regressor

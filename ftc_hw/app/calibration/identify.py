@@ -39,7 +39,7 @@ from ftc_hw.calibration.file import (
 )
 from ftc_hw.calibration.free_motion import FreeMotionFit, FreeMotionIdentifier, IdentificationError, MotionData
 from ftc_hw.calibration.joint_friction import JointFit, fit_joint_friction
-from ftc_hw.calibration.joint_ident import noise_std
+from ftc_hw.calibration.joint_motion import noise_std
 from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.model import ArmModel

@@ -16,7 +16,8 @@ from ftc_hw.app.setup.rig import build_rig, require_device
 from ftc_hw.bus import Bus, JointFrame, joints_topic
 from ftc_hw.calibration.file import Calibration, Identification, now_iso
 from ftc_hw.calibration.free_motion import IdentificationError
-from ftc_hw.calibration.joint_ident import JointIdentFit, JointIdentifier, JointMotionData
+from ftc_hw.calibration.joint_ident import JointIdentFit, JointIdentifier
+from ftc_hw.calibration.joint_motion import JointMotionData
 from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import Corrections
 from ftc_hw.record.reader import Recording
