@@ -6,7 +6,8 @@ and raises :class:`CalibrationError` (with the file and the key) on anything wro
 sensor serial, missing or malformed values. ``cal.corrections(scene)`` gives ``ContactPipeline``
 (:class:`~ftc_hw.pipeline.Corrections`) everything the file estimates: bias, payload, and
 (:mod:`.applied`) the mount yaw, gravity tilt, arm-gravity corrections and ``[identification]``
-(``ftc identify``: link inertials, the load gain).
+(``ftc identify``: link inertials, the load gain; or, from the joints' own signals, link inertials,
+torque constants, joint friction, rotor inertias, torque sensors' offsets and the joint residuals' std).
 """
 from __future__ import annotations
 
@@ -29,6 +30,9 @@ from .applied import extra_corrections, merge_inertials
 
 SCHEMA = 1
 KIND = "ftc-hw calibration"
+JOINT_KEYS = ("torque_constant", "friction_viscous", "friction_coulomb")  # per joint, >= 0 (kt > 0)
+SIGNED_JOINT_KEYS = ("rotor_inertia", "torque_offset")  # per joint, any sign (corrections about the model)
+SIGNALS = ("currents", "joint_torques")
 
 
 class CalibrationError(Exception):
@@ -54,6 +58,11 @@ class Identification:
     # what the pipeline undoes on a contact's wrench: the gain in the directions the data told
     # (FreeMotionFit.told_gain); None in files written before it was kept
     contact_gain: np.ndarray | None = None
+    # what it was identified from: "base_ft" (and currents, for the joints' friction), or the joint
+    # signals ("currents", "joint_torques", comma-separated)
+    sensing: str = "base_ft"
+    joint_residual_std: dict[str, np.ndarray] = field(default_factory=dict)  # signal -> (n,) N m
+    joint_noise_std: dict[str, np.ndarray] = field(default_factory=dict)  # signal -> (n,) N m
 
     def told_gain(self) -> np.ndarray:
         """What the pipeline undoes on a contact's wrench: ``contact_gain``; for a file without it, the
@@ -82,6 +91,10 @@ class Identification:
             out["gain_fitted"] = self.gain_fitted
         if self.contact_gain is not None:
             out["contact_gain"] = [_floats(r) for r in self.contact_gain]
+        out["sensing"] = self.sensing
+        for key in ("joint_residual_std", "joint_noise_std"):
+            if getattr(self, key):
+                out[key] = {k: _floats(v) for k, v in getattr(self, key).items()}
         return out
 
     @staticmethod
@@ -94,14 +107,21 @@ class Identification:
         inertials = {str(k): _vec(table, k, 10, f"{where}: inertials") for k in table}
         joints = {}
         jt = data.get("joints", {})
-        for key in ("torque_constant", "friction_viscous", "friction_coulomb"):
+        for key in (*JOINT_KEYS, *SIGNED_JOINT_KEYS):
             if key in jt:
-                v = np.asarray(_get(jt, key, list, f"{where}: joints"), dtype=float)
-                if v.ndim != 1 or not np.all(np.isfinite(v)) or np.any(v < 0) or (key == "torque_constant"
-                                                                                  and np.any(v <= 0)):
+                v = _joint_vector(jt, key, f"{where}: joints")
+                if key in JOINT_KEYS and (np.any(v < 0) or (key == "torque_constant" and np.any(v <= 0))):
                     raise CalibrationError(f"{where}: joints: {key}: expected finite numbers >= 0 (> 0 for a "
                                            f"torque constant), got {jt[key]!r}")
                 joints[key] = v
+        stds = {}
+        for key in ("joint_residual_std", "joint_noise_std"):
+            table = data.get(key, {})
+            if not isinstance(table, dict) or set(table) - set(SIGNALS):
+                raise CalibrationError(f"{where}: {key}: expected a table of {', '.join(SIGNALS)}")
+            stds[key] = {k: _joint_vector(table, k, f"{where}: {key}") for k in table}
+            if any(np.any(v < 0) for v in stds[key].values()):
+                raise CalibrationError(f"{where}: {key}: expected standard deviations >= 0")
         cov = None
         if "covariance" in data:
             n = 10 * len(inertials) + (36 if data.get("gain_fitted", True) else 0)
@@ -114,7 +134,18 @@ class Identification:
         return Identification(str(data.get("date", "")), str(data.get("source", "")), str(data.get("verdict", "")),
                               [str(r) for r in data.get("reasons", [])], gain, inertials,
                               [str(u) for u in data.get("untold", [])], dict(data.get("figures", {})), joints,
-                              cov, bool(data.get("gain_fitted", True)), contact_gain)
+                              cov, bool(data.get("gain_fitted", True)), contact_gain,
+                              str(data.get("sensing", "base_ft")), stds["joint_residual_std"], stds["joint_noise_std"])
+
+
+def _joint_vector(table: dict, key: str, where: str) -> np.ndarray:
+    try:
+        v = np.asarray(_get(table, key, list, where), dtype=float)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{where}: {key}: expected a list of numbers, got {table[key]!r}") from None
+    if v.ndim != 1 or not np.all(np.isfinite(v)):
+        raise CalibrationError(f"{where}: {key}: expected finite numbers, got {table[key]!r}")
+    return v
 
 
 def _gain_matrix(data: dict, key: str, where: str) -> np.ndarray:
@@ -165,6 +196,9 @@ class Calibration:
             if self.identification.joints:
                 out["joints"] = {k: v.copy() for k, v in self.identification.joints.items()}
             out["model_error"] = self.identification.model_error()
+            for key in ("joint_residual_std", "joint_noise_std"):
+                if getattr(self.identification, key):
+                    out[key] = {k: v.copy() for k, v in getattr(self.identification, key).items()}
         inertials = merge_inertials(*tables)
         if inertials:
             out["inertials"] = inertials

@@ -161,23 +161,12 @@ class FreeMotionIdentifier:
         so the posterior keeps the inertia about the centre of mass near the model's."""
         p = self.priors
         blocks = [np.eye(6) * p.bias]
-        for k in range(len(self.bodies)):
-            pi = self.pi0[k * N_PARAMS:(k + 1) * N_PARAMS]
-            mass, h = pi[0], pi[1:4]
-            i_c = inertia_at_com(pi)
-            std = np.array([p.mass_rel * mass, *([mass * p.com_m + p.mass_rel * np.linalg.norm(h)] * 3),
-                            *([p.inertia_rel * max(np.max(np.linalg.eigvalsh(i_c)), 1e-6)] * 6)])
-            blocks.append(_com_to_origin_jacobian(mass, h) @ np.diag(std))
+        blocks += [body_prior(self.pi0[k * N_PARAMS:(k + 1) * N_PARAMS], p) for k in range(len(self.bodies))]
         if self.with_gain:
             full = np.asarray(self.arm.scene.sensor.range, dtype=float)
             scale = p.gain * max(self.arm.scene.sensor.accuracy, 1e-4) * full[:, None] / full[None, :]
             blocks.append(np.diag(scale.reshape(-1)))
-        out = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
-        k = 0
-        for b in blocks:
-            out[k:k + b.shape[0], k:k + b.shape[0]] = b
-            k += b.shape[0]
-        return out
+        return block_diagonal(blocks)
 
     def rows(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, nominal): the fit's 6 x P rows and the model's reading (no bias) at one state."""
@@ -216,7 +205,7 @@ class FreeMotionIdentifier:
         x = cov = r = None
         for _ in range(4):
             weights = np.tile(1.0 / scale, len(y) // 6) * np.sqrt(huber)
-            x, cov = _bayes(a * weights[:, None], y * weights, self.prior_sqrt)
+            x, cov = bayes(a * weights[:, None], y * weights, self.prior_sqrt)
             r = (y - a @ x).reshape(-1, 6)
             scale = np.maximum(1.4826 * np.median(np.abs(r - np.median(r, axis=0)), axis=0), scale * 0.1)
             u = np.abs(r / scale).reshape(-1)
@@ -238,11 +227,30 @@ class FreeMotionIdentifier:
         return fit
 
 
+def body_prior(pi: np.ndarray, p: Priors) -> np.ndarray:
+    """A square root (10 x 10) of one body's prior covariance about its parameters ``pi``: independent
+    in (mass, first moments, inertia about the centre of mass), carried to the inertia about the origin."""
+    mass, h = pi[0], pi[1:4]
+    i_c = inertia_at_com(pi)
+    std = np.array([p.mass_rel * mass, *([mass * p.com_m + p.mass_rel * np.linalg.norm(h)] * 3),
+                    *([p.inertia_rel * max(np.max(np.linalg.eigvalsh(i_c)), 1e-6)] * 6)])
+    return _com_to_origin_jacobian(mass, h) @ np.diag(std)
+
+
+def block_diagonal(blocks: Sequence[np.ndarray]) -> np.ndarray:
+    out = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
+    k = 0
+    for b in blocks:
+        out[k:k + b.shape[0], k:k + b.shape[0]] = b
+        k += b.shape[0]
+    return out
+
+
 def _rms(r: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(r * r, axis=0))
 
 
-def _bayes(a: np.ndarray, y: np.ndarray, prior_sqrt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def bayes(a: np.ndarray, y: np.ndarray, prior_sqrt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Minimise |y - a x|^2 + |z|^2 over x = L z (L = ``prior_sqrt``): the estimate and its posterior
     covariance."""
     b = a @ prior_sqrt

@@ -102,7 +102,8 @@ ZenohConfigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
          "(docs/bus.md).")]
 SensingOption = Annotated[Optional[str], typer.Option(  # noqa: UP045
     metavar="KIND,...", help="Which of the scene's sensing to use: base_ft, flange_ft, joint_torques, currents, "
-    "comma-separated (default: the scene's own; docs/scenes.md, Sensing).")]
+    "comma-separated (default: the scene's own; docs/scenes.md, Sensing). Without base_ft the arm is judged "
+    "(and identified) from its joints.")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
 # monitor, demo, replay: the live page
@@ -518,6 +519,7 @@ def identify(
     gain: Annotated[bool, typer.Option("--gain/--no-gain", help="Also fit the sensor's linear error on the "
                                        "arm's loads (gain, crosstalk, mount).")] = True,
     plot: Annotated[bool, typer.Option("--plot/--no-plot", help=PLOT_HELP)] = True,
+    sensing: SensingOption = None,
     device: DeviceOption = None,
     rig: RigOption = None,
 ) -> None:
@@ -529,7 +531,8 @@ def identify(
                            gain=gain, plot=plot)
     raise typer.Exit(run_identify_command(recording, scene, sim=sim, plan=plan, plan_file=plan_file,
                                           scenario=scenario, duration=duration, seed=seed, reality=reality.value,
-                                          opts=opts, device_overrides=tuple(device or ()), rig=rig))
+                                          opts=opts, device_overrides=tuple(device or ()), rig=rig,
+                                          sensing=sensing))
 
 
 @app.command()

@@ -12,14 +12,15 @@ from ftc_hw.app.monitor.view import make_console
 from ftc_hw.calibration.excitation import plan_excitation
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.replay import ReplayError, recorded_scene
+from ftc_hw.scene import Scene, SceneError
 
-from .common import scene_or_exit
+from .common import scene_or_exit, sensing_kinds
 
 
 def run_identify_command(recording: Path | None, scene_name: str | None, *, sim: bool, plan: bool,
                          plan_file: Path | None, scenario: str | None, duration: float, seed: int, reality: str,
                          opts: IdentifyOptions, device_overrides: tuple[str, ...] = (),
-                         rig: Path | None = None) -> int:
+                         rig: Path | None = None, sensing: str | None = None) -> int:
     console = make_console()
     if (recording is None) == (not sim and not plan_file and not plan):
         raise typer.BadParameter("give a recording (FILE.mcap), or --sim, --plan or --plan-file",
@@ -28,10 +29,10 @@ def run_identify_command(recording: Path | None, scene_name: str | None, *, sim:
         raise typer.BadParameter("a recording, or --sim / --plan / --plan-file, not both", param_hint="RECORDING")
     if recording is not None:
         scene = scene_or_exit(scene_name) if scene_name else _recorded(recording)
-        return run_identify(scene, recording, opts, console=console)
+        return run_identify(with_sensing(scene, sensing), recording, opts, console=console)
     if scene_name is None:
         raise typer.BadParameter("--sim, --plan and --plan-file need --scene", param_hint="--scene")
-    scene = scene_or_exit(scene_name, device_overrides, rig)
+    scene = with_sensing(scene_or_exit(scene_name, device_overrides, rig), sensing)
     if plan_file is not None:
         return write_plan(scene, plan_file, duration, seed, console)
     if plan:
@@ -42,6 +43,16 @@ def run_identify_command(recording: Path | None, scene_name: str | None, *, sim:
             raise typer.BadParameter(str(exc), param_hint="--plan") from None
     return run_identify(scene, None, opts, sim=True, scenario=scenario or "sweep", duration=duration, seed=seed,
                         reality=reality, console=console)
+
+
+def with_sensing(scene: Scene, sensing: str | None) -> Scene:
+    """``--sensing a,b``: the scene using only those of what it has."""
+    if sensing is None:
+        return scene
+    try:
+        return scene.with_sensing(sensing_kinds(sensing))
+    except SceneError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--sensing") from None
 
 
 def _recorded(path: Path):

@@ -3,7 +3,8 @@
 A body's 10 standard parameters, in its own frame: ``pi = [m, hx, hy, hz, Ixx, Iyy, Izz, Ixy, Ixz, Iyz]``
 with ``h = m c`` (first moments, c the centre of mass) and ``I`` the rotational inertia about the body
 frame's origin. The wrench the moving bodies put on the sensor is linear in them:
-``w = Y(q, qd, qdd) pi`` (:func:`wrench_regressor`), the classic base-wrench regressor.
+``w = Y(q, qd, qdd) pi`` (:func:`wrench_regressor`), the classic base-wrench regressor; so are the
+joint torques the motion needs (:func:`joint_regressor`, the joint-torque regressor).
 """
 from __future__ import annotations
 
@@ -92,6 +93,24 @@ def _inertia_rows(v: np.ndarray) -> np.ndarray:
     return np.array([[x, 0, 0, y, z, 0], [0, y, 0, x, 0, z], [0, 0, z, 0, x, y]], dtype=float)
 
 
+def _body_wrench_columns(m: mujoco.MjModel, d: mujoco.MjData, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """(F, T): 3 x 10 each, base frame: the force and the torque about body ``b``'s origin that its
+    parameters need for the motion in ``d`` (see :func:`wrench_regressor` for what ``d`` must hold)."""
+    vel, acc = np.empty(6), np.empty(6)
+    # XBODY: the body frame (BODY would be its inertial frame); 1: local orientation
+    mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, vel, 1)
+    mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, acc, 1)
+    w, a = vel[:3], acc[3:]  # angular velocity; linear acceleration of the origin (minus gravity)
+    dw = acc[:3]
+    cols = np.zeros((6, N_PARAMS))  # the body's wrench about its origin, body frame
+    cols[:3, 0] = a
+    cols[:3, 1:4] = skew(dw) + skew(w) @ skew(w)  # m (dw x c + w x (w x c)) = [dw]x h + [w]x [w]x h
+    cols[3:, 1:4] = -skew(a)  # h x a = -[a]x h
+    cols[3:, 4:] = _inertia_rows(dw) + skew(w) @ _inertia_rows(w)
+    r_b = d.xmat[b].reshape(3, 3)
+    return r_b @ cols[:3], r_b @ cols[3:]
+
+
 def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int], site: int,
                      sign: float) -> np.ndarray:
     """``Y`` (6 x 10 len(bodies)): the sensor reading (site frame, about the site, ``sign`` the scene's
@@ -101,24 +120,26 @@ def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int],
     rot_s = d.site_xmat[site].reshape(3, 3)
     p_s = d.site_xpos[site]
     out = np.zeros((6, N_PARAMS * len(bodies)))
-    vel, acc = np.empty(6), np.empty(6)
     for k, b in enumerate(bodies):
-        # XBODY: the body frame (BODY would be its inertial frame); 1: local orientation
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, vel, 1)
-        mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, acc, 1)
-        w, a = vel[:3], acc[3:]  # angular velocity; linear acceleration of the origin (minus gravity)
-        dw = acc[:3]
-        cols = np.zeros((6, N_PARAMS))  # the body's wrench about its origin, body frame
-        cols[:3, 0] = a
-        cols[:3, 1:4] = skew(dw) + skew(w) @ skew(w)  # m (dw x c + w x (w x c)) = [dw]x h + [w]x [w]x h
-        cols[3:, 1:4] = -skew(a)  # h x a = -[a]x h
-        cols[3:, 4:] = _inertia_rows(dw) + skew(w) @ _inertia_rows(w)
-        r_b = d.xmat[b].reshape(3, 3)
-        f, t = r_b @ cols[:3], r_b @ cols[3:]
+        f, t = _body_wrench_columns(m, d, b)
         t = t + skew(d.xpos[b] - p_s) @ f  # about the sensor origin
         out[:3, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ f
         out[3:, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ t
     return sign * out
+
+
+def joint_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int]) -> np.ndarray:
+    """``Y`` (nv x 10 len(bodies)): the generalized forces on the model's dofs that each body's
+    parameters need for the motion in ``d`` (prepared as for :func:`wrench_regressor`), i.e. MuJoCo's
+    inverse dynamics less the armature's and passive forces, as ``sum_b J_b^T Y_b pi_b`` with ``J_b``
+    the body origin's Jacobian."""
+    out = np.zeros((m.nv, N_PARAMS * len(bodies)))
+    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    for k, b in enumerate(bodies):
+        f, t = _body_wrench_columns(m, d, b)
+        mujoco.mj_jacBody(m, d, jacp, jacr, b)
+        out[:, k * N_PARAMS:(k + 1) * N_PARAMS] = jacp.T @ f + jacr.T @ t
+    return out
 
 
 def model_rows(arm, data: mujoco.MjData, bodies: Sequence[int], q, qd, qdd,

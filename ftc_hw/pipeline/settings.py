@@ -56,8 +56,12 @@ class Corrections:
     is undone on the contact's wrench (None: ``gain``); ``inertials`` body -> (10,) corrections to its
     standard inertial parameters; ``frame`` (6, 6) the sensor's true frame (a mount yaw); ``gravity``
     (3,) m/s^2 in the base frame (a tilt); ``joints`` ``torque_constant``, ``friction_viscous``,
-    ``friction_coulomb`` -> (n,) per joint; ``model_error`` what the identified model may still get
-    wrong."""
+    ``friction_coulomb`` -> (n,) per joint, and from joint-signal identification ``rotor_inertia``
+    (kg m^2 beyond the model's armature, seen by the currents only) and ``torque_offset`` (N m, what
+    the joint torque sensors read at zero torque); ``model_error`` what the identified model may still
+    get wrong; ``joint_residual_std`` signal (``currents`` / ``joint_torques``) -> (n,) N m: the
+    identified model's residual std per joint, on signals low-passed over 0.1 s (the model's error);
+    ``joint_noise_std`` the same keys -> (n,) N m: each signal's white noise at its recorded rate."""
 
     bias: np.ndarray | None = None
     payload: Payload | None = None
@@ -68,6 +72,8 @@ class Corrections:
     gravity: np.ndarray | None = None
     joints: Mapping[str, np.ndarray] | None = None
     model_error: ModelErrorSpec | None = None
+    joint_residual_std: Mapping[str, np.ndarray] | None = None
+    joint_noise_std: Mapping[str, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -165,6 +171,8 @@ class PipelineSettings:
         return PipelineSettings(**{name: _section_in(name, data[name]) for name in SECTION_TYPES})
 
 
+# fields a recording made before them does not have (their defaults apply)
+ADDED_SINCE: dict[str, set[str]] = {"corrections": {"joint_residual_std", "joint_noise_std"}}
 SECTION_TYPES: dict[str, type] = {"corrections": Corrections, "motion": MotionSettings,
                                    "detection": DetectionSettings, "localization": LocalizationSettings,
                                    "events": EventSettings}
@@ -210,7 +218,7 @@ def _section_in(name: str, data: Any) -> Any:
     if not isinstance(data, dict):
         raise SettingsError(f"pipeline settings {name}: expected an object, got {type(data).__name__}")
     names = {f.name for f in fields(cls)}
-    _check_keys(f"pipeline settings {name}", set(data), names, names)
+    _check_keys(f"pipeline settings {name}", set(data), names, names - ADDED_SINCE.get(name, set()))
     values = {k: _value_in(k, v) for k, v in data.items()} if cls is Corrections else dict(data)
     if cls is DetectionSettings and values["extra_cov"] is not None:
         values["extra_cov"] = np.asarray(values["extra_cov"], dtype=float)
@@ -229,7 +237,7 @@ def _value_in(key: str, v: Any) -> Any:
             return Payload(float(v["mass"]), tuple(float(x) for x in v["com"]))
         if key == "model_error":
             return ModelErrorSpec(tuple(v["bodies"]), np.asarray(v["cov"], dtype=float), bool(v["gain"]))
-        if key in ("inertials", "joints"):
+        if key in ("inertials", "joints", "joint_residual_std", "joint_noise_std"):
             return {k: np.asarray(x, dtype=float) for k, x in v.items()}
         return np.asarray(v, dtype=float)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:

@@ -215,3 +215,23 @@ def test_the_plan_is_driven_through_a_dynamixel_arms_protocol(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "ftc_hw", "identify", "--scene", "ur5e", "--plan"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "--plan-file" in proc.stdout + proc.stderr
+
+
+def test_an_arm_sensed_through_its_currents_is_identified_from_its_emulated_joints_alone(tmp_path):
+    """``ftc identify --sim --plan --sensing currents`` on ur5e: the emulated UR controller's joint frames
+    (no F/T sensor read), the planned excitation played by the world, the joint model in the file."""
+    out = tmp_path / "ur5e.toml"
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "identify", "--scene", "ur5e", "--sim", "--plan",
+                           "--sensing", "currents", "--duration", "13", "--reality", "typical", "--out", str(out)],
+                          capture_output=True, text=True, timeout=240)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode in (0, 4), text[-3000:]
+    assert "free motion from the joints (currents)" in " ".join(text.split()), text[-3000:]
+    ident = load_calibration(out, scene="ur5e").identification
+    assert ident.sensing == "currents" and "joints" in ident.source
+    scene = load_scene("ur5e")
+    ratio = ident.joints["torque_constant"] / np.asarray(scene.robot.torque_constant)
+    assert np.all(np.abs(ratio - 1) < 0.15), ratio  # the typical world's are within 5 % of the scene's
+    before = np.asarray(ident.figures["joint_residual_std_before_Nm"]["currents"])
+    after = ident.joint_residual_std["currents"]
+    assert np.linalg.norm(after) < 0.2 * np.linalg.norm(before), (before, after)  # measured: 1.4 -> 0.05 N m

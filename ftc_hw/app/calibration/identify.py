@@ -5,7 +5,8 @@ From a recording (``ftc monitor --record``): the pipeline's inputs, with the con
 the lost streams and the interpolated-over-gap frames cut out (``--keep-contacts`` keeps the
 contacts and leaves them to the fit's robust weights). With ``--sim``: the scene's emulated devices
 run a contact-free scenario (the ordinary ``sweep``, or ``excitation``, a planned motion) recorded
-through the same monitor, then identified the same way.
+through the same monitor, then identified the same way. A scene sensed through its joints (no base
+F/T sensor in its sensing) is identified from its joint frames instead (:mod:`.identify_joints`).
 
 Exit codes: 0 identified (verdict good), 4 identified but poorly excited (the file is written; the
 verdict names what the motion could not tell), 1 nothing usable, 2 bad arguments.
@@ -38,6 +39,7 @@ from ftc_hw.calibration.file import (
 )
 from ftc_hw.calibration.free_motion import FreeMotionFit, FreeMotionIdentifier, IdentificationError, MotionData
 from ftc_hw.calibration.joint_friction import JointFit, fit_joint_friction
+from ftc_hw.calibration.joint_motion import noise_std
 from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.model import ArmModel
@@ -45,10 +47,12 @@ from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.pipeline import Corrections
 from ftc_hw.record.reader import Recording, RecordingError, read_recording
 from ftc_hw.scene import Scene
+from ftc_hw.sim_devices.host import WorldHostError
 
 from .device_session import DeviceSession, SessionError
 from .drive_excitation import drive_excitation
 from .fit_figure import plot_beside
+from .identify_joints import identify_joints, joint_segments, record_joint_motion, report_joints, uses_joints
 from .identify_plot import draw_identification
 
 CONTACT_MARGIN_S = 0.3  # cut this much before a reported contact and after its end
@@ -158,7 +162,10 @@ def identify(scene: Scene, segments: list[MotionData], base: Calibration | None,
                            {} if joints is None else {"torque_constant": joints.torque_constant,
                                                       "friction_viscous": joints.friction_viscous,
                                                       "friction_coulomb": joints.friction_coulomb},
-                           fit.cov[6:, 6:].copy(), gain, fit.told_gain())
+                           fit.cov[6:, 6:].copy(), gain, fit.told_gain(),
+                           "base_ft" if joints is None else "base_ft,currents",
+                           {} if joints is None else {"currents": joints.residual_rms},
+                           {} if joints is None else noise_std(segments, ("currents",), joints.torque_constant))
     bias = fit.bias if frame is None else frame @ fit.bias
     if base is None:
         cal = Calibration(scene=scene.name, sensor_serial=None, date=now_iso(), bias=bias, payload=None,
@@ -192,6 +199,9 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
     console = console or Console()
     if opts.out is None:
         opts = dataclasses.replace(opts, out=Path(f"calibration-{scene.name}.toml"))
+    if uses_joints(scene):
+        return _run_joint_identify(scene, recording, opts, sim=sim, scenario=scenario, duration=duration, seed=seed,
+                                   reality=reality, console=console, drive=drive)
     try:
         base = base_calibration(scene, opts)
         if drive:
@@ -225,6 +235,42 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
         figures = _figures(fit, counts, segments) | {"joints": {k: v.tolist() for k, v in
                                                                  cal.identification.joints.items()}}
         opts.json_path.write_text(json.dumps(figures, indent=2))
+    return 0 if fit.verdict == "good" else 4
+
+
+def _run_joint_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *, sim: bool, scenario: str,
+                        duration: float, seed: int, reality: str, console: Console, drive: bool) -> int:
+    """:func:`run_identify` for a scene sensed through its joints. The planned excitation is played by the
+    emulated world (a real arm's controller plays ``--plan-file`` while ``ftc monitor --record`` runs)."""
+    try:
+        if drive and not sim:
+            raise SessionError("a scene sensed through its joints is identified from a recording here: play the "
+                               "plan (--plan-file) on the arm while ftc monitor --record runs")
+        base = base_calibration(scene, opts)
+        if sim:
+            scenario = "excitation" if drive else scenario
+            if scenario not in FREE_SCENARIOS:
+                raise IdentificationError(f"--scenario {scenario}: identification needs free motion "
+                                          f"({', '.join(FREE_SCENARIOS)})")
+            segments, counts = record_joint_motion(scene, scenario, duration, seed, reality, console)
+            source = f"ftc identify --sim: {scenario}, {duration:g} s, reality {reality}, seed {seed}, joints"
+        else:
+            rec = read_recording(recording)
+            spans = _spans(rec, "lost") + ([] if opts.keep_contacts else _spans(rec, "contact"))
+            segments, counts = joint_segments(rec, scene, spans)
+            source = str(recording)
+        cal, fit = identify_joints(scene, segments, base, source)
+        save_calibration(cal, opts.out)
+    except (IdentificationError, RecordingError, CalibrationError, SessionError, RigError, DeviceError, OSError,
+            WorldHostError, np.linalg.LinAlgError) as exc:
+        console.print(f"[red]cannot identify:[/] {exc}")
+        return 1
+    report_joints(console, scene, fit, counts, segments, opts.out, base is not None)
+    if opts.json_path is not None:
+        opts.json_path.write_text(json.dumps({"verdict": fit.verdict, "reasons": fit.reasons, "untold": fit.untold,
+                                              **cal.identification.figures,
+                                              "joints": {k: v.tolist() for k, v in cal.identification.joints.items()}},
+                                             indent=2))
     return 0 if fit.verdict == "good" else 4
 
 
