@@ -134,7 +134,8 @@ class JointIdentifier:
                                       "identify it from its F/T sensor")
         self.priors = priors or JointPriors()
         m = arm.model
-        self.body_ids = [b for b in range(1, m.nbody) if moves(m, b)]
+        # the moving bodies with inertia to identify (a flange sensor's tool-side body is massless)
+        self.body_ids = [b for b in range(1, m.nbody) if moves(m, b) and m.body_mass[b] > 0]
         self.bodies = [m.body(b).name for b in self.body_ids]
         self.pi0 = np.concatenate([body_params(m, b) for b in self.body_ids])
         self.n = scene.n_joints
