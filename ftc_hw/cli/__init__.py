@@ -494,8 +494,9 @@ def bench_reflex(
 
 @app.command()
 def identify(
-    recording: Annotated[Optional[Path], typer.Argument(help="An MCAP recording (ftc monitor --record) of the "  # noqa: UP045
-                                                             "arm moving.")] = None,
+    recording: Annotated[Optional[list[Path]], typer.Argument(  # noqa: UP045
+        help="Recordings of the arm moving: MCAP (ftc monitor --record), or UR recordings (the CSV of UR's RTDE "
+             "client or of ur_rtde; with --scene), one or several.")] = None,
     scene: Annotated[Optional[str], typer.Option(  # noqa: UP045
         help="Built-in scene or scene file (default: the recording's).")] = None,
     sim: Annotated[bool, typer.Option("--sim", help="Record the emulated devices first, then identify.")] = False,

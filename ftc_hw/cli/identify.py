@@ -8,6 +8,7 @@ import typer
 
 from ftc_hw.app.calibration.device_session import SessionError
 from ftc_hw.app.calibration.identify import IdentifyOptions, run_identify, run_planned_identify
+from ftc_hw.app.monitor.replay_csv import is_mcap
 from ftc_hw.app.monitor.view import make_console
 from ftc_hw.calibration.excitation import plan_excitation
 from ftc_hw.record.reader import RecordingError, read_recording
@@ -17,7 +18,7 @@ from ftc_hw.scene import Scene, SceneError
 from .common import scene_or_exit, sensing_kinds
 
 
-def run_identify_command(recording: Path | None, scene_name: str | None, *, sim: bool, plan: bool,
+def run_identify_command(recording: list[Path] | None, scene_name: str | None, *, sim: bool, plan: bool,
                          plan_file: Path | None, scenario: str | None, duration: float, seed: int, reality: str,
                          opts: IdentifyOptions, device_overrides: tuple[str, ...] = (),
                          rig: Path | None = None, sensing: str | None = None) -> int:
@@ -25,10 +26,14 @@ def run_identify_command(recording: Path | None, scene_name: str | None, *, sim:
     if (recording is None) == (not sim and not plan_file and not plan):
         raise typer.BadParameter("give a recording (FILE.mcap), or --sim, --plan or --plan-file",
                                  param_hint="RECORDING")
+    recording = recording or None  # typer gives an empty list for none
     if recording is not None and (sim or plan_file or plan):
         raise typer.BadParameter("a recording, or --sim / --plan / --plan-file, not both", param_hint="RECORDING")
     if recording is not None:
-        scene = scene_or_exit(scene_name) if scene_name else _recorded(recording)
+        if scene_name is None and not all(is_mcap(p) for p in recording if p.is_file()):
+            raise typer.BadParameter("a UR recording holds no scene: give --scene (ur10e, ur5e, ...)",
+                                     param_hint="--scene")
+        scene = scene_or_exit(scene_name) if scene_name else _recorded(recording[0])
         return run_identify(with_sensing(scene, sensing), recording, opts, console=console)
     if scene_name is None:
         raise typer.BadParameter("--sim, --plan and --plan-file need --scene", param_hint="--scene")

@@ -16,6 +16,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import tempfile
+from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +26,7 @@ import numpy as np
 from rich.console import Console
 
 from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, SimOptions, ViewOptions
+from ftc_hw.app.monitor.replay_csv import is_mcap
 from ftc_hw.app.monitor.session import run_monitor
 from ftc_hw.app.setup.rig import RigError
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE
@@ -39,13 +42,14 @@ from ftc_hw.calibration.file import (
 )
 from ftc_hw.calibration.free_motion import FreeMotionFit, FreeMotionIdentifier, IdentificationError, MotionData
 from ftc_hw.calibration.joint_friction import JointFit, fit_joint_friction
-from ftc_hw.calibration.joint_motion import noise_std
+from ftc_hw.calibration.joint_motion import JointMotionData, noise_std
 from ftc_hw.devices.base import DeviceError
 from ftc_hw.devices.registry import moves_on_goals, role_of
 from ftc_hw.model import ArmModel
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.pipeline import Corrections
 from ftc_hw.record.reader import Recording, RecordingError, read_recording
+from ftc_hw.record.ur_csv import read_ur_csv
 from ftc_hw.scene import Scene
 from ftc_hw.sim_devices.host import WorldHostError
 
@@ -191,17 +195,24 @@ def _joint_figures(j: JointFit) -> dict[str, Any]:
             "joint_residual_rms_Nm": j.residual_rms.tolist(), "joint_std": j.std.tolist()}
 
 
-def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *, sim: bool = False,
+def run_identify(scene: Scene, recording: Path | Sequence[Path] | None, opts: IdentifyOptions, *, sim: bool = False,
                  scenario: str = "sweep", duration: float = 120.0, seed: int = 0, reality: str = "ideal",
                  console: Console | None = None, drive: bool = False) -> int:
-    """From ``recording``; or ``sim``: the emulated devices run ``scenario`` (recorded); or ``drive``:
-    the planned excitation streamed to the arm as goals through its protocol (emulated with ``sim``)."""
+    """From ``recording`` (one or several: MCAP, or a UR recording's CSV for a scene sensed through its
+    joints); or ``sim``: the emulated devices run ``scenario`` (recorded); or ``drive``: the planned
+    excitation streamed to the arm as goals through its protocol (emulated with ``sim``)."""
     console = console or Console()
     if opts.out is None:
         opts = dataclasses.replace(opts, out=Path(f"calibration-{scene.name}.toml"))
+    recordings = [recording] if isinstance(recording, Path) else list(recording or [])
     if uses_joints(scene):
-        return _run_joint_identify(scene, recording, opts, sim=sim, scenario=scenario, duration=duration, seed=seed,
+        return _run_joint_identify(scene, recordings, opts, sim=sim, scenario=scenario, duration=duration, seed=seed,
                                    reality=reality, console=console, drive=drive)
+    if len(recordings) > 1 or (recordings and not is_mcap(recordings[0])):
+        console.print("[red]cannot identify:[/] the F/T sensor's readings come from one MCAP recording (a UR "
+                      "recording holds no base F/T sensor: --sensing currents identifies the arm from its joints)")
+        return 1
+    recording = recordings[0] if recordings else None
     try:
         base = base_calibration(scene, opts)
         if drive:
@@ -238,7 +249,7 @@ def run_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *,
     return 0 if fit.verdict == "good" else 4
 
 
-def _run_joint_identify(scene: Scene, recording: Path | None, opts: IdentifyOptions, *, sim: bool, scenario: str,
+def _run_joint_identify(scene: Scene, recordings: list[Path], opts: IdentifyOptions, *, sim: bool, scenario: str,
                         duration: float, seed: int, reality: str, console: Console, drive: bool) -> int:
     """:func:`run_identify` for a scene sensed through its joints. The planned excitation is played by the
     emulated world (a real arm's controller plays ``--plan-file`` while ``ftc monitor --record`` runs)."""
@@ -255,10 +266,8 @@ def _run_joint_identify(scene: Scene, recording: Path | None, opts: IdentifyOpti
             segments, counts = record_joint_motion(scene, scenario, duration, seed, reality, console)
             source = f"ftc identify --sim: {scenario}, {duration:g} s, reality {reality}, seed {seed}, joints"
         else:
-            rec = read_recording(recording)
-            spans = _spans(rec, "lost") + ([] if opts.keep_contacts else _spans(rec, "contact"))
-            segments, counts = joint_segments(rec, scene, spans)
-            source = str(recording)
+            segments, counts = _recorded_joint_motion(scene, recordings, opts, console)
+            source = ", ".join(str(p) for p in recordings)
         cal, fit = identify_joints(scene, segments, base, source)
         save_calibration(cal, opts.out)
     except (IdentificationError, RecordingError, CalibrationError, SessionError, RigError, DeviceError, OSError,
@@ -272,6 +281,31 @@ def _run_joint_identify(scene: Scene, recording: Path | None, opts: IdentifyOpti
                                               "joints": {k: v.tolist() for k, v in cal.identification.joints.items()}},
                                              indent=2))
     return 0 if fit.verdict == "good" else 4
+
+
+def _recorded_joint_motion(scene: Scene, recordings: list[Path], opts: IdentifyOptions,
+                           console: Console) -> tuple[list, dict[str, int]]:
+    """The free motion of every recording: an MCAP's joint frames (contacts and lost streams cut), a UR
+    recording's kept rows (what it holds said first)."""
+    segments, counts = [], Counter()
+    for path in recordings:
+        if is_mcap(path):
+            rec = read_recording(path)
+            spans = _spans(rec, "lost") + ([] if opts.keep_contacts else _spans(rec, "contact"))
+            more, n = joint_segments(rec, scene, spans)
+        else:
+            ur = read_ur_csv(path)
+            console.print(ur.summary())
+            if "currents" in scene.sensing.kinds and ur.current is None:
+                raise RecordingError(f"{path}: no actual_current column: the scene is identified from its "
+                                     "motor currents")
+            if ur.n_joints != scene.n_joints:
+                raise RecordingError(f"{path}: {ur.n_joints} joints recorded, scene {scene.name!r} has "
+                                     f"{scene.n_joints}")
+            more, n = [JointMotionData(ur.t, ur.q, ur.qd, current=ur.current)], {"frames": len(ur.t), "cut": 0}
+        segments += more
+        counts.update(n)
+    return segments, dict(counts)
 
 
 def run_planned_identify(scene: Scene, opts: IdentifyOptions, *, sim: bool, duration: float, seed: int,
