@@ -1,0 +1,212 @@
+"""The contact pipeline driven by JOINT samples, for scenes whose sensing has no base F/T sensor: motor
+currents or joint torque sensors (and a flange F/T sensor's wrench where the scene uses one).
+
+    q, qd, current | tau_J  (a flange wrench)
+      -> JointResidual        momentum observer            -> r (n,) N m, its covariance (n, n)
+      -> JointDetector        chi-square of r              -> onset / in contact / offset
+      -> JointContactSolver   candidates on the surfaces   -> ContactEstimate (in contact): link, point,
+                                                              force, covariance, candidates, ``ambiguous``
+      -> ContactEvents        the contact's track, events  -> ContactEvent (onset / update / offset)
+
+The events stage is ContactPipeline's, unchanged; it is given the estimate's contact wrench as the F/T
+path's "external wrench" (sensor frame, scene convention), which it uses for the contact's force figures
+and the line of action into the meshes, and the chosen link's posterior probability as the frame's.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ftc_hw.bus import ContactEvent
+from ftc_hw.compensation import Compensator
+from ftc_hw.compensation.joint_residual import JointResidual
+from ftc_hw.detection import Detection
+from ftc_hw.detection.joint import JointDetector
+from ftc_hw.model import ArmModel
+from ftc_hw.scene import Scene
+from ftc_hw.solver import ContactEstimate
+from ftc_hw.solver.joint import JointContactSolver, invalid_estimate
+
+from .contact import ContactPipeline, FrameResult, corrected_scene
+from .events import ContactEvents
+from .settings import PipelineSettings
+from .stages import PipelineView
+from .timing import NO_CLOCK, StageClock
+
+
+class JointContactPipeline(PipelineView):
+    """One scene's joint-signal residual, detection, localization and events (see the module's notes).
+    Not thread-safe: one per reader thread. ``invalid_frames`` counts the samples refused (non-finite or
+    missing input): each is a frame flagged ``invalid_input``, the observer bridging over it."""
+
+    def __init__(self, scene: Scene, settings: PipelineSettings | None = None, *,
+                 clock: StageClock = NO_CLOCK) -> None:
+        self.scene = scene
+        self.settings = settings = settings or PipelineSettings()
+        sensing = scene.sensing
+        if not sensing.joint:
+            raise ValueError(f"scene {scene.name!r} uses no joint signals (sensing: {sensing.label()})")
+        self.source = "joint_torques" if sensing.joint_torques else "currents"
+        js, c = settings.joint, settings.corrections
+        model_scene = corrected_scene(scene, settings)
+        self.model = model = ArmModel(model_scene, c.payload, c.inertials)
+        self.residual = JointResidual(model_scene, model, self.source, gain=js.observer_gain,
+                                      friction_rel_std=js.friction_rel_std, model_rel_std=js.model_rel_std,
+                                      velocity_noise_std=js.velocity_noise_std)
+        d = settings.detection
+        self.detector = JointDetector(scene.n_joints, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off)
+        self.solver = JointContactSolver(model, spacing=js.spacing_m, fine_spacing=js.fine_spacing_m,
+                                         friction_mu=js.friction_mu, force_prior=js.force_prior_n,
+                                         ambiguity_radius=js.ambiguity_radius_m, ambiguity_mass=js.ambiguity_mass,
+                                         significant_sigma=js.significant_sigma)
+        self.flange = (Compensator(model, "dynamics", c.bias, gain=c.gain, frame=c.frame, contact_gain=c.contact_gain)
+                       if sensing.ft == "flange" else None)
+        self.events = ContactEvents(scene, model, self.solver.body_poses, settings)
+        self.clock = clock
+        self.localize_every = js.localize_every
+        self.invalid_frames = 0
+        self._since_solve = 0
+        self._last: ContactEstimate | None = None
+        self._zero6 = np.zeros(6)
+        self.warm_up()
+
+    @property
+    def level(self) -> str:
+        return "dynamics"
+
+    def warm_up(self) -> None:
+        """Call every compiled kernel once now (numba loads each from its cache on its first call)."""
+        home = np.asarray(self.scene.robot.home, dtype=float)
+        n = home.size
+        self.residual.warm_up(home)
+        self.detector.statistic(np.zeros(n), np.eye(n))
+        self.solver.solve(np.ones(n), np.eye(n), home)
+        self.events.warm_up()
+
+    def process_joints(self, t_ns: int, q, qd, *, current=None, tau_j=None, wrench=None,
+                       t_device_ns: int | None = None, joint_gap_ns: int = 0) -> FrameResult:
+        """One joint sample at host time t_ns: ``q``, ``qd`` (n,) rad, rad/s; ``current`` (n,) A (scenes
+        using currents) or ``tau_j`` (n,) N m (joint torque sensors); ``wrench`` (6,) the flange F/T
+        reading at that time (sensor frame, scene convention) when the scene uses one. ``t_device_ns``:
+        the sample's device time, the steadier clock for the observer's intervals (else t_ns).
+        ``joint_gap_ns`` > 0: samples were missed before this one (the observer integrates over the gap)."""
+        clock = self.clock
+        clock.begin()
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        signal = tau_j if self.source == "joint_torques" else current
+        if not _finite(q, qd, signal, self.scene.n_joints):
+            return self._invalid(t_ns)
+        t_obs = t_ns if t_device_ns is None else int(t_device_ns)
+        r, cov, ready = self.residual.update(t_obs, q, qd, current=current, tau_j=tau_j)
+        clock.lap("compensation")
+        if not ready:
+            clock.end()
+            return FrameResult(t_ns, self._zero6, _idle(self.detector), None, r.copy(), ())
+        det = self.detector.update(t_ns, r, cov)
+        clock.lap("detection")
+        estimate = None
+        external = self._zero6
+        if det.active:
+            estimate = self._localize(t_ns, det, r, cov, q, qd, wrench)
+            external = self._external(estimate, q)
+            clock.lap("localization")
+        events: list[ContactEvent] = []
+        if det.active or det.change == "offset":
+            det_out = det if estimate is None else dataclasses.replace(det, probability=_link_probability(estimate))
+            events = self.events.frame_events(t_ns, det_out, estimate, external, q)
+        if det.change == "offset":
+            self._last = None
+        clock.lap("events")
+        clock.end()
+        return FrameResult(t_ns, external, det, estimate, r.copy(), tuple(events))
+
+    def _localize(self, t_ns: int, det: Detection, r, cov, q, qd, wrench) -> ContactEstimate:
+        """A frame in contact: the estimate (every ``localize_every``-th frame, else the last one), fused
+        into the contact's track."""
+        if det.change == "onset":
+            self._since_solve = 0
+            self._last = None
+            if self.events.track is not None:
+                self.events.track.reset()
+        if self._last is not None and self._since_solve < self.localize_every - 1:
+            self._since_solve += 1
+            return self._last
+        self._since_solve = 0
+        w = w_cov = None
+        if self.flange is not None and wrench is not None and np.isfinite(np.asarray(wrench, dtype=float)).all():
+            ext = self.flange.external(np.asarray(wrench, dtype=float), q, qd, self.residual.observer.qdd)
+            w = -self.scene.sensor.reading_sign * ext  # the reading's change -> the contact's wrench on the arm
+            w_cov = self.scene.sensor.noise_cov
+        e = self.solver.solve(r, cov, q, wrench=w, wrench_cov=w_cov)
+        self._last = e
+        self.events.fuse(t_ns, e, q, self.solver.solved_body_poses())
+        return e
+
+    def _external(self, e: ContactEstimate, q: np.ndarray) -> np.ndarray:
+        """The estimate's contact wrench as the F/T path's external wrench: the change it makes in the
+        scene's sensor reading (sensor frame, about its origin), or in base axes about the base origin
+        where the scene has no F/T sensor."""
+        if not (e.contact and math.isfinite(float(e.force.sum() + e.point.sum()))):
+            return self._zero6
+        if self.scene.sensor is None:
+            return np.concatenate([e.force, np.cross(e.point, e.force)])
+        b_T_s = self.model.base_T_sensor(q)
+        rot, origin = b_T_s[:3, :3], b_T_s[:3, 3]
+        w = np.concatenate([rot.T @ e.force, rot.T @ np.cross(e.point - origin, e.force)])
+        return -self.scene.sensor.reading_sign * w
+
+    def _invalid(self, t_ns: int) -> FrameResult:
+        self.invalid_frames += 1
+        self.clock.end()
+        return FrameResult(t_ns, self._zero6, _idle(self.detector, math.nan), invalid_estimate(), None, ())
+
+    def recent_external(self) -> np.ndarray | None:
+        return self.events.recent_external()
+
+    def on_meshes(self, ev: ContactEvent, q, shell=None, wrench=None) -> ContactEvent:
+        return self.events.on_meshes(ev, np.asarray(q, dtype=float), shell, wrench)
+
+    def close_contact(self, t_ns: int, probability: float | None = None, *, lost: bool = False) -> ContactEvent:
+        """The open contact's offset (:meth:`ContactEvents.close_contact`). ``lost``: closed because a
+        stream was lost (flagged ``lost``; the detector and the track start afresh)."""
+        if lost:
+            self.detector.reset()
+        self._last = None
+        return self.events.close_contact(t_ns, probability, lost=lost)
+
+    def restart_motion(self) -> None:
+        """The joint stream was lost and is back: the observer starts afresh from the next sample."""
+        self.residual.reset()
+        self._last = None
+        self.events.previous = None
+
+
+def pipeline_for(scene: Scene, settings: PipelineSettings | None = None, *,
+                 clock: StageClock = NO_CLOCK) -> ContactPipeline | JointContactPipeline:
+    """ContactPipeline where the scene uses a base F/T sensor, else JointContactPipeline (joint signals,
+    with a flange sensor's wrench where used)."""
+    if scene.sensing.ft == "base":
+        return ContactPipeline(scene, settings, clock=clock)
+    return JointContactPipeline(scene, settings, clock=clock)
+
+
+def _finite(q: np.ndarray, qd: np.ndarray, signal, n: int) -> bool:
+    if signal is None or q.shape != (n,) or qd.shape != (n,):
+        return False
+    s = np.asarray(signal, dtype=float)
+    return s.shape == (n,) and math.isfinite(float(q.sum() + qd.sum() + s.sum()))
+
+
+def _idle(detector: JointDetector, d2: float = 0.0) -> Detection:
+    """The detector's state for a frame it did not judge."""
+    return Detection(detector.active, d2, False, 0.0, None, detector.onset_t_ns)
+
+
+def _link_probability(e: ContactEstimate) -> float:
+    """The chosen link's posterior probability (the estimate's first candidate row's score: its log)."""
+    if not e.candidate_links or e.candidate_data.shape[0] == 0:
+        return 0.0
+    return min(1.0, max(0.0, float(math.exp(e.candidate_data[0, 6]))))
