@@ -24,7 +24,7 @@ from .momentum import MomentumObserver, observer_step
 class JointResidual:
     """r and its covariance from joint samples (see the module's notes). Not thread-safe."""
 
-    def __init__(self, scene: Scene, arm: ArmModel, source: Source, *, gain: float = 60.0,
+    def __init__(self, scene: Scene, arm: ArmModel, source: Source, *, gain: float = 150.0,
                  friction_rel_std: float = 0.25, model_rel_std: float = 0.02, velocity_noise_std: float = 0.0) -> None:
         self.signals = JointSignals(scene, source, friction_rel_std=friction_rel_std, model_rel_std=model_rel_std)
         self.observer = MomentumObserver(arm, gain=gain)

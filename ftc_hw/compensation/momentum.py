@@ -43,7 +43,7 @@ class MomentumObserver:
     """The observer on ``arm`` (its model, gravity and joint couplings). ``gain`` 1/s: K, the bandwidth
     (per joint or one for all). Not thread-safe: one per pipeline."""
 
-    def __init__(self, arm: ArmModel, *, gain: float | np.ndarray = 60.0) -> None:
+    def __init__(self, arm: ArmModel, *, gain: float | np.ndarray = 150.0) -> None:
         self.arm = arm
         self.n = arm.n_joints
         self.gain = np.broadcast_to(np.asarray(gain, dtype=float), (self.n,)).copy()

@@ -81,7 +81,8 @@ class ArmModel:
         self.payload = payload
         self.inertials = dict(inertials or {})
         spec, self.mesh_fits = load_spec_and_fits(scene)
-        add_ft_sensors(spec, scene)
+        if scene.sensor is not None:  # a scene without an F/T sensor (joint signals only) models none
+            add_ft_sensors(spec, scene)
         if payload is not None:
             attach_payload(spec, scene, payload)
         self.model = spec.compile()
@@ -97,12 +98,15 @@ class ArmModel:
                 b = m.body(body).id
                 set_body_params(m, b, body_params(m, b) + np.asarray(delta, dtype=float), nearest=True)
             self.set_const()
-        self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
-        self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
-        # the sensor's wrench in sensordata: one gather per frame instead of two slices
-        self._wrench_adr = np.r_[self._force_adr:self._force_adr + 3, self._torque_adr:self._torque_adr + 3]
-        self.site_id = m.site(scene.sensor.site).id
-        self.sensor_body = int(m.site_bodyid[self.site_id])
+        if scene.sensor is not None:
+            self._force_adr = m.sensor(FORCE_SENSOR).adr[0]
+            self._torque_adr = m.sensor(TORQUE_SENSOR).adr[0]
+            # the sensor's wrench in sensordata: one gather per frame instead of two slices
+            self._wrench_adr = np.r_[self._force_adr:self._force_adr + 3, self._torque_adr:self._torque_adr + 3]
+            self.site_id = m.site(scene.sensor.site).id
+        else:  # no sensor: its frame is the base frame (base_T_sensor is the identity), and it reads nothing
+            self.site_id = -1
+        self.sensor_body = int(m.site_bodyid[self.site_id]) if self.site_id >= 0 else 0
 
         self.joint_names = scene.robot.joints
         self.n_joints = len(self.joint_names)
@@ -114,7 +118,7 @@ class ArmModel:
         self._forces_applied = False
         self.link_names = tuple(m.body(i).name for i in range(1, m.nbody))
         self.surfaces = self._collect_surfaces()
-        self.sign = scene.sensor.reading_sign
+        self.sign = scene.sensor.reading_sign if scene.sensor is not None else 1.0
         self.total_mass = float(m.body_subtreemass[self.sensor_body])
         self._posed = b""  # the q (bytes) whose kinematics the data holds (b"": none known)
         self._sensor_q = b""  # the q (bytes) of _sensor_T, the last base_T_sensor
@@ -226,6 +230,8 @@ class ArmModel:
         passes an event before, measured by ``ftc bench pipeline``)."""
         q = np.asarray(q, dtype=float)
         key = q.tobytes()
+        if self.site_id < 0:
+            return self._sensor_T  # the identity: no sensor, its frame is the base frame
         if key != self._sensor_q:
             if key != self._posed:  # else the frame's arm_loads has posed the data at q
                 self._set(q)
@@ -286,8 +292,10 @@ class ArmModel:
 
         ``level`` says which arm loads are included: ``bias`` none (contacts only), ``gravity`` the
         static weight of the arm, ``dynamics`` weight plus inertial, Coriolis and centrifugal terms
-        from (q, qd, qdd). The sensor's bias is not included.
+        from (q, qd, qdd). The sensor's bias is not included. A ``SceneError`` where the scene has no sensor.
         """
+        if self.site_id < 0:
+            self.scene.require_ft("a predicted sensor wrench")
         self._inverse(q, qd, qdd, level, contacts)
         d = self.data
         out = np.empty(6)
@@ -313,6 +321,8 @@ class ArmModel:
         recursive Newton-Euler at rest for the joint torques), ``dynamics`` MuJoCo's inverse dynamics.
         """
         m, d = self.model, self.data
+        if self.site_id < 0:
+            self.scene.require_ft("the arm's load on the sensor")
         if level == "bias":
             return np.zeros(6), (np.zeros(self.n_joints) if joint_torques else None)
         if level == "dynamics":

@@ -14,7 +14,6 @@ and the line of action into the meshes, and the chosen link's posterior probabil
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -65,9 +64,9 @@ class JointContactPipeline(PipelineView):
                        if sensing.ft == "flange" else None)
         self.events = ContactEvents(scene, model, self.solver.body_poses, settings)
         self.clock = clock
-        self.localize_every = js.localize_every
+        self.localize_period_ns = int(js.localize_period_s * 1e9)
         self.invalid_frames = 0
-        self._since_solve = 0
+        self._solved_ns = 0
         self._last: ContactEstimate | None = None
         self._zero6 = np.zeros(6)
         self.warm_up()
@@ -115,7 +114,8 @@ class JointContactPipeline(PipelineView):
             clock.lap("localization")
         events: list[ContactEvent] = []
         if det.active or det.change == "offset":
-            det_out = det if estimate is None else dataclasses.replace(det, probability=_link_probability(estimate))
+            det_out = det if estimate is None else Detection(det.active, det.d2, det.blind, _link_probability(estimate),
+                                                             det.change, det.onset_t_ns)
             events = self.events.frame_events(t_ns, det_out, estimate, external, q)
         if det.change == "offset":
             self._last = None
@@ -124,17 +124,15 @@ class JointContactPipeline(PipelineView):
         return FrameResult(t_ns, external, det, estimate, r.copy(), tuple(events))
 
     def _localize(self, t_ns: int, det: Detection, r, cov, q, qd, wrench) -> ContactEstimate:
-        """A frame in contact: the estimate (every ``localize_every``-th frame, else the last one), fused
-        into the contact's track."""
+        """A frame in contact: the estimate (at the onset, then at most every ``localize_period_s``; else
+        the last one), fused into the contact's track."""
         if det.change == "onset":
-            self._since_solve = 0
             self._last = None
             if self.events.track is not None:
                 self.events.track.reset()
-        if self._last is not None and self._since_solve < self.localize_every - 1:
-            self._since_solve += 1
+        if self._last is not None and t_ns - self._solved_ns < self.localize_period_ns:
             return self._last
-        self._since_solve = 0
+        self._solved_ns = t_ns
         w = w_cov = None
         if self.flange is not None and wrench is not None and np.isfinite(np.asarray(wrench, dtype=float)).all():
             ext = self.flange.external(np.asarray(wrench, dtype=float), q, qd, self.residual.observer.qdd)
@@ -151,12 +149,12 @@ class JointContactPipeline(PipelineView):
         where the scene has no F/T sensor."""
         if not (e.contact and math.isfinite(float(e.force.sum() + e.point.sum()))):
             return self._zero6
-        if self.scene.sensor is None:
-            return np.concatenate([e.force, np.cross(e.point, e.force)])
-        b_T_s = self.model.base_T_sensor(q)
+        b_T_s = self.model.base_T_sensor(q)  # the identity where the scene has no sensor
         rot, origin = b_T_s[:3, :3], b_T_s[:3, 3]
-        w = np.concatenate([rot.T @ e.force, rot.T @ np.cross(e.point - origin, e.force)])
-        return -self.scene.sensor.reading_sign * w
+        f, c = e.force, e.point - origin
+        moment = np.array([c[1] * f[2] - c[2] * f[1], c[2] * f[0] - c[0] * f[2], c[0] * f[1] - c[1] * f[0]])
+        w = np.concatenate([rot.T @ f, rot.T @ moment])
+        return w if self.scene.sensor is None else -self.scene.sensor.reading_sign * w
 
     def _invalid(self, t_ns: int) -> FrameResult:
         self.invalid_frames += 1

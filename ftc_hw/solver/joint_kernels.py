@@ -200,3 +200,47 @@ def fit_candidates(loc, nrm_loc, link_of, poses, joint_blocks, joint_b, flange_b
             force[m, i] = f[i]
             for j in range(3):
                 info[m, i, j] = a[i, j]
+
+
+@njit(cache=True, nogil=True)
+def posterior(chi2, post) -> None:
+    """post = exp(-chi2 / 2), normalized (relative to the smallest chi2: no underflow of the best)."""
+    lo = np.inf
+    for k in range(chi2.shape[0]):
+        if chi2[k] < lo:
+            lo = chi2[k]
+    total = 0.0
+    for k in range(chi2.shape[0]):
+        post[k] = math.exp(-0.5 * (chi2[k] - lo))
+        total += post[k]
+    for k in range(chi2.shape[0]):
+        post[k] /= total
+
+
+@njit(cache=True, nogil=True)
+def spread(post, points, centre, radius2, link_of, own_link, cov, link_p, best_k) -> float:
+    """About ``centre``: cov += sum_k post_k (p_k - c)(p_k - c)^T; link_p[l] = the posterior of link l;
+    best_k[l] = link l's most probable point (on ``own_link``: the most probable farther than sqrt(radius2),
+    -1 where none); returns the posterior mass farther than that from ``centre``."""
+    far = 0.0
+    for li in range(link_p.shape[0]):
+        link_p[li] = 0.0
+        best_k[li] = -1
+    for k in range(post.shape[0]):
+        d0, d1, d2 = points[k, 0] - centre[0], points[k, 1] - centre[1], points[k, 2] - centre[2]
+        w = post[k]
+        cov[0, 0] += w * d0 * d0
+        cov[0, 1] += w * d0 * d1
+        cov[0, 2] += w * d0 * d2
+        cov[1, 1] += w * d1 * d1
+        cov[1, 2] += w * d1 * d2
+        cov[2, 2] += w * d2 * d2
+        outside = d0 * d0 + d1 * d1 + d2 * d2 > radius2
+        if outside:
+            far += w
+        li = link_of[k]
+        link_p[li] += w
+        if (li != own_link or outside) and (best_k[li] < 0 or w > post[best_k[li]]):
+            best_k[li] = k
+    cov[1, 0], cov[2, 0], cov[2, 1] = cov[0, 1], cov[0, 2], cov[1, 2]
+    return far

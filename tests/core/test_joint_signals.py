@@ -19,7 +19,7 @@ from ftc_hw.pipeline import (
     PipelineSettings,
     pipeline_for,
 )
-from ftc_hw.scene import load_scene
+from ftc_hw.scene import SceneError, load_scene
 from ftc_hw.sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
 from ftc_hw.solver import JointContactSolver
 
@@ -211,14 +211,14 @@ def test_joint_detector_onset_and_offset():
 
 
 def test_joint_settings_round_trip_and_old_recordings():
-    s = PipelineSettings(joint=JointSettings(observer_gain=40.0, localize_every=2))
+    s = PipelineSettings(joint=JointSettings(observer_gain=40.0, localize_period_s=0.01))
     back = PipelineSettings.from_json(s.to_json())
     assert back.joint == s.joint
     old = json.loads(PipelineSettings().to_json())
     del old["joint"]  # a recording made before the joint section
     assert PipelineSettings.from_json(json.dumps(old)).joint == JointSettings()
     with pytest.raises(ValueError):
-        JointSettings(localize_every=0)
+        JointSettings(localize_period_s=-1.0)
 
 
 def test_pipeline_for_picks_by_sensing(ur5e_currents):
@@ -246,3 +246,17 @@ def test_a_flange_wrench_is_fused_for_the_bodies_beyond_it(ur5e_currents):
     fused = solver.solve(tau, np.diag(np.full(6, 2.0**2)), q, wrench=wrench, wrench_cov=noise)
     assert fused.link == "wrist_3" and np.linalg.norm(fused.point - p) < 0.01
     assert np.trace(fused.cov[:3, :3]) <= np.trace(joints_only.cov[:3, :3])
+
+
+def test_a_scene_without_an_ft_sensor_runs_on_its_joint_signals(ur5e_currents, pressed):
+    scene = dataclasses.replace(ur5e_currents, sensor=None)
+    with pytest.raises(SceneError):
+        ArmModel(scene).predicted_wrench(np.asarray(scene.robot.home, dtype=float))
+    pipe = pipeline_for(scene, PipelineSettings(joint=JointSettings(model_rel_std=0.005, friction_rel_std=0.05)))
+    assert isinstance(pipe, JointContactPipeline)
+    events = []
+    for t, q, qd, current, _, truth in pressed:
+        res = pipe.process_joints(int(round(t * 1e9)), q, qd, current=current)
+        events += [(e, truth) for e in res.events if e.kind in ("onset", "update") and truth is not None]
+    assert events and all(e.link == "wrist_3" for e, _ in events)
+    assert np.linalg.norm(np.asarray(events[-1][0].point) - events[-1][1].point) < 0.015
