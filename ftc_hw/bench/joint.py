@@ -122,6 +122,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
                 events.append({"t": s.t, "link": e.link, "true_link": main.link, "flags": list(e.flags),
                                "err_mm": float(np.linalg.norm(err)) * 1e3,
                                "covered": bool(np.sum((err / std) ** 2) <= CHI2_3_95),
+                               "std_mm": float(np.linalg.norm(std)) * 1e3,
                                "force": float(np.linalg.norm(main.force)), "probability": e.probability})
     return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
             "active": np.array(active, dtype=bool), "invalid": pipe.invalid_frames}
@@ -235,6 +236,34 @@ def _share(flags: list[bool]) -> float:
 
 def _pct(values, q: float) -> float:
     return float(np.percentile(values, q)) if len(values) else math.nan
+
+
+def time_frames(scene_name: str, *, n_probes: int = 8, seed: int = 0, sensing: tuple[str, ...] = ("currents",),
+                settings: PipelineSettings | None = None, repeats: int = 3) -> dict[str, Any]:
+    """process_joints' CPU time per frame (``ftc bench``-style): the world's joint samples recorded first
+    (sweep and distal probes), then the pipeline timed alone over them, ``repeats`` times (the fastest
+    pass per frame: what the code costs, not this host's other load)."""
+    scene = load_scene(scene_name).with_sensing(list(sensing))
+    traj = sweep(scene)
+    last3 = frozenset(t.link for t in scene.touchable[-3:])
+    pr = probes(scene, ArmModel(scene), traj, n_probes, np.random.default_rng(seed), links=last3)
+    world = World(scene, ScenarioSetup(traj, probes=pr), seed=seed)
+    every = max(1, round(1.0 / (arm_rate(scene) * world.dt)))
+    frames = []
+    for _ in range(int(round((pr[-1].t_end + 0.3) / world.dt))):
+        s = world.step()
+        if world.steps % every == 0:
+            frames.append((int(round(s.t * 1e9)), s.q, s.qd, world.read_current(s), getattr(s, "tau_j", None)))
+    best = np.full(len(frames), np.inf)
+    active = np.zeros(len(frames), dtype=bool)
+    for _ in range(repeats):
+        pipe = JointContactPipeline(scene, settings)
+        for i, (t_ns, q, qd, current, tau_j) in enumerate(frames):
+            c0 = time.thread_time()
+            res = pipe.process_joints(t_ns, q, qd, current=current, tau_j=tau_j)
+            best[i] = min(best[i], time.thread_time() - c0)
+            active[i] = res.detection.active
+    return {"scene": scene_name, "rate_hz": arm_rate(scene), **frame_costs({"cost_s": best, "active": active})}
 
 
 def run(json_path: Path | None = None, scenes: tuple[str, ...] = ("ur5e",), reality: str = "ideal",
