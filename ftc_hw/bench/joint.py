@@ -176,6 +176,7 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
         minutes = len(free["cost_s"]) / arm_rate(scene) / 60.0
         out["false_alarms"] = len(free["onsets"])
         out["false_alarms_per_min"] = len(free["onsets"]) / minutes if minutes else math.nan
+        out["free_minutes"] = minutes
     truth_t = probed["truth_t"]
     stray = [t for t, _ in probed["onsets"] if truth_t.size == 0 or np.min(np.abs(truth_t - t)) > 0.1]
     out["false_alarms_probed_run"] = len(stray)

@@ -20,6 +20,9 @@ from ..scene import Scene
 from .joint_signals import JointSignals, Source
 from .momentum import MomentumObserver, observer_step
 
+# a longer interval between joint samples restarts the observer (about 7 of its lags at K = 150/s)
+MAX_INTERVAL_NS = 50_000_000
+
 
 class JointResidual:
     """r and its covariance from joint samples (see the module's notes). Not thread-safe."""
@@ -54,10 +57,13 @@ class JointResidual:
 
     def update(self, t_ns: int, q, qd, current=None, tau_j=None) -> tuple[np.ndarray, np.ndarray, bool]:
         """(r (n,) N m, cov (n, n), ready): ``ready`` False on the first sample after a (re)start, when
-        the observer has no interval yet. Inputs must be finite."""
+        the observer has no interval yet, and after a gap of more than ``MAX_INTERVAL_NS`` (a restart).
+        Inputs must be finite."""
         qd = np.asarray(qd, dtype=float)
         obs = self.observer
         tau_in = self.signals.torque(qd, current, tau_j)
+        if obs.started and t_ns - obs.last_t_ns > MAX_INTERVAL_NS:
+            self.reset()  # the trapezoid over a long gap says little of what happened in it: start afresh
         first = not obs.started
         r = obs.update(t_ns, q, qd, tau_in)
         if first:

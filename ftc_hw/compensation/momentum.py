@@ -71,6 +71,11 @@ class MomentumObserver:
     def started(self) -> bool:
         return self._prev is not None
 
+    @property
+    def last_t_ns(self) -> int:
+        """The time of the last sample taken (ns; -1 before any)."""
+        return -1 if self._prev is None else self._prev[0]
+
     def dynamics(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(M(q), C(q, qd) qd + g(q)) on the scene's joints: mass matrix (n, n), bias (n,)."""
         arm, m, d = self.arm, self.arm.model, self._data

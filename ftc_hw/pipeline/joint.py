@@ -34,7 +34,6 @@ from .settings import PipelineSettings
 from .stages import PipelineView
 from .timing import NO_CLOCK, StageClock
 
-
 CORRELATED_FRAMES = 1.0  # the track's chain_ratio: the share of one frame's error no number of frames averages
 
 

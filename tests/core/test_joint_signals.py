@@ -307,3 +307,13 @@ def test_the_joint_pipeline_fuses_a_flange_sensor(ur5e_currents, pressed):
     assert events and all(e.link == "wrist_3" for e, _ in events)
     assert events[0][0].t_host_ns * 1e-9 < 0.915  # the flange's wrench sees the 30 N at once
     assert np.linalg.norm(np.asarray(events[-1][0].point) - events[-1][1].point) < 0.01
+
+
+def test_the_observer_restarts_after_a_long_gap(ur5e_currents, ur5e_model, pressed):
+    res = JointResidual(ur5e_currents, ur5e_model, "currents")
+    ready = [res.update(int(round(t * 1e9)), q, qd, current=c)[2] for t, q, qd, c, *_ in pressed[:5]]
+    assert ready == [False, True, True, True, True]
+    t, q, qd, c, *_ = pressed[60]  # 110 ms later: the trapezoid would bridge the gap blind
+    assert not res.update(int(round(t * 1e9)), q, qd, current=c)[2]
+    t, q, qd, c, *_ = pressed[61]
+    assert res.update(int(round(t * 1e9)), q, qd, current=c)[2]
