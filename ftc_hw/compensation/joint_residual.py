@@ -9,7 +9,8 @@ Covariance of the residual r (n x n), per sample:
 (``sigma_v`` rad/s the joint velocities' noise, 0 where the arm reports a clean velocity); ``s_slow``: the
 slowly varying errors' 1-sigma (friction, static friction, model) through the observer's own lag, which
 bounds the filtered error when the errors of consecutive samples are fully correlated (a static friction
-that lasted until a joint broke loose still sits in r for about 1/K).
+that lasted until a joint broke loose still sits in r for about 1/K); and, where identification gave its
+parameters' covariance, that carried to the joint torques (:mod:`.joint_model_error`).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import numpy as np
 
 from ..model import ArmModel
 from ..scene import Scene
+from .joint_model_error import JointModelError
 from .joint_signals import JointSignals, Source
 from .momentum import MomentumObserver, observer_step
 
@@ -28,12 +30,15 @@ class JointResidual:
     """r and its covariance from joint samples (see the module's notes). Not thread-safe."""
 
     def __init__(self, scene: Scene, arm: ArmModel, source: Source, *, gain: float = 150.0,
-                 friction_rel_std: float = 0.25, model_rel_std: float = 0.02, velocity_noise_std: float = 0.0) -> None:
+                 friction_rel_std: float = 0.25, model_rel_std: float = 0.02, velocity_noise_std: float = 0.0,
+                 model_error: JointModelError | None = None) -> None:
+        """``model_error``: the identified parameters' covariance in the joint torques, added to ``cov``."""
         self.signals = JointSignals(scene, source, friction_rel_std=friction_rel_std, model_rel_std=model_rel_std)
         self.observer = MomentumObserver(arm, gain=gain)
         n = arm.n_joints
         self.n = n
         self.velocity_var = float(velocity_noise_std) ** 2
+        self.model_error = model_error
         self._slow = np.zeros(n)
         self._slow_now = np.zeros(n)
         self.cov = np.zeros((n, n))
@@ -80,4 +85,6 @@ class JointResidual:
             m = obs.mass * d[:, None]
             cov += self.velocity_var * (m @ m.T)
         cov[np.diag_indices(self.n)] += self.signals.white_var * f_white + self._slow**2
+        if self.model_error is not None:
+            cov += self.model_error.cov(t_ns, q, qd, obs.qdd)
         return r, cov, True

@@ -92,6 +92,24 @@ def _inertia_rows(v: np.ndarray) -> np.ndarray:
     return np.array([[x, 0, 0, y, z, 0], [0, y, 0, x, 0, z], [0, 0, z, 0, x, y]], dtype=float)
 
 
+def body_wrench_rows(m: mujoco.MjModel, d: mujoco.MjData, b: int, vel: np.ndarray,
+                     acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Body ``b``'s wrench for its motion (force, torque about its origin; base axes) as 3 x 10 rows each on
+    its parameters, at the state in ``d`` (as :func:`wrench_regressor` needs it); ``vel``, ``acc``: scratch (6,)."""
+    # XBODY: the body frame (BODY would be its inertial frame); 1: local orientation
+    mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, vel, 1)
+    mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, acc, 1)
+    w, a = vel[:3], acc[3:]  # angular velocity; linear acceleration of the origin (minus gravity)
+    dw = acc[:3]
+    cols = np.zeros((6, N_PARAMS))  # the body's wrench about its origin, body frame
+    cols[:3, 0] = a
+    cols[:3, 1:4] = skew(dw) + skew(w) @ skew(w)  # m (dw x c + w x (w x c)) = [dw]x h + [w]x [w]x h
+    cols[3:, 1:4] = -skew(a)  # h x a = -[a]x h
+    cols[3:, 4:] = _inertia_rows(dw) + skew(w) @ _inertia_rows(w)
+    r_b = d.xmat[b].reshape(3, 3)
+    return r_b @ cols[:3], r_b @ cols[3:]
+
+
 def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int], site: int,
                      sign: float) -> np.ndarray:
     """``Y`` (6 x 10 len(bodies)): the sensor reading (site frame, about the site, ``sign`` the scene's
@@ -103,18 +121,7 @@ def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int],
     out = np.zeros((6, N_PARAMS * len(bodies)))
     vel, acc = np.empty(6), np.empty(6)
     for k, b in enumerate(bodies):
-        # XBODY: the body frame (BODY would be its inertial frame); 1: local orientation
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, vel, 1)
-        mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, acc, 1)
-        w, a = vel[:3], acc[3:]  # angular velocity; linear acceleration of the origin (minus gravity)
-        dw = acc[:3]
-        cols = np.zeros((6, N_PARAMS))  # the body's wrench about its origin, body frame
-        cols[:3, 0] = a
-        cols[:3, 1:4] = skew(dw) + skew(w) @ skew(w)  # m (dw x c + w x (w x c)) = [dw]x h + [w]x [w]x h
-        cols[3:, 1:4] = -skew(a)  # h x a = -[a]x h
-        cols[3:, 4:] = _inertia_rows(dw) + skew(w) @ _inertia_rows(w)
-        r_b = d.xmat[b].reshape(3, 3)
-        f, t = r_b @ cols[:3], r_b @ cols[3:]
+        f, t = body_wrench_rows(m, d, b, vel, acc)
         t = t + skew(d.xpos[b] - p_s) @ f  # about the sensor origin
         out[:3, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ f
         out[3:, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ t

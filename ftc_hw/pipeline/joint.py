@@ -20,6 +20,7 @@ import numpy as np
 
 from ftc_hw.bus import ContactEvent
 from ftc_hw.compensation import Compensator
+from ftc_hw.compensation.joint_model_error import JointModelError
 from ftc_hw.compensation.joint_residual import JointResidual
 from ftc_hw.detection import Detection
 from ftc_hw.detection.joint import JointDetector
@@ -53,9 +54,12 @@ class JointContactPipeline(PipelineView):
         js, c = settings.joint, settings.corrections
         model_scene = corrected_scene(scene, settings)
         self.model = model = ArmModel(model_scene, c.payload, c.inertials)
+        me = c.model_error
         self.residual = JointResidual(model_scene, model, self.source, gain=js.observer_gain,
                                       friction_rel_std=js.friction_rel_std, model_rel_std=js.model_rel_std,
-                                      velocity_noise_std=js.velocity_noise_std)
+                                      velocity_noise_std=js.velocity_noise_std,
+                                      model_error=None if me is None else JointModelError(model, me.bodies, me.cov,
+                                                                                          me.gain))
         self.flange = FlangeWrench(scene, model, settings) if sensing.ft == "flange" else None
         d = settings.detection
         dims = scene.n_joints + (6 if self.flange is not None else 0)  # the flange wrench joins the test

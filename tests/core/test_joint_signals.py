@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from ftc_hw.compensation import JointResidual
+from ftc_hw.compensation.joint_model_error import JointModelError
 from ftc_hw.detection import JointDetector, chi2_isf, chi2_isf6, chi2_sf
 from ftc_hw.model import ArmModel, Contact
+from ftc_hw.model.inertials import body_params
 from ftc_hw.pipeline import (
     ContactPipeline,
     JointContactPipeline,
@@ -317,3 +319,26 @@ def test_the_observer_restarts_after_a_long_gap(ur5e_currents, ur5e_model, press
     assert not res.update(int(round(t * 1e9)), q, qd, current=c)[2]
     t, q, qd, c, *_ = pressed[61]
     assert res.update(int(round(t * 1e9)), q, qd, current=c)[2]
+
+
+def test_the_identified_parameters_covariance_reaches_the_joint_torques(ur5e_currents, ur5e_model, pressed):
+    m = ur5e_model.model
+    # the regressor over every body with mass, times their parameters, is the model's inverse dynamics
+    every = [m.body(b).name for b in range(1, m.nbody) if m.body_mass[b] > 0]
+    rng = np.random.default_rng(4)
+    q, qd, qdd = (np.asarray(ur5e_model.scene.robot.home) + rng.normal(size=6) * 0.3, rng.normal(size=6),
+                  rng.normal(size=6))
+    y = JointModelError(ur5e_model, every, np.eye(10 * len(every)), False).regressor(q, qd, qdd)
+    pi = np.concatenate([body_params(m, m.body(b).id) for b in every])
+    tau = ur5e_model.joint_torques(q, qd, qdd)
+    assert np.abs(y @ pi - tau).max() < 1e-9 * (1 + np.abs(tau).max())
+    bodies = ("forearm", "wrist_1")
+    jme = JointModelError(ur5e_model, bodies, np.eye(20) * 1e-4, False)
+    with_error = JointResidual(ur5e_currents, ur5e_model, "currents", model_error=jme)
+    without = JointResidual(ur5e_currents, ur5e_model, "currents")
+    for t, q, qd, c, *_ in pressed[100:103]:
+        _, cov_with, _ = with_error.update(int(round(t * 1e9)), q, qd, current=c)
+        _, cov_without, _ = without.update(int(round(t * 1e9)), q, qd, current=c)
+    extra = cov_with - cov_without
+    assert np.all(np.linalg.eigvalsh(extra) > -1e-12) and np.trace(extra) > 0
+    assert extra[1, 1] > 0 and extra[2, 2] > 0  # the shoulder's and elbow's torques carry those bodies
