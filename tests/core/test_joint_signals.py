@@ -342,3 +342,20 @@ def test_the_identified_parameters_covariance_reaches_the_joint_torques(ur5e_cur
     extra = cov_with - cov_without
     assert np.all(np.linalg.eigvalsh(extra) > -1e-12) and np.trace(extra) > 0
     assert extra[1, 1] > 0 and extra[2, 2] > 0  # the shoulder's and elbow's torques carry those bodies
+
+
+def test_the_joint_pipeline_on_joint_torque_sensors(ur5e_currents, ur5e_model, pressed):
+    spec = JointTorqueSpec(noise_std=np.full(6, 0.05), range=np.full(6, 300.0), offset=np.zeros(6))
+    scene = dataclasses.replace(ur5e_currents, joint_torque=spec, uses=frozenset({"joint_torques"}))
+    pipe = pipeline_for(scene, PipelineSettings(joint=JointSettings(model_rel_std=0.005)))
+    assert pipe.source == "joint_torques"
+    rng = np.random.default_rng(2)
+    onsets, events = [], []
+    for t, q, qd, current, tau_ext, truth, qdd in pressed:
+        tau_j = ur5e_model.joint_torques(q, qd, qdd) - tau_ext + rng.normal(size=6) * 0.05
+        res = pipe.process_joints(int(round(t * 1e9)), q, qd, tau_j=tau_j, current=current * np.nan)
+        onsets += [t for e in res.events if e.kind == "onset"]
+        events += [(e, truth) for e in res.events if e.kind in ("onset", "update") and truth is not None]
+    assert len(onsets) == 1 and 0.9 <= onsets[0] <= 0.91  # no friction to hide the first newtons
+    assert events and all(e.link == "wrist_3" for e, _ in events)
+    assert all(np.linalg.norm(np.asarray(e.point) - tr.point) < 0.015 for e, tr in events)
