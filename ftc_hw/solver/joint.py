@@ -279,7 +279,8 @@ class JointContactSolver:
     def _admissible(self, r: np.ndarray, cov: np.ndarray, use_flange: bool) -> np.ndarray:
         """The coarse candidates on the links the last significant joint moves (every link when none is,
         or when a flange wrench speaks too): the isolation bound of Haddadin et al. (2017) sec. V."""
-        return self._admissible_by_joint[0 if use_flange else self.last_significant(r, cov) + 1]
+        idx = self._admissible_by_joint[0 if use_flange else self.last_significant(r, cov) + 1]
+        return idx if idx.size else self._admissible_by_joint[0]  # a joint that moves no touchable link
 
     def _estimate(self, idx, coarse, post, fine, fine_idx) -> ContactEstimate:
         """The answer (the best fine point, else coarse), its covariance, flags and candidates."""
