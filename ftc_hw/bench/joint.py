@@ -268,8 +268,11 @@ def time_frames(scene_name: str, *, n_probes: int = 8, seed: int = 0, sensing: t
 
 
 def run(json_path: Path | None = None, scenes: tuple[str, ...] = ("ur5e",), reality: str = "ideal",
-        free_s: float = 60.0, n_probes: int = 40, seed: int = 0) -> dict[str, Any]:
-    results = {name: evaluate(name, reality, free_s=free_s, n_probes=n_probes, seed=seed) for name in scenes}
+        free_s: float = 60.0, n_probes: int = 40, seed: int = 0, *, distal: bool = False, oracle: bool = False,
+        settings: PipelineSettings | None = None) -> dict[str, Any]:
+    """:func:`evaluate` per scene (currents only), the results as JSON at ``json_path``."""
+    results = {name: evaluate(name, reality, free_s=free_s, n_probes=n_probes, seed=seed, distal=distal,
+                              oracle=oracle, settings=settings) for name in scenes}
     if json_path is not None:
         json_path.write_text(json.dumps(results, indent=2))
     return results
