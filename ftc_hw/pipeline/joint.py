@@ -92,6 +92,8 @@ class JointContactPipeline(PipelineView):
         n = home.size
         self.residual.warm_up(home)
         self.detector.statistic(np.zeros(n), np.eye(n))
+        if self.flange is not None:
+            self.flange.contact(np.zeros(6), home, np.zeros(n), np.zeros(n))
         self.solver.solve(np.ones(n), np.eye(n), home)
         self.events.warm_up()
 
