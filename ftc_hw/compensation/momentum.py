@@ -142,14 +142,5 @@ def observer_step(m1, m0, qd1, qd0, tau1, tau0, b1, b0, dt, gain, r, e, qdd, fac
         e[i] = acc - 0.5 * (tau1[i] + tau0[i]) + 0.5 * (b1[i] + b0[i])
         a = math.exp(-gain[i] * dt)
         r[i] = a * r[i] + (1.0 - a) * e[i]
-    a0 = math.exp(-gain[0] * dt)
-    factors[0] = 0.5 * (1.0 - a0)
-    factors[1] = 2.0 * (1.0 - a0) ** 2 / ((1.0 + a0) * dt * dt)
-
-
-def filter_factors(gain: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per joint, the variance factors of the observer's filter at sample interval dt (s): white torque
-    noise (the trapezoid's mean of two samples through the lag: ``(1 - a) / 2``) and white velocity noise
-    (its difference over dt through the lag: ``2 (1 - a)^2 / ((1 + a) dt^2)``), ``a = exp(-K dt)``."""
-    a = np.exp(-np.asarray(gain, dtype=float) * dt)
-    return 0.5 * (1.0 - a), 2.0 * (1.0 - a) ** 2 / ((1.0 + a) * dt * dt)
+        factors[0, i] = 0.5 * (1.0 - a)
+        factors[1, i] = 2.0 * (1.0 - a) ** 2 / ((1.0 + a) * dt * dt)
