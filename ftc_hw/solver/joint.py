@@ -29,7 +29,7 @@ import numpy as np
 from ..geometry import inside
 from ..model import ArmModel, descends
 from ..model.sampling import _area, sample_local
-from .joint_kernels import cone_edges, fit_candidates, posterior, spread
+from .joint_kernels import cone_edges, fit_candidates, link_jacobians, posterior, spread
 from .solver import ContactEstimate
 
 FORCE_PRIOR_N = 300.0
@@ -174,12 +174,12 @@ class JointContactSolver:
         """What the links' Jacobians are made of: each model joint of the scene (its MuJoCo id, hinge or
         slide), which touchable link it moves, and its column of C (scene joint, ratio)."""
         m, jm = self.model.model, self.model.joints
-        self._jids = jm.jnt_ids
-        self._hinge = (m.jnt_type[self._jids] == mujoco.mjtJoint.mjJNT_HINGE)[None, :, None]
+        self._jids = np.ascontiguousarray(jm.jnt_ids, dtype=np.int64)
+        self._hinge = np.ascontiguousarray(m.jnt_type[self._jids] == mujoco.mjtJoint.mjJNT_HINGE)
         self._moved = np.array([[descends(m, int(b), int(m.jnt_bodyid[j])) for j in self._jids]
-                                for b in self.body_ids], dtype=float)[:, :, None]  # (L, J, 1)
-        self._c_map = np.zeros((len(self._jids), self.model.n_joints))  # model joint -> scene joint, ratio
-        self._c_map[np.arange(len(self._jids)), jm.joint] = jm.ratio
+                                for b in self.body_ids], dtype=np.bool_)  # (L, J)
+        self._scene_joint = np.ascontiguousarray(jm.joint, dtype=np.int64)  # each model joint's scene joint
+        self._ratio = np.ascontiguousarray(jm.ratio, dtype=float)
 
     def _pose(self, q: np.ndarray) -> None:
         """The links' poses and origin Jacobians at q: a hinge's column is ``axis`` (angular) and
@@ -187,14 +187,8 @@ class JointContactSolver:
         model, m, d = self.model, self.model.model, self._data
         model.joints.set_qpos(q, d.qpos)
         mujoco.mj_kinematics(m, d)
-        b = self.body_ids
-        self._poses[:, :, :3] = d.xmat[b].reshape(-1, 3, 3)
-        self._poses[:, :, 3] = x = d.xpos[b]
-        axis, anchor = d.xaxis[self._jids][None], d.xanchor[self._jids][None]  # (1, J, 3)
-        lin = np.where(self._hinge, _cross(axis, x[:, None, :] - anchor), axis) * self._moved  # (L, J, 3)
-        ang = np.where(self._hinge, axis, 0.0) * self._moved
-        np.matmul(lin.transpose(0, 2, 1), self._c_map, out=self._jv)
-        np.matmul(ang.transpose(0, 2, 1), self._c_map, out=self._jw)
+        link_jacobians(d.xpos, d.xmat, self.body_ids, d.xaxis, d.xanchor, self._jids, self._hinge, self._moved,
+                       self._scene_joint, self._ratio, self._poses, self._jv, self._jw)
         self._solved_q = q.copy()
 
     def body_poses(self, q) -> tuple[np.ndarray, np.ndarray]:
@@ -336,14 +330,6 @@ class JointContactSolver:
         for name, row in zip(estimate.candidate_links, estimate.candidate_data, strict=True):
             out.setdefault(name, math.exp(row[6]))
         return out
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b over the last axis, broadcast: np.cross's arithmetic without its axis handling (90 us a frame
-    of its own, measured on dxl-arm)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _buffers(n: int) -> dict[str, np.ndarray]:

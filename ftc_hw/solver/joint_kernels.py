@@ -244,3 +244,36 @@ def spread(post, points, centre, radius2, link_of, own_link, cov, link_p, best_k
             best_k[li] = k
     cov[1, 0], cov[2, 0], cov[2, 1] = cov[0, 1], cov[0, 2], cov[1, 2]
     return far
+
+
+@njit(cache=True, nogil=True)
+def link_jacobians(xpos, xmat, body_ids, xaxis, xanchor, jids, hinge, moved, scene_joint, ratio, poses, jv, jw):
+    """Each link's pose (rotation, origin) into ``poses`` (L, 3, 4) and its origin's Jacobians over the
+    scene's joints into ``jv``, ``jw`` (L, 3, n): a hinge's column ``axis x (x - anchor)`` (linear) and
+    ``axis`` (angular), a slide's ``axis`` (linear), times its ratio into its scene joint. ``moved`` (L, J):
+    model joint j moves link l; ``jids``, ``hinge``, ``scene_joint``, ``ratio`` (J,) per model joint."""
+    jv[:] = 0.0
+    jw[:] = 0.0
+    for li in range(body_ids.shape[0]):
+        b = body_ids[li]
+        for i in range(3):
+            poses[li, i, 3] = xpos[b, i]
+            for k in range(3):
+                poses[li, i, k] = xmat[b, 3 * i + k]
+        for j in range(jids.shape[0]):
+            if not moved[li, j]:
+                continue
+            jid, c, s = jids[j], scene_joint[j], ratio[j]
+            a0, a1, a2 = xaxis[jid, 0], xaxis[jid, 1], xaxis[jid, 2]
+            if hinge[j]:
+                d0, d1, d2 = xpos[b, 0] - xanchor[jid, 0], xpos[b, 1] - xanchor[jid, 1], xpos[b, 2] - xanchor[jid, 2]
+                jv[li, 0, c] += s * (a1 * d2 - a2 * d1)
+                jv[li, 1, c] += s * (a2 * d0 - a0 * d2)
+                jv[li, 2, c] += s * (a0 * d1 - a1 * d0)
+                jw[li, 0, c] += s * a0
+                jw[li, 1, c] += s * a1
+                jw[li, 2, c] += s * a2
+            else:
+                jv[li, 0, c] += s * a0
+                jv[li, 1, c] += s * a1
+                jv[li, 2, c] += s * a2
