@@ -211,7 +211,8 @@ class ContactTrack:
         self.gate = _CHI2_3[p_gate]
         self.restart_after = int(restart_after)
         spec = model.scene.sensor
-        self._drift_ratio = float(np.max((np.asarray(spec.drift_per_s) / np.sqrt(np.diag(spec.noise_cov))) ** 2))
+        self._drift_ratio = (0.0 if spec is None else  # joint signals only: no F/T bias drifting since a tare
+                             float(np.max((np.asarray(spec.drift_per_s) / np.sqrt(np.diag(spec.noise_cov))) ** 2)))
         self.bias_ratio = 0.0
         self.chain_ratio = float(chain_ratio)
         self._bias_t_ns: int | None = None

@@ -68,7 +68,11 @@ class ContactDetector:
             raise ValueError("cov must be 6x6")
         self.cov = cov
         self.inv = np.linalg.inv(cov)
-        self.on = chi2_isf6(p_false)
+        self._hysteresis(chi2_isf6(p_false), release, n_on, n_off, max_blind_s)
+
+    def _hysteresis(self, on: float, release: float, n_on: int, n_off: int, max_blind_s: float) -> None:
+        """The onset threshold ``on`` (d2), the offset's ``release * on``, the debounce counts, the state."""
+        self.on = on
         self.off = release * self.on
         self.n_on = n_on
         self.n_off = n_off
@@ -97,6 +101,11 @@ class ContactDetector:
             d2 = float(w @ self.inv @ w)
         if not math.isfinite(d2):
             raise ValueError("wrench holds NaN or Inf")
+        change, blind = self._judge(t_ns, d2, u)
+        return Detection(self.active, d2, blind, 1.0 - chi2_sf6(d2), change, self.onset_t_ns)
+
+    def _judge(self, t_ns: int, d2: float, u: np.ndarray | None) -> tuple[str | None, bool]:
+        """One sample's statistic d2 through the hysteresis: (the change, blind)."""
         change = None
         blind = False
         if not self.active:
@@ -122,7 +131,7 @@ class ContactDetector:
                 change = "offset"
         else:
             self._below = 0
-        return Detection(self.active, d2, blind, 1.0 - chi2_sf6(d2), change, self.onset_t_ns)
+        return change, blind
 
     def _blinded(self, t_ns: int, u: np.ndarray | None) -> bool:
         """In contact: the model error alone as large as an onset, for under ``max_blind_s`` so far."""

@@ -19,6 +19,14 @@ def mahalanobis2(w: np.ndarray, cov: np.ndarray, u: np.ndarray) -> float:
         for i in range(n):
             for j in range(n):
                 a[i, j] += u[k, i] * u[k, j]
+    return chol_quad(w, a)
+
+
+@njit(cache=True, nogil=True)
+def chol_quad(w: np.ndarray, a: np.ndarray) -> float:
+    """w^T a^-1 w for w (n,) and a symmetric (n, n), by a Cholesky factorization in place (``a`` is
+    overwritten); inf when ``a`` is not positive definite."""
+    n = w.shape[0]
     # Cholesky a = L L^T in place (lower triangle), then solve L y = w: d2 = |y|^2
     for j in range(n):
         s = a[j, j]

@@ -90,7 +90,8 @@ class ArmModel:
         self.payload = payload
         self.inertials = dict(inertials or {})
         spec, self.mesh_fits = load_spec_and_fits(scene)
-        add_ft_sensors(spec, scene)
+        if scene.sensor is not None:  # a scene without an F/T sensor (joint signals only) models none
+            add_ft_sensors(spec, scene)
         if payload is not None:
             attach_payload(spec, scene, payload)
         self.model = spec.compile()
@@ -243,6 +244,8 @@ class ArmModel:
         passes an event before, measured by ``ftc bench pipeline``)."""
         q = np.asarray(q, dtype=float)
         key = q.tobytes()
+        if self.site_id is None:
+            return self._sensor_T  # the identity: no sensor, its frame is the base frame
         if key != self._sensor_q:
             self._require_ft()
             if key != self._posed:  # else the frame's arm_loads has posed the data at q
@@ -304,7 +307,7 @@ class ArmModel:
 
         ``level`` says which arm loads are included: ``bias`` none (contacts only), ``gravity`` the
         static weight of the arm, ``dynamics`` weight plus inertial, Coriolis and centrifugal terms
-        from (q, qd, qdd). The sensor's bias is not included.
+        from (q, qd, qdd). The sensor's bias is not included. A ``SceneError`` where the scene has no sensor.
         """
         self._require_ft()
         self._inverse(q, qd, qdd, level, contacts)

@@ -93,10 +93,10 @@ def _inertia_rows(v: np.ndarray) -> np.ndarray:
     return np.array([[x, 0, 0, y, z, 0], [0, y, 0, x, 0, z], [0, 0, z, 0, x, y]], dtype=float)
 
 
-def _body_wrench_columns(m: mujoco.MjModel, d: mujoco.MjData, b: int) -> tuple[np.ndarray, np.ndarray]:
-    """(F, T): 3 x 10 each, base frame: the force and the torque about body ``b``'s origin that its
-    parameters need for the motion in ``d`` (see :func:`wrench_regressor` for what ``d`` must hold)."""
-    vel, acc = np.empty(6), np.empty(6)
+def body_wrench_rows(m: mujoco.MjModel, d: mujoco.MjData, b: int, vel: np.ndarray,
+                     acc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Body ``b``'s wrench for its motion (force, torque about its origin; base axes) as 3 x 10 rows each on
+    its parameters, at the state in ``d`` (as :func:`wrench_regressor` needs it); ``vel``, ``acc``: scratch (6,)."""
     # XBODY: the body frame (BODY would be its inertial frame); 1: local orientation
     mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, vel, 1)
     mujoco.mj_objectAcceleration(m, d, mujoco.mjtObj.mjOBJ_XBODY, b, acc, 1)
@@ -120,8 +120,9 @@ def wrench_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int],
     rot_s = d.site_xmat[site].reshape(3, 3)
     p_s = d.site_xpos[site]
     out = np.zeros((6, N_PARAMS * len(bodies)))
+    vel, acc = np.empty(6), np.empty(6)
     for k, b in enumerate(bodies):
-        f, t = _body_wrench_columns(m, d, b)
+        f, t = body_wrench_rows(m, d, b, vel, acc)
         t = t + skew(d.xpos[b] - p_s) @ f  # about the sensor origin
         out[:3, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ f
         out[3:, k * N_PARAMS:(k + 1) * N_PARAMS] = rot_s.T @ t
@@ -135,8 +136,9 @@ def joint_regressor(m: mujoco.MjModel, d: mujoco.MjData, bodies: Sequence[int]) 
     the body origin's Jacobian."""
     out = np.zeros((m.nv, N_PARAMS * len(bodies)))
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    vel, acc = np.empty(6), np.empty(6)
     for k, b in enumerate(bodies):
-        f, t = _body_wrench_columns(m, d, b)
+        f, t = body_wrench_rows(m, d, b, vel, acc)
         mujoco.mj_jacBody(m, d, jacp, jacr, b)
         out[:, k * N_PARAMS:(k + 1) * N_PARAMS] = jacp.T @ f + jacr.T @ t
     return out

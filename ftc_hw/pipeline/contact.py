@@ -26,7 +26,7 @@ from .events import ContactEvents, PreviousFrame
 from .localization import LocalizationStage
 from .motion import MotionStage
 from .settings import PipelineSettings
-from .stages import Compensation, Detector, Events, Localization
+from .stages import Compensation, Detector, Events, Localization, PipelineView
 from .timing import NO_CLOCK, StageClock
 
 
@@ -49,7 +49,7 @@ def corrected_scene(scene: Scene, settings: PipelineSettings) -> Scene:
     return out
 
 
-class ContactPipeline:
+class ContactPipeline(PipelineView):
     """One scene's compensation, detection, localization and events. Not thread-safe: one per reader
     thread. ``clock``: told each stage's end in every frame (``ftc bench pipeline`` times the stages
     with it; the default does nothing)."""
@@ -73,15 +73,6 @@ class ContactPipeline:
     @property
     def level(self):
         return self.motion.level
-
-    @property
-    def surface_source(self) -> str:
-        """Where events put their points: ``meshes`` or ``primitives``."""
-        return self.events.surface_source
-
-    @property
-    def in_contact(self) -> bool:
-        return self.detector.active
 
     def warm_up(self) -> None:
         """Call every compiled kernel once now. numba loads each from its cache on its first call,

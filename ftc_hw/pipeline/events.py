@@ -22,6 +22,9 @@ from ftc_hw.tracking import FUSED_FLAGS, ContactTrack, fuse_point, link_pose, re
 
 from .settings import PipelineSettings
 
+# frames a second of a scene without an F/T sensor (its frames are joint samples): the recent wrench's ring
+NO_SENSOR_RATE_HZ = 1000.0
+
 
 class PreviousFrame(NamedTuple):
     """The last frame the pipeline judged, as the onset's track fuses it (the sample before the onset)."""
@@ -87,7 +90,8 @@ class ContactEvents:
         self.surface_source = "meshes" if self.mesh_shell is not None else "primitives"
         # the contact's external wrench over the last update period: the line of action followed into the meshes
         # (a ring and its running sum: np.mean over a deque took 22 us an event, measured by ftc bench pipeline)
-        self._recent_ring = np.zeros((max(1, round(ev.update_period_s * scene.sensor.rate_hz)), 6))
+        rate = scene.sensor.rate_hz if scene.sensor is not None else NO_SENSOR_RATE_HZ
+        self._recent_ring = np.zeros((max(1, round(ev.update_period_s * rate)), 6))
         self._recent_sum = np.zeros(6)
         self._recent_count = 0
         self._gain_var = gain_std_of(scene) ** 2
@@ -284,7 +288,9 @@ def gain_std_of(scene: Scene) -> np.ndarray:
     is undone on the contact's wrench: what free motion tells of the gain leans on the link masses it
     fits beside and on the arm's own loads (its weight along z, the moments of gravity), and its
     posterior under-covered (measured, ur5e typical: coverage 0.77 with the posterior, 0.89 with the
-    accuracy)."""
+    accuracy). Zeros where the scene has no F/T sensor (its contacts' wrenches come from joint signals)."""
+    if scene.sensor is None:
+        return np.zeros((6, 6))
     rng = np.asarray(scene.sensor.range, dtype=float)
     return scene.sensor.accuracy * rng[:, None] / rng[None, :]
 

@@ -8,6 +8,8 @@ command line) and passed whole from the session through the monitor to the pipel
       detection     DetectionSettings    the detector's false-alarm rate, hysteresis, extra noise
       localization  LocalizationSettings the method and the surface a point is put on
       events        EventSettings        how often an open contact is reported, the track
+      joint         JointSettings        the joint-signal pipeline's observer, noise and localizer
+                                         (``JointContactPipeline``); optional in JSON (older recordings)
 
 Units: SI (s, N, N m, kg, m, rad); arrays as the stages take them (shapes below). ``to_json`` writes
 every field (a recording replays with the settings it was made with, whatever the defaults become);
@@ -133,6 +135,43 @@ class EventSettings:
     bias_var_ratio: float = 0.01
 
 
+@dataclass(frozen=True)
+class JointSettings:
+    """The joint-signal pipeline (:mod:`ftc_hw.pipeline.joint`). ``observer_gain`` 1/s: the momentum
+    observer's bandwidth (its lag 1/K: 6.7 ms at 150, for onsets within 20 ms; measured on ur5e, typical
+    world: 50-100 N probes' median delay 10 ms at 150, 14 ms at 60, same false alarms (none));
+    ``friction_rel_std``: 1 sigma of the friction model, relative (the typical world draws +-30 %:
+    ``sim_devices/world/reality.py``);
+    ``model_rel_std``: of the rigid-body model torque, relative; ``velocity_noise_std`` rad/s: the joint
+    velocities' white noise (0: the arm reports a clean velocity); ``spacing_m``/``fine_spacing_m``: the
+    localizer's candidate points, coarse and fine; ``friction_mu``: the friction cone a contact force lies in
+    (ESTIMATE: 1.0, pushes up to 45 deg off the normal; rubber on painted metal reaches ~1); ``force_prior_n``:
+    1 sigma of the force's Gaussian prior (weak: it only regularizes what r cannot tell);
+    ``ambiguity_radius_m``/``ambiguity_mass``: flag ``ambiguous`` when more than that share of the
+    posterior lies farther than that from the answer; ``significant_sigma``: a joint's residual beyond this
+    bounds the touched link; ``localize_period_s``: in contact, localize at the onset and then at most this
+    often (the frames between carry the last estimate: a localization costs several times a detection,
+    and consecutive frames of the observer's lagged residual say nearly the same; 0: every frame)."""
+
+    observer_gain: float = 150.0
+    friction_rel_std: float = 0.25
+    model_rel_std: float = 0.02
+    velocity_noise_std: float = 0.0
+    spacing_m: float = 0.02
+    fine_spacing_m: float = 0.005
+    friction_mu: float = 1.0
+    force_prior_n: float = 300.0
+    ambiguity_radius_m: float = 0.03
+    ambiguity_mass: float = 0.1
+    significant_sigma: float = 3.0
+    localize_period_s: float = 0.004
+
+    def __post_init__(self) -> None:
+        if not (self.observer_gain > 0 and self.spacing_m > 0 and self.fine_spacing_m > 0
+                and self.localize_period_s >= 0):
+            raise ValueError("observer_gain, spacing_m and fine_spacing_m must be > 0, localize_period_s >= 0")
+
+
 @dataclass(frozen=True, eq=False)
 class PipelineSettings:
     """Everything the pipeline is set by, besides its scene (see the module's docstring)."""
@@ -142,6 +181,7 @@ class PipelineSettings:
     detection: DetectionSettings = field(default_factory=DetectionSettings)
     localization: LocalizationSettings = field(default_factory=LocalizationSettings)
     events: EventSettings = field(default_factory=EventSettings)
+    joint: JointSettings = field(default_factory=JointSettings)
 
     def with_level(self, level: CompensationLevel | None) -> PipelineSettings:
         """These settings at another compensation level (None: unchanged)."""
@@ -167,15 +207,17 @@ class PipelineSettings:
         elif data["schema"] != SCHEMA:
             raise SettingsError(f"pipeline settings schema {data['schema']!r}: this version reads {SCHEMA}")
         names = set(SECTION_TYPES)
-        _check_keys("pipeline settings", data.keys() - {"schema"}, names, names)
-        return PipelineSettings(**{name: _section_in(name, data[name]) for name in SECTION_TYPES})
+        _check_keys("pipeline settings", data.keys() - {"schema"}, names, names - OPTIONAL_SECTIONS)
+        return PipelineSettings(**{name: _section_in(name, data[name]) for name in SECTION_TYPES if name in data})
 
 
 # fields a recording made before them does not have (their defaults apply)
 ADDED_SINCE: dict[str, set[str]] = {"corrections": {"joint_residual_std", "joint_noise_std"}}
 SECTION_TYPES: dict[str, type] = {"corrections": Corrections, "motion": MotionSettings,
                                    "detection": DetectionSettings, "localization": LocalizationSettings,
-                                   "events": EventSettings}
+                                   "events": EventSettings, "joint": JointSettings}
+# sections added since schema 2 was first written: a recording made before them reads with their defaults
+OPTIONAL_SECTIONS = frozenset({"joint"})
 
 
 def _from_flat(flat: dict[str, Any]) -> dict[str, Any]:

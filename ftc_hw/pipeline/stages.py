@@ -76,6 +76,24 @@ class Localization(Protocol):
     def solved_poses(self): ...
 
 
+class PipelineView:
+    """What the monitor, replay and the CLI read of a pipeline besides its frames, the same for
+    :class:`~ftc_hw.pipeline.contact.ContactPipeline` and the joint-signal pipeline: whether a contact is
+    open and where its events put their points. Needs ``detector`` and ``events`` attributes."""
+
+    detector: Detector
+    events: Events
+
+    @property
+    def surface_source(self) -> str:
+        """Where events put their points: ``meshes`` or ``primitives``."""
+        return self.events.surface_source
+
+    @property
+    def in_contact(self) -> bool:
+        return self.detector.active
+
+
 class Events(Protocol):
     """The contact's track and its onset, update and offset events."""
 

@@ -5,6 +5,7 @@ from typing import Literal
 
 from ..model import ArmModel
 from ..scene import Scene
+from .joint import JointContactSolver
 from .leng2016 import Leng2016Solver
 from .protocol import BodyPoses, Solver
 from .solver import BatchEstimate, Candidate, ContactEstimate, ContactSolver, flag_names
@@ -21,5 +22,6 @@ def make_solver(scene: Scene | ArmModel, method: Method = "ours") -> Solver:
     raise ValueError(f"unknown method {method!r} (ours, leng2016)")
 
 
-__all__ = ["BatchEstimate", "BodyPoses", "Candidate", "ContactEstimate", "ContactSolver", "Leng2016Solver", "Method",
-           "Solver", "flag_names", "make_solver"]
+__all__ = ["BatchEstimate", "BodyPoses", "Candidate", "ContactEstimate", "ContactSolver", "JointContactSolver",
+           "Leng2016Solver",
+           "Method", "Solver", "flag_names", "make_solver"]

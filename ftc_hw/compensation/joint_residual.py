@@ -1,0 +1,90 @@
+"""The external joint torques and their covariance, one joint sample at a time: the joint signals
+(:mod:`.joint_signals`) through the momentum observer (:mod:`.momentum`).
+
+Covariance of the residual r (n x n), per sample:
+
+    cov = diag(white x f_white) + D M diag(sigma_v^2) M D + diag(s_slow^2)
+
+``f_white``, ``D = diag(sqrt(f_vel))``: the observer's variance factors for white torque and velocity noise
+(``sigma_v`` rad/s the joint velocities' noise, 0 where the arm reports a clean velocity); ``s_slow``: the
+slowly varying errors' 1-sigma (friction, static friction, model) through the observer's own lag, which
+bounds the filtered error when the errors of consecutive samples are fully correlated (a static friction
+that lasted until a joint broke loose still sits in r for about 1/K); and, where identification gave its
+parameters' covariance, that carried to the joint torques (:mod:`.joint_model_error`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import ArmModel
+from ..scene import Scene
+from .joint_model_error import JointModelError
+from .joint_signals import JointSignals, Source
+from .momentum import MomentumObserver, observer_step
+
+# a longer interval between joint samples restarts the observer (about 7 of its lags at K = 150/s)
+MAX_INTERVAL_NS = 50_000_000
+
+
+class JointResidual:
+    """r and its covariance from joint samples (see the module's notes). Not thread-safe."""
+
+    def __init__(self, scene: Scene, arm: ArmModel, source: Source, *, gain: float = 150.0,
+                 friction_rel_std: float = 0.25, model_rel_std: float = 0.02, velocity_noise_std: float = 0.0,
+                 model_error: JointModelError | None = None) -> None:
+        """``model_error``: the identified parameters' covariance in the joint torques, added to ``cov``."""
+        self.signals = JointSignals(scene, source, friction_rel_std=friction_rel_std, model_rel_std=model_rel_std)
+        self.observer = MomentumObserver(arm, gain=gain)
+        n = arm.n_joints
+        self.n = n
+        self.velocity_var = float(velocity_noise_std) ** 2
+        self.model_error = model_error
+        self._slow = np.zeros(n)
+        self._slow_now = np.zeros(n)
+        self.cov = np.zeros((n, n))
+
+    def warm_up(self, home: np.ndarray) -> None:
+        """Call the compiled kernels once on scratch state (the live observer keeps its own)."""
+        n = self.n
+        z, m = np.zeros(n), np.eye(n)
+        observer_step(m, m, z, z, z, z, z, z, 1e-3, self.observer.gain, np.zeros(n), np.zeros(n), np.zeros(n),
+                       np.zeros((2, n)))
+        self.signals.slow_std(z, z, np.zeros(n))
+        self.observer.dynamics(np.asarray(home, dtype=float), z)
+
+    def reset(self) -> None:
+        self.observer.reset()
+        self._slow[:] = 0.0
+
+    @property
+    def r(self) -> np.ndarray:
+        return self.observer.r
+
+    def update(self, t_ns: int, q, qd, current=None, tau_j=None) -> tuple[np.ndarray, np.ndarray, bool]:
+        """(r (n,) N m, cov (n, n), ready): ``ready`` False on the first sample after a (re)start, when
+        the observer has no interval yet, and after a gap of more than ``MAX_INTERVAL_NS`` (a restart).
+        Inputs must be finite."""
+        qd = np.asarray(qd, dtype=float)
+        obs = self.observer
+        tau_in = self.signals.torque(qd, current, tau_j)
+        if obs.started and t_ns - obs.last_t_ns > MAX_INTERVAL_NS:
+            self.reset()  # the trapezoid over a long gap says little of what happened in it: start afresh
+        first = not obs.started
+        r = obs.update(t_ns, q, qd, tau_in)
+        if first:
+            self._slow[:] = self.signals.slow_std(qd, obs.bias, self._slow_now)
+            return r, self.cov, False
+        slow = self.signals.slow_std(qd, obs.model_torque(), self._slow_now)
+        f_white, f_vel = obs.factors[0], obs.factors[1]
+        a = 1.0 - 2.0 * f_white  # the filter's pole this interval, a = exp(-K dt)
+        self._slow = a * self._slow + (1.0 - a) * slow
+        cov = self.cov
+        cov[:] = 0.0
+        if self.velocity_var > 0.0:
+            d = np.sqrt(f_vel)
+            m = obs.mass * d[:, None]
+            cov += self.velocity_var * (m @ m.T)
+        cov[np.diag_indices(self.n)] += self.signals.white_var * f_white + self._slow**2
+        if self.model_error is not None:
+            cov += self.model_error.cov(t_ns, q, qd, obs.qdd)
+        return r, cov, True

@@ -1,0 +1,361 @@
+"""Contact sensing from joint signals (issue 37): the momentum observer against the world's true external
+joint torques, the n-dimensional detector, the localizer from joint torques (a distal contact found, a
+proximal one flagged ambiguous), the joint pipeline's bad input, its settings and its choice by sensing."""
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from ftc_hw.compensation import JointResidual
+from ftc_hw.compensation.joint_model_error import JointModelError
+from ftc_hw.detection import JointDetector, chi2_isf, chi2_isf6, chi2_sf
+from ftc_hw.model import ArmModel, Contact
+from ftc_hw.model.inertials import body_params
+from ftc_hw.pipeline import (
+    ContactPipeline,
+    JointContactPipeline,
+    JointSettings,
+    PipelineSettings,
+    pipeline_for,
+)
+from ftc_hw.scene import JointTorqueSpec, SceneError, load_scene
+from ftc_hw.sim_devices.world import Probe, ScenarioSetup, Sinusoid, World
+from ftc_hw.solver import JointContactSolver
+
+EVERY = 4  # world steps (0.5 ms) per joint sample: UR's 500 Hz
+
+
+@pytest.fixture(scope="module")
+def ur5e_currents():
+    return load_scene("ur5e").with_sensing(["currents"])
+
+
+@pytest.fixture(scope="module")
+def ur5e_model(ur5e_currents):
+    return ArmModel(ur5e_currents)
+
+
+@pytest.fixture(scope="module")
+def solver(ur5e_model):
+    return JointContactSolver(ur5e_model)
+
+
+@pytest.fixture(scope="module")
+def pressed(ur5e_currents, ur5e_model):
+    """Every joint sweeping in the ideal world while a probe presses wrist_3 (30 N, 0.9-1.4 s): per joint
+    sample, (t, q, qd, current, true J^T f, true contact or None, true qdd)."""
+    scene = ur5e_currents
+    home = np.asarray(scene.robot.home, dtype=float)
+    motion = Sinusoid(home, np.full(scene.n_joints, 0.3), 0.25, start_s=0.2)
+    # a point on wrist_3's side, pushed inward, within its surface (the link frame's primitive)
+    surf = next(s for s in ur5e_model.surfaces if s.link == "wrist_3")
+    r_geom = surf.link_T_geom[:3, :3]
+    radial = r_geom @ np.array([1.0, 0.0, 0.0])
+    point = surf.link_T_geom[:3, 3] + surf.size[0] * radial
+    q_mid, _, _ = motion.reference(1.15)
+    b_T_l = ur5e_model.kinematics(q_mid)["wrist_3"]
+    direction = -(b_T_l[:3, :3] @ radial)
+    probe = Probe("wrist_3", point, direction, 30.0, t_start=0.9, ramp_s=0.02, hold_s=0.5, normal_link=radial,
+                  geom=surf.geom)
+    world = World(scene, ScenarioSetup(motion, probes=(probe,)), seed=3)
+    rows = []
+    for _ in range(int(1.6 / world.dt)):
+        s = world.step()
+        if world.steps % EVERY:
+            continue
+        tau = np.zeros(scene.n_joints)
+        for c in s.contacts:
+            tau += ur5e_model.jacobian(s.q, c.link, c.point).T @ c.force
+        rows.append((s.t, s.q, s.qd, world.read_current(s), tau, s.contacts[0] if s.contacts else None, s.qdd))
+    return rows
+
+
+def test_observer_gives_the_true_external_torques_in_the_ideal_world(ur5e_currents, ur5e_model, pressed):
+    gain = 60.0
+    res = JointResidual(ur5e_currents, ur5e_model, "currents", gain=gain)
+    out = []
+    for t, q, qd, current, tau, *_ in pressed:
+        r, cov, ready = res.update(int(round(t * 1e9)), q, qd, current=current)
+        if ready:
+            out.append((t, r.copy(), tau, qd, np.sqrt(np.diag(cov))))
+    t = np.array([o[0] for o in out])
+    r, tau, qd, std = (np.array([o[k] for o in out]) for k in (1, 2, 3, 4))
+    # the observer follows tau_ext through a first-order lag of 1/K: the truth through the same lag (the
+    # arm's motion turns the contact's torques by up to ~6 N m/s here, 0.1 N m over the lag)
+    a = np.exp(-gain * np.diff(t, prepend=t[0]))
+    for i in range(1, len(t)):
+        tau[i] = a[i] * tau[i - 1] + (1 - a[i]) * 0.5 * (tau[i] + np.array(out[i - 1][2]))
+    # in contact, 5 time constants after the ramp, while a joint slides (its friction known) and has for
+    # 5 time constants (a joint stuck at a reversal hides a torque within +-f_c: the reported deviation
+    # says so): r is J^T f (lagged), within 0.05 N m + 1 % of it
+    held = (t > 0.92 + 5 / gain) & (t < 1.4)
+    assert np.abs(tau[held]).max() > 3.0  # the contact is there to be seen
+    for j in range(r.shape[1]):
+        sliding = held & _slid_since(t, qd[:, j], 5 / gain)
+        assert sliding.sum() > 30
+        assert np.all(np.abs(r[sliding, j] - tau[sliding, j]) <= 0.05 + 0.01 * np.abs(tau[sliding, j]))
+    assert np.all(np.abs(r[held] - tau[held]) <= 3.0 * std[held])
+    # without contact, while a joint slides (its friction known): zero-mean, within 0.05 N m
+    free = (t > 0.5) & (t < 0.88)
+    for j in range(r.shape[1]):
+        sliding = free & _slid_since(t, qd[:, j], 5 / gain)
+        assert sliding.sum() > 20
+        assert abs(r[sliding, j].mean()) < 0.02
+        assert np.abs(r[sliding, j]).max() < 0.05
+    # and the reported deviation covers it everywhere without contact (standstill's friction included)
+    assert np.all(np.abs(r[free]) <= 3.0 * std[free])
+
+
+def _slid_since(t: np.ndarray, qd: np.ndarray, span: float) -> np.ndarray:
+    """Samples at which the joint has moved faster than 0.05 rad/s for the last ``span`` s."""
+    out = np.zeros(len(t), dtype=bool)
+    last_stuck = -np.inf
+    for i in range(len(t)):
+        if abs(qd[i]) <= 0.05:
+            last_stuck = t[i]
+        out[i] = t[i] - last_stuck > span
+    return out
+
+
+def test_joint_pipeline_finds_the_distal_contact(ur5e_currents, pressed):
+    settings = PipelineSettings(joint=JointSettings(model_rel_std=0.005, friction_rel_std=0.05))
+    pipe = JointContactPipeline(ur5e_currents, settings)
+    onsets, events = [], []
+    for t, q, qd, current, _, truth, _ in pressed:
+        res = pipe.process_joints(int(round(t * 1e9)), q, qd, current=current)
+        for e in res.events:
+            onsets += [t] if e.kind == "onset" else []
+            if e.kind in ("onset", "update") and truth is not None:
+                events.append((e, truth))
+    assert len(onsets) == 1 and 0.9 <= onsets[0] <= 0.93  # within 30 ms of the probe's first newton
+    assert events
+    for e, truth in events:
+        assert e.link == "wrist_3"
+        assert "ambiguous" not in e.flags
+        assert np.linalg.norm(np.asarray(e.point) - truth.point) < 0.015
+
+
+def _contact_torques(model, q, link, local_point, force_dir, magnitude):
+    b_T_l = model.kinematics(q)[link]
+    p = b_T_l[:3, :3] @ local_point + b_T_l[:3, 3]
+    f = magnitude * np.asarray(force_dir, dtype=float)
+    return p, f, model.jacobian(q, link, p).T @ f
+
+
+def test_localizes_a_known_distal_contact_from_its_joint_torques(ur5e_model, solver):
+    q = np.asarray(ur5e_model.scene.robot.home, dtype=float) + 0.15
+    # a candidate point of wrist_3 (six joints move it: a point force is determined), 20 deg off its normal
+    k = int(np.flatnonzero(solver.fine.link_of == solver.touch.index("wrist_3"))[7])
+    rot = ur5e_model.kinematics(q)["wrist_3"][:3, :3]
+    n = rot @ solver.fine.nrm[k]
+    side = np.cross(n, [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0])
+    direction = -np.cos(0.35) * n + np.sin(0.35) * side / np.linalg.norm(side)
+    p, f, tau = _contact_torques(ur5e_model, q, "wrist_3", solver.fine.loc[k], direction, 40.0)
+    cov = np.diag(np.full(6, 0.05**2))
+    e = solver.solve(tau, cov, q)
+    assert e.contact and e.link == "wrist_3" and "ambiguous" not in e.flags
+    assert np.linalg.norm(e.point - p) < 0.01
+    assert np.linalg.norm(e.force - f) < 0.1 * 40.0
+    # the reported covariance is a covariance, and puts the truth within reach
+    assert np.all(np.linalg.eigvalsh(e.cov[:3, :3]) >= 0)
+    assert np.linalg.norm(e.point - p) < 3 * np.sqrt(np.trace(e.cov[:3, :3]))
+
+
+def test_a_contact_on_the_first_links_is_flagged_ambiguous_with_its_candidates(ur5e_model, solver):
+    q = np.asarray(ur5e_model.scene.robot.home, dtype=float)
+    b_T_l = ur5e_model.kinematics(q)["upper_arm"]
+    k = int(np.flatnonzero(solver.coarse.link_of == solver.touch.index("upper_arm"))[3])
+    n = b_T_l[:3, :3] @ solver.coarse.nrm[k]
+    p, f, tau = _contact_torques(ur5e_model, q, "upper_arm", solver.coarse.loc[k], -n, 60.0)
+    e = solver.solve(tau, np.diag(np.full(6, 0.05**2)), q)
+    assert e.contact
+    assert "ambiguous" in e.flags
+    assert len(e.candidate_links) >= 2
+    probs = solver.link_probabilities(e)
+    assert 0.99 < sum(probs.values()) <= 1.0 + 1e-9 or len(probs) < len(e.candidate_links)
+    assert np.isfinite(e.candidate_data).all()
+
+
+def test_non_finite_input_is_a_flagged_frame(ur5e_currents, pressed):
+    pipe = JointContactPipeline(ur5e_currents)
+    t, q, qd, current, *_ = pressed[10]
+    bad_q = q.copy()
+    bad_q[2] = np.nan
+    res = pipe.process_joints(int(t * 1e9), bad_q, qd, current=current)
+    assert res.estimate is not None and res.estimate.flags == ("invalid_input",)
+    assert res.events == () and not res.detection.active
+    res = pipe.process_joints(int(t * 1e9) + 1, q, qd, current=None)  # a scene on currents without them
+    assert res.estimate.flags == ("invalid_input",)
+    assert pipe.invalid_frames == 2
+    for t, q, qd, current, *_ in pressed[11:40]:  # and the stream goes on
+        res = pipe.process_joints(int(round(t * 1e9)), q, qd, current=current)
+        assert res.estimate is None and np.isfinite(res.detection.d2)
+
+
+def test_chi_square_of_any_dimension():
+    assert chi2_isf(1e-9, 6) == pytest.approx(chi2_isf6(1e-9), rel=1e-9)
+    assert chi2_sf(3.841458820694124, 1) == pytest.approx(0.05, rel=1e-6)
+    assert chi2_sf(14.067140449340169, 7) == pytest.approx(0.05, rel=1e-6)
+
+
+def test_joint_detector_onset_and_offset():
+    det = JointDetector(5, p_false=1e-6, n_on=2, n_off=3)
+    cov = np.eye(5)
+    big, small = np.full(5, 10.0), np.zeros(5)
+    changes = [det.update(i, big if 2 <= i < 6 else small, cov).change for i in range(12)]
+    assert changes.index("onset") == 3 and det.onset_t_ns == 2
+    assert changes.index("offset") == 8
+    with pytest.raises(ValueError):
+        det.update(20, np.full(5, np.nan), cov)
+
+
+def test_joint_settings_round_trip_and_old_recordings():
+    s = PipelineSettings(joint=JointSettings(observer_gain=40.0, localize_period_s=0.01))
+    back = PipelineSettings.from_json(s.to_json())
+    assert back.joint == s.joint
+    old = json.loads(PipelineSettings().to_json())
+    del old["joint"]  # a recording made before the joint section
+    assert PipelineSettings.from_json(json.dumps(old)).joint == JointSettings()
+    with pytest.raises(ValueError):
+        JointSettings(localize_period_s=-1.0)
+
+
+def test_pipeline_for_picks_by_sensing(ur5e_currents):
+    assert isinstance(pipeline_for(load_scene("ur5e")), ContactPipeline)
+    assert isinstance(pipeline_for(ur5e_currents), JointContactPipeline)
+    with pytest.raises(ValueError):
+        JointContactPipeline(load_scene("ur5e").with_sensing(["base_ft"]))
+
+
+def test_a_flange_wrench_is_fused_for_the_bodies_beyond_it(ur5e_currents):
+    scene = dataclasses.replace(ur5e_currents, sensor=dataclasses.replace(ur5e_currents.sensor, site="flange",
+                                                                          mount="flange"))
+    model = ArmModel(scene)
+    solver = JointContactSolver(model)
+    assert solver.flange_on[solver.touch.index("wrist_3")] and not solver.flange_on[solver.touch.index("forearm")]
+    q = np.asarray(scene.robot.home, dtype=float) + 0.1
+    k = int(np.flatnonzero(solver.fine.link_of == solver.touch.index("wrist_3"))[5])
+    n = model.kinematics(q)["wrist_3"][:3, :3] @ solver.fine.nrm[k]
+    p, f, tau = _contact_torques(model, q, "wrist_3", solver.fine.loc[k], -n, 20.0)
+    b_T_s = model.base_T_site(q, "flange")
+    rot, s = b_T_s[:3, :3], b_T_s[:3, 3]
+    wrench = np.concatenate([rot.T @ f, rot.T @ np.cross(p - s, f)])  # on the arm, sensor frame
+    noise = np.diag(np.full(6, 0.3**2))
+    joints_only = solver.solve(tau, np.diag(np.full(6, 2.0**2)), q)
+    fused = solver.solve(tau, np.diag(np.full(6, 2.0**2)), q, wrench=wrench, wrench_cov=noise)
+    assert fused.link == "wrist_3" and np.linalg.norm(fused.point - p) < 0.01
+    assert np.trace(fused.cov[:3, :3]) <= np.trace(joints_only.cov[:3, :3])
+
+
+def test_a_scene_without_an_ft_sensor_runs_on_its_joint_signals(ur5e_currents, pressed):
+    scene = dataclasses.replace(ur5e_currents, sensor=None)
+    with pytest.raises(SceneError):
+        ArmModel(scene).predicted_wrench(np.asarray(scene.robot.home, dtype=float))
+    pipe = pipeline_for(scene, PipelineSettings(joint=JointSettings(model_rel_std=0.005, friction_rel_std=0.05)))
+    assert isinstance(pipe, JointContactPipeline)
+    events = []
+    for t, q, qd, current, _, truth, _ in pressed:
+        res = pipe.process_joints(int(round(t * 1e9)), q, qd, current=current)
+        events += [(e, truth) for e in res.events if e.kind in ("onset", "update") and truth is not None]
+    assert events and all(e.link == "wrist_3" for e, _ in events)
+    assert np.linalg.norm(np.asarray(events[-1][0].point) - events[-1][1].point) < 0.015
+
+
+def test_link_side_joint_torques_give_the_external_torques_without_friction(ur5e_currents, ur5e_model, pressed):
+    """A torque sensor between gear and link reads the link-side torque: the rigid-body torque of the motion
+    less the contact's, ``M qdd + c + g - J^T f`` (here from the world's true accelerations). The observer
+    on it needs no friction model: r follows J^T f (lagged) at standstill too."""
+    spec = JointTorqueSpec(noise_std=np.full(6, 0.05), range=np.full(6, 300.0), offset=np.zeros(6))
+    scene = dataclasses.replace(ur5e_currents, joint_torque=spec, uses=frozenset({"joint_torques"}))
+    gain = 150.0
+    res = JointResidual(scene, ur5e_model, "joint_torques", gain=gain)
+    rng = np.random.default_rng(0)
+    lag, last, errs = np.zeros(6), None, []
+    for t, q, qd, _, tau_ext, _, qdd in pressed:
+        tau_j = ur5e_model.joint_torques(q, qd, qdd) - tau_ext + rng.normal(size=6) * 0.05
+        r, cov, ready = res.update(int(round(t * 1e9)), q, qd, tau_j=tau_j)
+        if last is not None:
+            a = np.exp(-gain * (t - last[0]))
+            lag = a * lag + (1 - a) * 0.5 * (tau_ext + last[1])
+        last = (t, tau_ext)
+        # the probe's ramps (0.90-0.92 s, 1.42-1.44 s) change J^T f within a few of these samples, which
+        # this sensor reads at the sample instants only while the world integrates between them: left out
+        ramp = 0.895 < t < 0.93 or 1.415 < t < 1.45
+        if ready and t > 0.3 and not ramp:
+            errs.append((r - lag) / np.sqrt(np.diag(cov)))
+    errs = np.array(errs)
+    assert np.abs(errs).max() < 4.0  # within its reported deviation everywhere, standstill included
+    assert np.abs(errs.mean(axis=0)).max() < 0.5
+
+
+def test_the_joint_pipeline_fuses_a_flange_sensor(ur5e_currents, pressed):
+    """A flange F/T sensor (here at ur5e's flange site, carrying wrist_3) joins detection and localization:
+    its reading is the model's (the bodies beyond it, the contact on them) plus noise."""
+    sensor = dataclasses.replace(ur5e_currents.sensor, site="flange", mount="flange")
+    scene = dataclasses.replace(ur5e_currents, sensor=sensor, uses=frozenset({"currents", "flange_ft"}))
+    model = ArmModel(scene)
+    pipe = pipeline_for(scene)
+    assert isinstance(pipe, JointContactPipeline) and pipe.detector.dof == 12
+    rng = np.random.default_rng(1)
+    events = []
+    for t, q, qd, current, _, truth, qdd in pressed:
+        contacts = [Contact(truth.link, truth.point, truth.force)] if truth is not None else []
+        raw = model.predicted_wrench(q, qd, qdd, contacts=contacts) + rng.normal(size=6) * sensor.noise_std
+        res = pipe.process_joints(int(round(t * 1e9)), q, qd, current=current, wrench=raw)
+        events += [(e, truth) for e in res.events if e.kind in ("onset", "update") and truth is not None]
+    assert events and all(e.link == "wrist_3" for e, _ in events)
+    assert events[0][0].t_host_ns * 1e-9 < 0.915  # the flange's wrench sees the 30 N at once
+    assert np.linalg.norm(np.asarray(events[-1][0].point) - events[-1][1].point) < 0.01
+
+
+def test_the_observer_restarts_after_a_long_gap(ur5e_currents, ur5e_model, pressed):
+    res = JointResidual(ur5e_currents, ur5e_model, "currents")
+    ready = [res.update(int(round(t * 1e9)), q, qd, current=c)[2] for t, q, qd, c, *_ in pressed[:5]]
+    assert ready == [False, True, True, True, True]
+    t, q, qd, c, *_ = pressed[60]  # 110 ms later: the trapezoid would bridge the gap blind
+    assert not res.update(int(round(t * 1e9)), q, qd, current=c)[2]
+    t, q, qd, c, *_ = pressed[61]
+    assert res.update(int(round(t * 1e9)), q, qd, current=c)[2]
+
+
+def test_the_identified_parameters_covariance_reaches_the_joint_torques(ur5e_currents, ur5e_model, pressed):
+    m = ur5e_model.model
+    # the regressor over every body with mass, times their parameters, is the model's inverse dynamics
+    every = [m.body(b).name for b in range(1, m.nbody) if m.body_mass[b] > 0]
+    rng = np.random.default_rng(4)
+    q, qd, qdd = (np.asarray(ur5e_model.scene.robot.home) + rng.normal(size=6) * 0.3, rng.normal(size=6),
+                  rng.normal(size=6))
+    y = JointModelError(ur5e_model, every, np.eye(10 * len(every)), False).regressor(q, qd, qdd)
+    pi = np.concatenate([body_params(m, m.body(b).id) for b in every])
+    tau = ur5e_model.joint_torques(q, qd, qdd)
+    assert np.abs(y @ pi - tau).max() < 1e-9 * (1 + np.abs(tau).max())
+    bodies = ("forearm", "wrist_1")
+    jme = JointModelError(ur5e_model, bodies, np.eye(20) * 1e-4, False)
+    with_error = JointResidual(ur5e_currents, ur5e_model, "currents", model_error=jme)
+    without = JointResidual(ur5e_currents, ur5e_model, "currents")
+    for t, q, qd, c, *_ in pressed[100:103]:
+        _, cov_with, _ = with_error.update(int(round(t * 1e9)), q, qd, current=c)
+        _, cov_without, _ = without.update(int(round(t * 1e9)), q, qd, current=c)
+    extra = cov_with - cov_without
+    assert np.all(np.linalg.eigvalsh(extra) > -1e-12) and np.trace(extra) > 0
+    assert extra[1, 1] > 0 and extra[2, 2] > 0  # the shoulder's and elbow's torques carry those bodies
+
+
+def test_the_joint_pipeline_on_joint_torque_sensors(ur5e_currents, ur5e_model, pressed):
+    spec = JointTorqueSpec(noise_std=np.full(6, 0.05), range=np.full(6, 300.0), offset=np.zeros(6))
+    scene = dataclasses.replace(ur5e_currents, joint_torque=spec, uses=frozenset({"joint_torques"}))
+    pipe = pipeline_for(scene, PipelineSettings(joint=JointSettings(model_rel_std=0.005)))
+    assert pipe.source == "joint_torques"
+    rng = np.random.default_rng(2)
+    onsets, events = [], []
+    for t, q, qd, current, tau_ext, truth, qdd in pressed:
+        tau_j = ur5e_model.joint_torques(q, qd, qdd) - tau_ext + rng.normal(size=6) * 0.05
+        res = pipe.process_joints(int(round(t * 1e9)), q, qd, tau_j=tau_j, current=current * np.nan)
+        onsets += [t for e in res.events if e.kind == "onset"]
+        events += [(e, truth) for e in res.events if e.kind in ("onset", "update") and truth is not None]
+    assert len(onsets) == 1 and 0.9 <= onsets[0] <= 0.91  # no friction to hide the first newtons
+    assert events and all(e.link == "wrist_3" for e, _ in events)
+    assert all(np.linalg.norm(np.asarray(e.point) - tr.point) < 0.015 for e, tr in events)
