@@ -12,7 +12,7 @@ import pytest
 from ftc_hw.compensation import JointResidual
 from ftc_hw.compensation.joint_model_error import JointModelError
 from ftc_hw.detection import JointDetector, chi2_isf, chi2_isf6, chi2_sf
-from ftc_hw.model import ArmModel, Contact
+from ftc_hw.model import ArmModel
 from ftc_hw.model.inertials import body_params
 from ftc_hw.pipeline import (
     ContactPipeline,
@@ -47,30 +47,35 @@ def solver(ur5e_model):
 def pressed(ur5e_currents, ur5e_model):
     """Every joint sweeping in the ideal world while a probe presses wrist_3 (30 N, 0.9-1.4 s): per joint
     sample, (t, q, qd, current, true J^T f, true contact or None, true qdd)."""
-    scene = ur5e_currents
+    return _pressed(ur5e_currents, ur5e_model, "wrist_3")[0]
+
+
+def _pressed(scene, model, link):
+    """(rows as ``pressed`` gives them, the world's F/T readings at them or None) for a probe on ``link``."""
     home = np.asarray(scene.robot.home, dtype=float)
     motion = Sinusoid(home, np.full(scene.n_joints, 0.3), 0.25, start_s=0.2)
-    # a point on wrist_3's side, pushed inward, within its surface (the link frame's primitive)
-    surf = next(s for s in ur5e_model.surfaces if s.link == "wrist_3")
+    # a point on the link's side, pushed inward, within its surface (the link frame's primitive)
+    surf = next(s for s in model.surfaces if s.link == link)
     r_geom = surf.link_T_geom[:3, :3]
     radial = r_geom @ np.array([1.0, 0.0, 0.0])
     point = surf.link_T_geom[:3, 3] + surf.size[0] * radial
     q_mid, _, _ = motion.reference(1.15)
-    b_T_l = ur5e_model.kinematics(q_mid)["wrist_3"]
+    b_T_l = model.kinematics(q_mid)[link]
     direction = -(b_T_l[:3, :3] @ radial)
-    probe = Probe("wrist_3", point, direction, 30.0, t_start=0.9, ramp_s=0.02, hold_s=0.5, normal_link=radial,
+    probe = Probe(link, point, direction, 30.0, t_start=0.9, ramp_s=0.02, hold_s=0.5, normal_link=radial,
                   geom=surf.geom)
     world = World(scene, ScenarioSetup(motion, probes=(probe,)), seed=3)
-    rows = []
+    rows, readings = [], []
     for _ in range(int(1.6 / world.dt)):
         s = world.step()
         if world.steps % EVERY:
             continue
         tau = np.zeros(scene.n_joints)
         for c in s.contacts:
-            tau += ur5e_model.jacobian(s.q, c.link, c.point).T @ c.force
+            tau += model.jacobian(s.q, c.link, c.point).T @ c.force
         rows.append((s.t, s.q, s.qd, world.read_current(s), tau, s.contacts[0] if s.contacts else None, s.qdd))
-    return rows
+        readings.append(world.read_sensor(s).wrench if s.wrench is not None else None)
+    return rows, readings
 
 
 def test_observer_gives_the_true_external_torques_in_the_ideal_world(ur5e_currents, ur5e_model, pressed):
@@ -291,22 +296,19 @@ def test_link_side_joint_torques_give_the_external_torques_without_friction(ur5e
     assert np.abs(errs.mean(axis=0)).max() < 0.5
 
 
-def test_the_joint_pipeline_fuses_a_flange_sensor(ur5e_currents, pressed):
-    """A flange F/T sensor (here at ur5e's flange site, carrying wrist_3) joins detection and localization:
-    its reading is the model's (the bodies beyond it, the contact on them) plus noise."""
-    sensor = dataclasses.replace(ur5e_currents.sensor, site="flange", mount="flange")
-    scene = dataclasses.replace(ur5e_currents, sensor=sensor, uses=frozenset({"currents", "flange_ft"}))
+def test_the_joint_pipeline_fuses_a_flange_sensor():
+    """A flange F/T sensor (ur10e's own, between wrist 3 and its tool) joins detection and localization:
+    a push on the tool is in its reading (the world's), which tells the point at once."""
+    scene = load_scene("ur10e")
     model = ArmModel(scene)
     pipe = pipeline_for(scene)
     assert isinstance(pipe, JointContactPipeline) and pipe.detector.dof == 12
-    rng = np.random.default_rng(1)
+    rows, readings = _pressed(scene, model, "tool")
     events = []
-    for t, q, qd, current, _, truth, qdd in pressed:
-        contacts = [Contact(truth.link, truth.point, truth.force)] if truth is not None else []
-        raw = model.predicted_wrench(q, qd, qdd, contacts=contacts) + rng.normal(size=6) * sensor.noise_std
+    for (t, q, qd, current, _, truth, _), raw in zip(rows, readings, strict=True):
         res = pipe.process_joints(int(round(t * 1e9)), q, qd, current=current, wrench=raw)
         events += [(e, truth) for e in res.events if e.kind in ("onset", "update") and truth is not None]
-    assert events and all(e.link == "wrist_3" for e, _ in events)
+    assert events and all(e.link == "tool" for e, _ in events)
     assert events[0][0].t_host_ns * 1e-9 < 0.915  # the flange's wrench sees the 30 N at once
     assert np.linalg.norm(np.asarray(events[-1][0].point) - events[-1][1].point) < 0.01
 

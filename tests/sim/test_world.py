@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from ftc_hw.model import ArmModel, Contact
+from ftc_hw.model import ArmModel, Contact, sample_rate_hz
 from ftc_hw.scene import builtin_names, load_scene
 from ftc_hw.sim_devices.world import SCENARIOS, World, build_scenario, truth_record
 from ftc_hw.sim_devices.world.scenarios import SWEEP_REST_S
@@ -145,7 +145,7 @@ def test_every_scenario_builds_for_every_scene(scene_name):
     model = ArmModel(scene)
     lo, hi = model.joint_limits()
     touchable = {t.link for t in scene.touchable}
-    period = 1.0 / scene.sensor.rate_hz
+    period = 1.0 / sample_rate_hz(scene)
     for name in SCENARIOS:
         duration = 5.0
         setup = build_scenario(name, scene, model, 0, duration)
@@ -173,7 +173,11 @@ def test_every_scenario_builds_for_every_scene(scene_name):
         for state, reading in world.run(plateau + 2 * period if plateau is not None else 0.2):
             assert state.t == pytest.approx(t_prev + period), name
             t_prev = state.t
-            for v in (state.q, state.qd, state.qdd, state.tau, state.current, state.wrench, reading.wrench):
+            assert (reading is None) == (scene.sensor is None) == (state.wrench is None), name
+            assert (state.tau_j is None) == (scene.joint_torque is None), name
+            for v in (state.q, state.qd, state.qdd, state.tau, state.current,
+                      *((state.wrench, reading.wrench) if reading is not None else ()),
+                      *((state.tau_j,) if state.tau_j is not None else ())):
                 assert np.all(np.isfinite(v)), (name, state.t)
             if state.t < first:
                 assert not state.contacts, (name, state.t, state.contacts)
