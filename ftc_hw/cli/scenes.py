@@ -12,7 +12,8 @@ def list_scenes() -> None:
     for name in builtin_names() + variant_names():
         s = load_scene(name)
         kinds = ", ".join(f"{d.kind}/{d.transport}" for d in s.devices) or "no devices"
-        typer.echo(f"{name:10s} {s.n_joints} joints, sensor {s.sensor.rate_hz:g} Hz ({s.sensor.reports}), "
+        ft = f", F/T {s.sensor.rate_hz:g} Hz at the {s.sensor.mount} ({s.sensor.reports})" if s.sensor else ""
+        typer.echo(f"{name:10s} {s.n_joints} joints, sensing {s.sensing.label()}{ft}, "
                    f"compensation {s.compensation}, devices: {kinds} - {s.description}")
         shell = s.robot.vendor_shell
         if shell is not None:

@@ -33,8 +33,10 @@ def test_scenes_lists_the_builtins_one_line_each():
     assert result.exit_code == 0, result.output
     lines = result.output.strip().splitlines()
     names = [line.split()[0] for line in lines]
-    assert {"leng2016", "ur5e", "dxl-arm"} <= set(names)
-    assert len(lines) == len(names)
+    assert {"leng2016", "ur5e", "dxl-arm", "ur10e", "panda"} <= set(names)
+    said = {line.split()[0]: line for line in lines}
+    assert "sensing flange_ft + currents, F/T 500 Hz at the flange" in said["ur10e"]
+    assert "sensing joint_torques," in said["panda"] and "F/T" not in said["panda"].split(" - ")[0]
 
 
 def test_sim_list():
