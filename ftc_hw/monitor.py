@@ -115,7 +115,8 @@ class LiveMonitor:
         self.uses_ft = sensing.ft is not None
         self.ft_topic = wrench_topic(ft_source)
         self.joint_topic = joints_topic(arm_source)
-        self.tare_s = tare_s if self.uses_ft else None  # nothing to tare without an F/T sensor
+        # the F/T sensor, or the joint torque sensors' offsets, tared at rest; motor currents take none
+        self.tare_s = tare_s if self.uses_ft or sensing.joint_torques else None
         # a frame waits for the side stream to pass it as long as a gap may last: on a loaded host the
         # side reader can be late by several periods, and extrapolating over that span near a reversal
         # of the motion reads as a contact (normally the wait is under a period)
@@ -128,7 +129,7 @@ class LiveMonitor:
         self._sub = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self._tare_buf: list[tuple[np.ndarray, np.ndarray]] = []
+        self._tare_buf: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
         self._tare_until_ns: int | None = None
         self.tared = self.tare_s is None
         self._ft_clock = ClockAligner()
@@ -392,7 +393,7 @@ class LiveMonitor:
             self.counters["no_joint_torques"] += 1
             return None
         inp = PipelineInput(t, frame.t_device_ns, frame.seq, frame.source, wrench, frame.q, frame.qd, frame.current,
-                            saturated, tare=not self.tared and wrench.size > 0, joint_gap_ns=gap, tau_j=tau_j)
+                            saturated, tare=not self.tared, joint_gap_ns=gap, tau_j=tau_j)
         if self.publish_inputs:
             self.bus.publish(MONITOR_INPUT, inp)
         return self.consume(inp)
@@ -407,7 +408,7 @@ class LiveMonitor:
     def consume(self, inp: PipelineInput) -> MonitoredFrame | None:
         """One pipeline input (live, or from a recording): the tare or the pipeline; events go on the bus."""
         if inp.tare:
-            self._tare(inp.t_host_ns, inp.wrench, inp.q)
+            self._tare(inp.t_host_ns, inp.wrench, inp.q, inp.tau_j)
             return None
         try:
             result = self._process(inp)
@@ -437,14 +438,21 @@ class LiveMonitor:
                                             wrench=inp.wrench if inp.wrench.size else None,
                                             t_device_ns=inp.t_device_ns, joint_gap_ns=inp.joint_gap_ns)
 
-    def _tare(self, t: int, wrench, q) -> None:
+    def _tare(self, t: int, wrench, q, tau_j=None) -> None:
+        """At rest: the F/T readings' mean (the samples that had one) and the joint torque sensors'."""
         if self._tare_until_ns is None:
             self._tare_until_ns = t + int(self.tare_s * 1e9)
-        self._tare_buf.append((np.asarray(wrench), np.asarray(q)))
+        self._tare_buf.append((np.asarray(wrench), np.asarray(q), None if tau_j is None else np.asarray(tau_j)))
         if t >= self._tare_until_ns:
-            w = np.mean([b[0] for b in self._tare_buf], axis=0)
+            wrenches = [b[0] for b in self._tare_buf if b[0].size]
+            torques = [b[2] for b in self._tare_buf if b[2] is not None]
+            w = np.mean(wrenches, axis=0) if wrenches else None
             q = np.mean([b[1] for b in self._tare_buf], axis=0)
-            self.pipeline.tare(w, q, len(self._tare_buf), t)
+            tj = np.mean(torques, axis=0) if torques else None
+            if self.driver == "ft":
+                self.pipeline.tare(w, q, len(self._tare_buf), t)
+            else:
+                self.pipeline.tare(w, q, len(wrenches) or len(torques), t, tau_j=tj)
             self.tared = True
             self._tare_buf.clear()
 

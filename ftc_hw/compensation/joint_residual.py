@@ -31,9 +31,11 @@ class JointResidual:
 
     def __init__(self, scene: Scene, arm: ArmModel, source: Source, *, gain: float = 150.0,
                  friction_rel_std: float = 0.25, model_rel_std: float = 0.02, velocity_noise_std: float = 0.0,
-                 model_error: JointModelError | None = None) -> None:
-        """``model_error``: the identified parameters' covariance in the joint torques, added to ``cov``."""
-        self.signals = JointSignals(scene, source, friction_rel_std=friction_rel_std, model_rel_std=model_rel_std)
+                 model_error: JointModelError | None = None, offset=None, identified_std=None) -> None:
+        """``model_error``: the identified parameters' covariance in the joint torques, added to ``cov``;
+        ``offset``, ``identified_std``: :class:`JointSignals`'."""
+        self.signals = JointSignals(scene, source, friction_rel_std=friction_rel_std, model_rel_std=model_rel_std,
+                                    offset=offset, identified_std=identified_std)
         self.observer = MomentumObserver(arm, gain=gain)
         n = arm.n_joints
         self.n = n

@@ -28,7 +28,10 @@ class JointSignals:
     """``tau_in`` and its variances for one scene and source (see the module's notes)."""
 
     def __init__(self, scene: Scene, source: Source, *, friction_rel_std: float = 0.25,
-                 model_rel_std: float = 0.02, floor: float = 0.02) -> None:
+                 model_rel_std: float = 0.02, floor: float = 0.02, offset=None, identified_std=None) -> None:
+        """``offset`` (n,) N m: the joint torque sensors' offsets (identified, or tared at rest), taken off
+        their reading. ``identified_std`` (n,) N m: identification's post-fit residual of this signal: the
+        slow error while the joints move, in place of the friction and rigid-body models' assumed shares."""
         if source not in ("currents", "joint_torques"):
             raise ValueError(f"source: 'currents' or 'joint_torques', got {source!r}")
         self.source = source
@@ -46,6 +49,10 @@ class JointSignals:
             self._white = np.asarray(scene.joint_torque.noise_std, dtype=float) ** 2 + floor**2
             self._viscous = self._coulomb = np.zeros(n)
         self.v_eps = self.residuals.v_eps
+        self.offset = np.zeros(n) if offset is None else np.asarray(offset, dtype=float).copy()
+        self._identified = np.zeros(n) if identified_std is None else np.asarray(identified_std, dtype=float)
+        if identified_std is not None:
+            self.friction_rel_std = self.model_rel_std = 0.0
 
     @property
     def white_var(self) -> np.ndarray:
@@ -56,21 +63,21 @@ class JointSignals:
         """tau_in (n,) N m from this sample's currents (A) or joint torques (N m)."""
         if self.source == "currents":
             return self.residuals.kt * np.asarray(current, dtype=float) - self.residuals.friction(qd)
-        return np.asarray(tau_j, dtype=float).copy()
+        return np.asarray(tau_j, dtype=float) - self.offset
 
     def slow_std(self, qd: np.ndarray, model_tau: np.ndarray, out: np.ndarray) -> np.ndarray:
         """(n,) N m into ``out``: 1 sigma of tau_in's slowly varying error (friction model, static friction,
         rigid-body model) at joint velocities qd and model torque ``model_tau``."""
         _slow_std(np.asarray(qd, dtype=float), model_tau, self._viscous, self._coulomb, self.v_eps,
-                  self.friction_rel_std, self.model_rel_std, out)
+                  self.friction_rel_std, self.model_rel_std, self._identified, out)
         return out
 
 
 @njit(cache=True, nogil=True)
-def _slow_std(qd, model_tau, viscous, coulomb, v_eps, friction_rel, model_rel, out):
+def _slow_std(qd, model_tau, viscous, coulomb, v_eps, friction_rel, model_rel, identified, out):
     for j in range(qd.shape[0]):
         slip = abs(math.tanh(qd[j] / v_eps))
         sliding = friction_rel * (coulomb[j] * slip + abs(viscous[j] * qd[j]))
         stuck = coulomb[j] * (1.0 - slip)
         rel = model_rel * model_tau[j]
-        out[j] = math.sqrt(sliding * sliding + stuck * stuck + rel * rel)
+        out[j] = math.sqrt(sliding * sliding + stuck * stuck + rel * rel + identified[j] * identified[j])

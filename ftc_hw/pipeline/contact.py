@@ -40,12 +40,18 @@ class FrameResult:
     events: tuple[ContactEvent, ...]
 
 
+# the identified joint terms the scene's [robot] holds (the others, rotor inertia and torque sensor offsets,
+# the joint pipeline takes from the corrections itself)
+ROBOT_JOINT_TERMS = ("torque_constant", "friction_viscous", "friction_coulomb")
+
+
 def corrected_scene(scene: Scene, settings: PipelineSettings) -> Scene:
     """The scene the pipeline's model is built from: a calibrated gravity and identified joints."""
     c = settings.corrections
     out = scene if c.gravity is None else replace(scene, gravity=np.asarray(c.gravity, dtype=float))
-    if c.joints:
-        out = replace(out, robot=replace(out.robot, **{k: np.asarray(v, dtype=float) for k, v in c.joints.items()}))
+    terms = {k: np.asarray(v, dtype=float) for k, v in (c.joints or {}).items() if k in ROBOT_JOINT_TERMS}
+    if terms:
+        out = replace(out, robot=replace(out.robot, **terms))
     return out
 
 
@@ -85,7 +91,7 @@ class ContactPipeline(PipelineView):
         self.localization.warm_up(np.asarray(self.scene.robot.home, dtype=float))
         self.events.warm_up()
 
-    def tare(self, raw_mean, q, samples: int, t_ns: int) -> None:
+    def tare(self, raw_mean, q, samples: int, t_ns: int, tau_j=None) -> None:
         """Re-zero on the mean ``raw_mean`` of ``samples`` still, untouched frames at joint angles q
         (taken by host time ``t_ns``): the bias is then known to 1/samples of the sensor's noise."""
         self.motion.tare(raw_mean, q)

@@ -54,12 +54,18 @@ class JointContactPipeline(PipelineView):
         js, c = settings.joint, settings.corrections
         model_scene = corrected_scene(scene, settings)
         self.model = model = ArmModel(model_scene, c.payload, c.inertials)
+        joints = c.joints or {}
+        if "rotor_inertia" in joints:  # identified beyond the model's armature (the currents' side only)
+            add_rotor_inertia(model, np.asarray(joints["rotor_inertia"], dtype=float))
         me = c.model_error
+        identified = (c.joint_residual_std or {}).get(self.source)
         self.residual = JointResidual(model_scene, model, self.source, gain=js.observer_gain,
                                       friction_rel_std=js.friction_rel_std, model_rel_std=js.model_rel_std,
                                       velocity_noise_std=js.velocity_noise_std,
                                       model_error=None if me is None else JointModelError(model, me.bodies, me.cov,
-                                                                                          me.gain))
+                                                                                          me.gain),
+                                      offset=joints.get("torque_offset") if self.source == "joint_torques" else None,
+                                      identified_std=identified)
         self.flange = FlangeWrench(scene, model, settings) if sensing.ft == "flange" else None
         d = settings.detection
         dims = scene.n_joints + (6 if self.flange is not None else 0)  # the flange wrench joins the test
@@ -175,12 +181,19 @@ class JointContactPipeline(PipelineView):
         self.clock.end()
         return FrameResult(t_ns, self._zero6, _idle(self.detector, math.nan), invalid_estimate(), None, ())
 
-    def tare(self, raw_mean, q, samples: int, t_ns: int) -> None:
-        """Re-zero the flange sensor on the mean ``raw_mean`` of ``samples`` still, untouched readings at q
-        (ContactPipeline's call; nothing to do without a flange sensor: joint signals need no tare)."""
-        if self.flange is not None:
+    def tare(self, raw_mean, q, samples: int, t_ns: int, tau_j=None) -> None:
+        """Re-zero at rest on the means of ``samples`` still, untouched samples at q: the flange sensor on
+        ``raw_mean`` (its readings), the joint torque sensors' offsets on ``tau_j`` (theirs, against the
+        model's gravity torques at q). Motor currents take no tare (static friction holds anything within
+        +-f_c at rest)."""
+        if self.flange is not None and raw_mean is not None and np.size(raw_mean) == 6:
             self.flange.compensator.tare(raw_mean, q)
             self.events.set_bias(1.0 / max(int(samples), 1), t_ns)
+        if self.source == "joint_torques" and tau_j is not None:
+            q = np.asarray(q, dtype=float)
+            gravity = self.model.joint_torques(q, np.zeros_like(q), np.zeros_like(q))
+            self.residual.signals.offset = np.asarray(tau_j, dtype=float) - gravity
+            self.residual.reset()
 
     def recent_external(self) -> np.ndarray | None:
         return self.events.recent_external()
@@ -245,6 +258,14 @@ def pipeline_for(scene: Scene, settings: PipelineSettings | None = None, *,
     if scene.sensing.ft == "base":
         return ContactPipeline(scene, settings, clock=clock)
     return JointContactPipeline(scene, settings, clock=clock)
+
+
+def add_rotor_inertia(model: ArmModel, rotor: np.ndarray) -> None:
+    """Each scene joint's identified rotor inertia (kg m^2, at the joint) onto the model's armature (the dof
+    its motor drives: a coupling's first driven joint, as ``rotor / ratio^2`` in that dof's units)."""
+    jm = model.joints
+    dofs, ratio = jm.dadr[jm.lead], jm.ratio[jm.lead]
+    model.model.dof_armature[dofs] += rotor / ratio**2
 
 
 def _finite(q: np.ndarray, qd: np.ndarray, signal, n: int) -> bool:

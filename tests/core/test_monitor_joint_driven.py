@@ -29,8 +29,8 @@ class RecordingPipeline:
         det = Detection(active=False, d2=0.0, blind=False, probability=0.0, change=None, onset_t_ns=None)
         return FrameResult(t_ns, np.zeros(6), det, None, None, ())
 
-    def tare(self, raw_mean, q, samples, t_ns):
-        self.tares.append((np.asarray(raw_mean).copy(), samples))
+    def tare(self, raw_mean, q, samples, t_ns, tau_j=None):
+        self.tares.append((None if raw_mean is None else np.asarray(raw_mean).copy(), samples, tau_j))
 
 
 @pytest.fixture
@@ -85,7 +85,7 @@ def test_a_flange_sensor_is_sampled_at_each_joint_sample_after_its_tare(recordin
 def test_joint_torques_come_from_the_joint_frame_and_a_frame_without_them_is_counted(recording):
     scene = dataclasses.replace(load_scene("ur5e"), joint_torque=JointTorqueSpec(
         noise_std=np.full(6, 0.05), range=np.full(6, 100.0), offset=np.zeros(6))).with_sensing(["joint_torques"])
-    monitor = LiveMonitor(Bus(), scene)
+    monitor = LiveMonitor(Bus(), scene, tare_s=None)
     monitor.handle(_joints(1_000_000, 1, tau=np.arange(6.0)))
     monitor.handle(_joints(2_000_000, 2))  # no tau: not judged, counted
     assert len(monitor.pipeline.calls) == 1
@@ -104,3 +104,15 @@ def test_missed_joint_samples_are_a_gap(recording):
     assert monitor.pipeline.calls[-1]["gap"] == 10_000_000
     assert monitor.pipeline.calls[-2]["gap"] == 0
     assert monitor.counters["joint_gap_frames"] == 1
+
+
+def test_joint_torque_sensors_are_tared_at_rest_without_a_calibration(recording):
+    scene = dataclasses.replace(load_scene("ur5e"), joint_torque=JointTorqueSpec(
+        noise_std=np.full(6, 0.05), range=np.full(6, 100.0), offset=np.zeros(6))).with_sensing(["joint_torques"])
+    monitor = LiveMonitor(Bus(), scene, tare_s=0.002)
+    assert not monitor.tared
+    for k in range(1, 6):
+        monitor.handle(_joints(1_000_000 * k, k, tau=np.full(6, float(k))))
+    (raw, samples, tau_j), = monitor.pipeline.tares  # the first 3 ms: the offsets' tare, no F/T in it
+    assert raw is None and samples == 3 and tau_j == pytest.approx(np.full(6, 2.0))
+    assert len(monitor.pipeline.calls) == 2

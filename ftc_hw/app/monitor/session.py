@@ -392,8 +392,9 @@ def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, 
     """The outcome's figures and judgements, and the summary printed."""
     monitor, rig = live.monitor, live.rig
     _finish(cfg, scene, live, out)
-    if monitor.pipeline.motion.refiner is not None:
-        out.drift = monitor.pipeline.motion.refiner.drift()
+    refiner = getattr(getattr(monitor.pipeline, "motion", None), "refiner", None)  # the F/T pipeline's only
+    if refiner is not None:
+        out.drift = refiner.drift()
         console.print(out.drift.summary())
     if isinstance(rig, RemoteRig):
         out.remote = rig.counts
@@ -468,8 +469,10 @@ def _finish(cfg: MonitorOptions, scene: Scene, live: _Live, out: MonitorOutcome)
             out.reflex["stopped_by_reader"] = [dict(e.counters) for e in monitor.bus.history(EVENTS_DEVICE)
                                                if e.kind == "stopped"]
     if world is not None and world.done and "error" not in (world.result or {}):
+        ft = scene.sensing.ft is not None  # the bound and the solver's own error are the F/T sensor's
         out.evaluation = evaluate(out.events, read_truth(live.truth_path), world.sample_period_s,
-                                  crlb=crlb_of_truth(scene), solver_rms=solver_rms_of_truth(scene))
+                                  crlb=crlb_of_truth(scene) if ft else None,
+                                  solver_rms=solver_rms_of_truth(scene) if ft else None)
     elif world is not None and "interrupted" not in out.problems:  # Ctrl-C: the world was stopped, not failed
         out.problems.append(f"the simulated world did not finish: {world.result}")
     if recorder is not None:
