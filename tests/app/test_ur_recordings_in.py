@@ -41,11 +41,20 @@ def excitation_files(tmp_path_factory):
                                                                                                    style=UR_CLIENT))]
 
 
-def test_ftc_identify_takes_several_ur_recordings_skips_their_bad_rows_and_finds_the_drawn_arm(excitation_files):
+@pytest.fixture(scope="module")
+def identified(excitation_files):
+    """``ftc identify`` on both files: (its output, the calibration file)."""
     folder, files = excitation_files
     out = folder / "cal.toml"
     proc = ftc("identify", *(str(p) for p, _ in files), "--scene", "ur10e", "--sensing", "currents",
                "--out", str(out))
+    return proc, out
+
+
+def test_ftc_identify_takes_several_ur_recordings_skips_their_bad_rows_and_finds_the_drawn_arm(excitation_files,
+                                                                                              identified):
+    _, files = excitation_files
+    proc, out = identified
     text = proc.stdout + proc.stderr
     assert proc.returncode in (0, 4), text[-3000:]  # 4: poorly excited (some inertial parameter untold)
     flat = " ".join(text.split())  # rich wraps at the terminal's width
@@ -72,3 +81,33 @@ def test_a_recording_without_the_currents_the_scene_uses_is_refused_by_name(tmp_
     assert proc.returncode == 1 and "no actual_current column" in " ".join((proc.stdout + proc.stderr).split())
     proc = ftc("identify", str(path), "--out", str(tmp_path / "c.toml"))
     assert proc.returncode == 2 and "give --scene" in proc.stderr
+
+
+def _onsets(text: str) -> int:
+    return int(re.search(r"'onset': (\d+)", text).group(1))
+
+
+@pytest.mark.parametrize("calibrated", [False, True])
+def test_ftc_replay_judges_a_ur_recording_no_onset_when_free_one_per_contact(excitation_files, identified,
+                                                                            calibrated):
+    folder, _ = excitation_files
+    proc, out = identified
+    assert out.is_file(), proc.stdout[-2000:]
+    cal = ["--calibration", str(out)] if calibrated else []
+    free = run_world(SCENE, WORLD, "sweep", 12.0, seed=4)
+    path = folder / "free.csv"
+    write_with_bad_rows(path, free.columns, style=UR_RTDE)
+    proc = ftc("replay", str(path), "--scene", "ur10e", *cal, "--view", "none")
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0, text[-3000:]
+    assert "sensing used: flange_ft + currents" in " ".join(text.split()) and _onsets(text) == 0, text[-2000:]
+    hit = run_world(SCENE, WORLD, "sweep-with-collision", 10.0, seed=4)
+    episodes = int(np.sum(np.diff(hit.contact.astype(int)) == 1))
+    assert episodes >= 1
+    path, events = folder / "hit.csv", folder / "events.jsonl"
+    write_with_bad_rows(path, thinned(hit.columns, np.random.default_rng(1)), style=UR_CLIENT)
+    proc = ftc("replay", str(path), "--scene", "ur10e", *cal, "--view", "none", "--events", str(events))
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0, text[-3000:]
+    assert _onsets(text) == episodes, (episodes, text[-2000:])
+    assert events.read_text().count('"onset"') == episodes
