@@ -20,7 +20,7 @@ from numba.core.dispatcher import Dispatcher
 from ftc_hw.bus import ClockAligner
 from ftc_hw.detection.kernels import mahalanobis2, quad_sum
 from ftc_hw.model import ArmModel, Contact
-from ftc_hw.pipeline import ContactPipeline, PipelineSettings
+from ftc_hw.pipeline import ContactPipeline, PipelineSettings, pipeline_for
 from ftc_hw.scene import Scene, builtin_names, load_scene
 from ftc_hw.sim_devices.world import SCENARIOS, World, build_scenario
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
@@ -47,8 +47,10 @@ def _pipeline(scene: Scene) -> None:
     detector's kernels with the model error the pipeline passes once the arm moves, whose rows are
     a transposed array (Fortran order: another signature, MotionStage._model_error), and the
     solver's tree kinematics, which a contact's track asks for at a q the last solve was not at."""
-    pipe = ContactPipeline(scene, PipelineSettings().with_level("dynamics"))
+    pipe = pipeline_for(scene, PipelineSettings().with_level("dynamics"))  # the joint pipeline warms itself
     ClockAligner()  # the monitor's and the readers' clock alignment: its fit's kernels load with the first one
+    if not isinstance(pipe, ContactPipeline):
+        return
     rows = np.zeros((6, 2)).T
     mahalanobis2(np.zeros(6), pipe.detector.cov, rows)
     quad_sum(rows, pipe.detector.inv)
@@ -57,7 +59,9 @@ def _pipeline(scene: Scene) -> None:
 
 def _evaluation(scene: Scene) -> None:
     """The end of a simulated run (``ftc_hw.app.monitor.evaluate``): at a contact on the surface, the
-    Cramer-Rao bound and the solver's batch."""
+    Cramer-Rao bound and the solver's batch (a base F/T sensor's: the same kernels serve a flange one)."""
+    if scene.sensing.ft != "base":
+        return
     arm = ArmModel(scene)
     solver = ContactSolver(arm)
     q = np.asarray(scene.robot.home, dtype=float)
