@@ -444,6 +444,29 @@ def bench_reality(
         only_columns=column)
 
 
+@bench_app.command("proprio")
+def bench_proprio(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    draws: Annotated[int, typer.Option(min=1, help="Seeded draws of the typical world per column.")] = 2,
+    free_minutes: Annotated[float, typer.Option(min=0.05, help="Simulated minutes of free sweep per draw.")] = 5.0,
+    probes: Annotated[int, typer.Option(min=4, help="Probes per draw (one a second, in four force bands).")] = 40,
+    identify_minutes: Annotated[float, typer.Option(min=0.0, help="Minutes of planned excitation the drawn arm "
+                                                    "is identified from first (0: the nominal model).")] = 2.0,
+    workers: Annotated[Optional[int], typer.Option(min=1, help="Processes (default: one per CPU).")] = None,  # noqa: UP045
+    column: Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
+        help="Only the columns matching this name or glob (repeatable), e.g. 'ur10e: currents', 'panda*'.")] = None,
+) -> None:
+    """Contact sensing by what the arm senses: currents, joint torques, base or flange F/T, side by side."""
+    from ftc_hw.bench.proprio import run, select  # lazy: CLI start-up
+
+    try:
+        columns = select(column)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--column") from exc
+    run(json_path, columns=columns, draws=draws, free_s=free_minutes * 60.0, n_probes=probes,
+        identify_s=identify_minutes * 60.0, workers=workers)
+
+
 @bench_app.command("isolation")
 def bench_isolation(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
