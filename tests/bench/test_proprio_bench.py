@@ -1,0 +1,31 @@
+"""``ftc bench proprio``: its columns are the issue's, and a short run of one column through the real
+pipeline gives the figures the table shows (a run of a drawn ur10e sensed by its currents alone)."""
+from __future__ import annotations
+
+import pytest
+
+from ftc_hw.bench.proprio import COLUMNS, Job, combine, run_job, select
+
+
+def test_the_columns_are_the_sensings_the_issue_names():
+    sensings = {tuple(sorted(c.sensing)) for c in COLUMNS}
+    for wanted in (("currents",), ("joint_torques",), ("base_ft",), ("base_ft", "currents"),
+                   ("currents", "flange_ft")):
+        assert wanted in sensings, wanted
+    assert select(["panda*"]) == tuple(c for c in COLUMNS if c.scene == "panda")
+    with pytest.raises(ValueError, match="no column matches 'kuka'"):
+        select(["kuka"])
+
+
+def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
+    column = select(["ur10e: currents"])[0]
+    out = run_job(Job(column, draw=0, free_s=6.0, n_probes=4, identify_s=0.0))
+    assert out["column"] == "ur10e: currents" and out["rate_hz"] == 500.0
+    assert out["free_minutes"] == pytest.approx(0.1, abs=0.01)  # 6 s of joint samples at 500 Hz
+    assert out["false_alarms"] == 0  # a drawn arm on the nominal model: no alarm in a free sweep
+    assert sum(b["n"] for b in out["detection"].values()) == 4  # one probe in each force band
+    assert out["detection"]["50-100 N"]["detected"] == 1.0
+    row = combine([out, out])
+    assert row["free_minutes"] == pytest.approx(2 * out["free_minutes"]) and row["false_alarms"] == 0
+    assert row["detection"]["50-100 N"]["n"] == 2
+    assert out["events"] > 0 and 0.0 <= row["ambiguous_share"] <= 1.0  # events in contact, shares of them
