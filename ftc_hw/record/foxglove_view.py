@@ -81,7 +81,8 @@ class FoxgloveView:
         self.rate_hz = rate_hz
         self.contact_lifetime_s = contact_lifetime_s
         self.sensor_frame = "sensor" if "sensor" not in arm.link_names else "sensor_site"
-        self.sensor_link = arm.model.body(arm.sensor_body).name
+        # without an F/T sensor its frame is the base frame (ArmModel.base_T_sensor), on the arm's first body
+        self.sensor_link = arm.model.body(arm.sensor_body if arm.sensor_body is not None else 1).name
         home = np.asarray(scene.robot.home, dtype=float)
         links = arm.kinematics(home)
         link_T_sensor = _inverse(links[self.sensor_link]) @ arm.base_T_sensor(home)

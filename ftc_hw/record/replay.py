@@ -23,6 +23,8 @@ class ReplayError(Exception):
 
 
 def recorded_scene(rec: Recording) -> Scene:
+    """The scene the recording was made with, using the sensing it used (``--sensing``; recordings made
+    before it was recorded: the scene's own)."""
     meta = rec.metadata.get("scene")
     if meta is None:
         raise ReplayError(f"{rec.path}: no scene metadata; give --scene")
@@ -30,9 +32,14 @@ def recorded_scene(rec: Recording) -> Scene:
         if not ref:
             continue
         try:
-            return load_scene(ref)
+            scene = load_scene(ref)
         except (SceneError, OSError):
             continue
+        sensing = meta.get("sensing")
+        try:
+            return scene.with_sensing(sensing.split(",")) if sensing else scene
+        except SceneError as exc:
+            raise ReplayError(f"{rec.path}: the recorded sensing: {exc}") from None
     raise ReplayError(f"{rec.path}: scene {meta.get('name')!r} ({meta.get('path')}) not found; give --scene")
 
 

@@ -209,7 +209,8 @@ def _resume_options(cfg: MonitorOptions, scene: Scene) -> dict[str, dict]:
 def _start_recorder(cfg: MonitorOptions, scene: Scene, bus: Bus, monitor_meta: dict[str, str],
                     cal_meta: dict[str, str] | None) -> RecorderProcess:
     toml = Path(scene.path).read_text(encoding="utf-8")
-    meta = {"scene": {"name": scene.name, "path": str(scene.path), "toml": toml}, "monitor": monitor_meta}
+    meta = {"scene": {"name": scene.name, "path": str(scene.path), "toml": toml,
+                      "sensing": ",".join(sorted(scene.sensing.kinds))}, "monitor": monitor_meta}
     if cal_meta is not None:
         meta["calibration"] = cal_meta
     try:
