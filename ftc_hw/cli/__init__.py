@@ -193,11 +193,13 @@ def solve(
     input_path: Annotated[str, typer.Option("--input", help="JSON Lines file, or - for stdin.")] = "-",
     output_path: Annotated[str, typer.Option("--output", help="JSON Lines file, or - for stdout.")] = "-",
     bias: Annotated[Optional[str], typer.Option(help="Sensor bias to subtract, JSON list of 6 (N, N m).")] = None,  # noqa: UP045
+    sensing: SensingOption = None,
 ) -> None:
-    """Localize contacts: one JSON line in ({"q", "wrench", ...}), one estimate or error line out."""
+    """Localize contacts: one JSON line in ({"q", "wrench", ...}; a scene sensed through its joints: {"q",
+    "tau_ext", "tau_ext_std"}), one estimate or error line out."""
     from ftc_hw.cli.solve import run_solve  # lazy: CLI start-up
 
-    run_solve(scene, method.value, input_path, output_path, bias)
+    run_solve(scene, method.value, input_path, output_path, bias, sensing)
 
 
 @bench_app.command("bus")

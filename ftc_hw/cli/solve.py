@@ -1,7 +1,12 @@
 """``ftc solve``: JSON Lines in, one estimate (or error) line out per input line, blank ones included,
 in order. Every output line is standard JSON (no NaN or Infinity): a wrench beyond the sensor's range
 or a joint angle outside its joint's range is an error line, and an estimate holding a non-finite
-number goes out as no contact with ``null`` there and the ``non_finite`` flag."""
+number goes out as no contact with ``null`` there and the ``non_finite`` flag.
+
+A scene sensed through its joints (no base F/T sensor in its sensing) takes the external joint torques
+instead of a wrench: ``{"q": [...], "tau_ext": [...], "tau_ext_std": [...]}`` (N m, the torque the contact
+exerts about each joint, ``J_c^T p``; its 1 sigma per joint, default 0.1 N m), and, where the scene uses
+a flange sensor, ``"wrench"``: the contact's wrench on the arm at that sensor (compensated, its frame)."""
 from __future__ import annotations
 
 import json
@@ -13,7 +18,8 @@ from typing import IO, Any
 import numpy as np
 
 from ftc_hw.compensation import Compensator
-from ftc_hw.solver import ContactEstimate, make_solver
+from ftc_hw.model import ArmModel
+from ftc_hw.solver import ContactEstimate, JointContactSolver, make_solver
 
 from .common import scene_or_exit
 
@@ -114,14 +120,7 @@ def solve_lines(solver, compensator: Compensator, lines: Iterable[str]) -> Itera
     sensor_range = np.asarray(solver.scene.sensor.range, dtype=float)
     for number, line in enumerate(lines, start=1):
         try:
-            if not line.strip():
-                raise InputError("blank line")
-            try:
-                obj = json.loads(line, parse_constant=lambda c: (_ for _ in ()).throw(InputError(f"{c} is not JSON")))
-            except json.JSONDecodeError as exc:
-                raise InputError(f"not JSON: {exc.msg} at column {exc.colno}") from None
-            if not isinstance(obj, dict):
-                raise InputError("expected a JSON object")
+            obj = _object(line)
             q = _vector(obj, "q", n_joints)
             wrench = _vector(obj, "wrench", 6)
             qd = _vector(obj, "qd", n_joints, required=False)
@@ -142,8 +141,55 @@ def solve_lines(solver, compensator: Compensator, lines: Iterable[str]) -> Itera
             yield {"error": str(exc), "line": number}
 
 
-def run_solve(scene_name: str, method: str, input_path: str, output_path: str, bias: str | None) -> None:
-    scene = scene_or_exit(scene_name)
+TAU_EXT_STD = 0.1  # N m: the external joint torques' 1 sigma where a line gives none
+
+
+def solve_joint_lines(solver: JointContactSolver, lines: Iterable[str], *,
+                      flange: bool) -> Iterator[dict[str, Any]]:
+    """As :func:`solve_lines`, from the external joint torques (and a flange sensor's wrench)."""
+    n_joints = solver.model.n_joints
+    bounds = joint_bounds(solver.model)
+    for number, line in enumerate(lines, start=1):
+        try:
+            obj = _object(line)
+            q = _vector(obj, "q", n_joints)
+            tau = _vector(obj, "tau_ext", n_joints)
+            std = _vector(obj, "tau_ext_std", n_joints, required=False)
+            std = np.full(n_joints, TAU_EXT_STD) if std is None else std
+            if np.any(std <= 0):
+                raise InputError("'tau_ext_std' must be > 0")
+            wrench = _vector(obj, "wrench", 6, required=False) if flange else None
+            _check_q(q, bounds)
+            wrench_cov = None if wrench is None else solver.model.scene.sensor.noise_cov
+            with np.errstate(over="ignore", invalid="ignore"):
+                yield estimate_record(solver.solve(tau, np.diag(std**2), q, wrench=wrench, wrench_cov=wrench_cov))
+        except InputError as exc:
+            yield {"error": str(exc), "line": number}
+
+
+def _object(line: str) -> dict:
+    if not line.strip():
+        raise InputError("blank line")
+    try:
+        obj = json.loads(line, parse_constant=lambda c: (_ for _ in ()).throw(InputError(f"{c} is not JSON")))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not JSON: {exc.msg} at column {exc.colno}") from None
+    if not isinstance(obj, dict):
+        raise InputError("expected a JSON object")
+    return obj
+
+
+def run_solve(scene_name: str, method: str, input_path: str, output_path: str, bias: str | None,
+              sensing: str | None = None) -> None:
+    scene = scene_or_exit(scene_name, sensing=sensing)
+    if scene.sensing.ft != "base":
+        if method != "ours" or bias:
+            raise SystemExit(f"error: scene {scene.name!r} is sensed through its joints ({scene.sensing.label()}): "
+                             "--method leng2016 and --bias are for a base F/T sensor's wrench")
+        solver = JointContactSolver(ArmModel(scene))
+        _write(input_path, output_path,
+               lambda lines: solve_joint_lines(solver, lines, flange=scene.sensing.ft == "flange"))
+        return
     solver = make_solver(scene, method)
     bias_vec = None
     if bias:
@@ -152,11 +198,16 @@ def run_solve(scene_name: str, method: str, input_path: str, output_path: str, b
         except (ValueError, TypeError) as exc:
             raise SystemExit(f"error: --bias must be a JSON list of 6 numbers ({exc})") from None
     compensator = Compensator(solver.model, bias=bias_vec)
+    _write(input_path, output_path, lambda lines: solve_lines(solver, compensator, lines))
+
+
+def _write(input_path: str, output_path: str, solve) -> None:
+    """``solve(lines)``'s records, one JSON line each, from the input to the output (``-``: stdin, stdout)."""
     src: IO[str] = sys.stdin if input_path == "-" else _open(input_path, "r", "input")
     try:
         dst: IO[str] = sys.stdout if output_path == "-" else _open(output_path, "w", "output")
         try:
-            for record in solve_lines(solver, compensator, _lines(src, input_path)):
+            for record in solve(_lines(src, input_path)):
                 dst.write(json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n")
                 dst.flush()
         finally:

@@ -151,3 +151,34 @@ def test_leng2016_takes_base_moments_of_the_papers_experiment(tmp_path):
         assert "error" not in record, record
         assert record["contact"] and record["link"] == "link3"
         np.testing.assert_allclose(record["point"], point, atol=1e-6)
+
+
+def test_a_scene_sensed_through_its_joints_takes_external_joint_torques(tmp_path):
+    """panda (joint torque sensors): a push on link 7 from the torques it exerts about the joints."""
+    scene = load_scene("panda")
+    model = ArmModel(scene)
+    q = np.array(scene.robot.home)
+    surf = next(s for s in model.surfaces if s.link == "link7")
+    b_T = model.kinematics(q)["link7"]
+    radial = b_T[:3, :3] @ surf.link_T_geom[:3, :3] @ np.array([1.0, 0.0, 0.0])
+    point = b_T[:3, :3] @ (surf.link_T_geom[:3, 3] + surf.size[0] * surf.link_T_geom[:3, :3] @ [1.0, 0, 0]) \
+        + b_T[:3, 3]
+    force = -20.0 * radial
+    tau = model.jacobian(q, "link7", point).T @ force
+    lines = [json.dumps({"q": list(q), "tau_ext": list(tau), "tau_ext_std": [0.02] * 7}),
+             json.dumps({"q": list(q), "wrench": [0.0] * 6}),  # a wrench is no joint torque
+             json.dumps({"q": list(q), "tau_ext": list(tau), "tau_ext_std": [0.0] * 7})]
+    src, out = tmp_path / "in.jsonl", tmp_path / "out.jsonl"
+    src.write_text("\n".join(lines) + "\n")
+    proc = subprocess.run([*FTC, "solve", "--scene", "panda", "--input", str(src), "--output", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    good, no_tau, zero_std = map(json.loads, out.read_text().splitlines())
+    assert good["contact"] and good["link"] == "link7", good
+    assert np.linalg.norm(np.array(good["point"]) - point) < 0.01
+    assert np.linalg.norm(np.array(good["force"]) - force) < 2.0
+    assert no_tau == {"error": "missing 'tau_ext'", "line": 2}
+    assert zero_std["error"] == "'tau_ext_std' must be > 0"
+    bad = subprocess.run([*FTC, "solve", "--scene", "panda", "--method", "leng2016", "--input", str(src)],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode != 0 and "sensed through its joints" in bad.stderr
