@@ -30,9 +30,9 @@ def ftc(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def excitation_files(tmp_path_factory):
-    """60 s of the planned excitation, as two files: ur_rtde's at 500 Hz, UR's client's thinned to ~100 Hz."""
+    """40 s of the planned excitation, as two files: ur_rtde's at 500 Hz, UR's client's thinned to ~100 Hz."""
     folder = tmp_path_factory.mktemp("ur-csv")
-    run = run_world(SCENE, WORLD, "excitation", 60.0, seed=1)
+    run = run_world(SCENE, WORLD, "excitation", 40.0, seed=1)
     half = len(run.columns["timestamp"]) // 2
     first = {k: v[:half] for k, v in run.columns.items()}
     second = thinned({k: v[half:] for k, v in run.columns.items()}, np.random.default_rng(0))
@@ -94,7 +94,7 @@ def test_ftc_replay_judges_a_ur_recording_no_onset_when_free_one_per_contact(exc
     proc, out = identified
     assert out.is_file(), proc.stdout[-2000:]
     cal = ["--calibration", str(out)] if calibrated else []
-    free = run_world(SCENE, WORLD, "sweep", 12.0, seed=4)
+    free = run_world(SCENE, WORLD, "sweep", 8.0, seed=4)
     path = folder / "free.csv"
     write_with_bad_rows(path, free.columns, style=UR_RTDE)
     proc = ftc("replay", str(path), "--scene", "ur10e", *cal, "--view", "none")
