@@ -110,7 +110,7 @@ class LiveMonitor:
         self.bus = bus
         self.scene = scene
         self.pipeline = pipeline_for(scene, settings)
-        sensing = scene.sensing
+        self.sensing = sensing = scene.sensing  # one object: Scene.sensing builds it on every call
         self.driver = "ft" if sensing.ft == "base" else "joints"
         self.uses_ft = sensing.ft is not None
         self.ft_topic = wrench_topic(ft_source)
@@ -388,8 +388,8 @@ class LiveMonitor:
             self.counters["frames_without_ft"] += 1
         if gap:
             self.counters["joint_gap_frames"] += 1
-        tau_j = frame.tau if self.scene.sensing.joint_torques else None
-        if self.scene.sensing.joint_torques and tau_j is None:
+        tau_j = frame.tau if self.sensing.joint_torques else None
+        if self.sensing.joint_torques and tau_j is None:
             self.counters["no_joint_torques"] += 1
             return None
         inp = PipelineInput(t, frame.t_device_ns, frame.seq, frame.source, wrench, frame.q, frame.qd, frame.current,
@@ -431,7 +431,7 @@ class LiveMonitor:
             return self.pipeline.process(inp.t_host_ns, inp.wrench, inp.q, inp.qd, inp.current,
                                          saturated=inp.saturated, t_device_ns=inp.t_device_ns,
                                          joint_gap_ns=inp.joint_gap_ns)
-        sensing = self.scene.sensing
+        sensing = self.sensing
         return self.pipeline.process_joints(inp.t_host_ns, inp.q, inp.qd,
                                             current=inp.current if sensing.currents else None,
                                             tau_j=inp.tau_j if sensing.joint_torques else None,

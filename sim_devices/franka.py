@@ -45,7 +45,7 @@ from .emulator import Emulator, serve_with
 from .franka_state import StateBuilder
 from .franka_urdf import robot_urdf
 from .link import Command, JointRecord
-from .listener import Listener
+from .listener import Listener, drop_session
 from .loopback import check_loopback
 
 DEFAULT_ADDRESS = "127.0.0.4"  # where an emulated controller listens unless told
@@ -131,12 +131,7 @@ class FrankaServer:
         threading.Thread(target=s.run, name="franka-session", daemon=True).start()
 
     def drop(self, s: Session) -> None:
-        s.closed = True
-        with self.lock:
-            if s in self.sessions:
-                self.sessions.remove(s)
-        with contextlib.suppress(OSError):
-            s.sock.close()
+        drop_session(self.lock, self.sessions, s)
 
     def answer(self, s: Session, header: F.Header, payload: bytes, t_rx_ns: int) -> bytes | None:
         """The reply to one request; None closes the connection (a protocol error)."""

@@ -8,6 +8,16 @@ import threading
 from typing import Any
 
 
+def drop_session(lock: threading.Lock, sessions: list, s: Any) -> None:
+    """A session's end: marked closed, out of its server's ``sessions``, its socket closed."""
+    s.closed = True
+    with lock:
+        if s in sessions:
+            sessions.remove(s)
+    with contextlib.suppress(OSError):
+        s.sock.close()
+
+
 class Listener:
     """A listening TCP socket on a loopback address and an accept thread calling ``on_client``."""
 

@@ -48,7 +48,6 @@ robot_mode, safety_mode, runtime_state, robot_status_bits and joint_mode.
 """
 from __future__ import annotations
 
-import contextlib
 import math
 import socket
 import struct
@@ -62,7 +61,7 @@ import numpy as np
 from . import ur_data as D
 from .emulator import Emulator, serve_with
 from .link import Command, JointRecord
-from .listener import Listener
+from .listener import Listener, drop_session
 from .loopback import check_loopback
 from .thermal import ThermalModel
 from .ur_dashboard import answer, serve_connection
@@ -454,12 +453,7 @@ class RtdeServer:
             return any(name in r.names for s in self.sessions if s is not me for r in s.inputs.values())
 
     def drop(self, s: RtdeSession) -> None:
-        s.closed = True
-        with self.lock:
-            if s in self.sessions:
-                self.sessions.remove(s)
-        with contextlib.suppress(OSError):
-            s.sock.close()
+        drop_session(self.lock, self.sessions, s)
 
     def stream(self, tick: Tick) -> None:
         with self.lock:

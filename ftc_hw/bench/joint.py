@@ -113,19 +113,26 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         res = pipe.process_joints(t_ns, s.q, s.qd, current=current, tau_j=tau_j)
         costs.append(time.thread_time() - c0)
         active.append(res.detection.active)
-        for e in res.events:
-            if e.kind == "onset":
-                onsets.append((s.t, e.link))
-            if e.kind in ("onset", "update") and main is not None and "no_estimate" not in e.flags:
-                err = np.asarray(e.point) - main.point
-                std = np.maximum(np.asarray(e.point_std), 1e-9)
-                events.append({"t": s.t, "link": e.link, "true_link": main.link, "flags": list(e.flags),
-                               "err_mm": float(np.linalg.norm(err)) * 1e3,
-                               "covered": bool(np.sum((err / std) ** 2) <= CHI2_3_95),
-                               "std_mm": float(np.linalg.norm(std)) * 1e3,
-                               "force": float(np.linalg.norm(main.force)), "probability": e.probability})
+        judge_events(res.events, s.t, main, onsets, events)
     return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
             "active": np.array(active, dtype=bool), "invalid": pipe.invalid_frames}
+
+
+def judge_events(frame_events, t: float, main, onsets: list, events: list) -> None:
+    """One frame's events against the world's strongest contact ``main`` (None: none) at time ``t`` (s):
+    its onsets into ``onsets`` as (t, link); its estimates in contact into ``events``, each with its link,
+    flags, point error (mm) and whether the truth lies within its 95 % ellipsoid."""
+    for e in frame_events:
+        if e.kind == "onset":
+            onsets.append((t, e.link))
+        if e.kind in ("onset", "update") and main is not None and "no_estimate" not in e.flags:
+            err = np.asarray(e.point) - main.point
+            std = np.maximum(np.asarray(e.point_std), 1e-9)
+            events.append({"t": t, "link": e.link, "true_link": main.link, "flags": list(e.flags),
+                           "err_mm": float(np.linalg.norm(err)) * 1e3,
+                           "covered": bool(np.sum((err / std) ** 2) <= CHI2_3_95),
+                           "std_mm": float(np.linalg.norm(std)) * 1e3,
+                           "force": float(np.linalg.norm(main.force)), "probability": e.probability})
 
 
 def oracle_corrections(scene: Scene, world_scene: Scene) -> Corrections:

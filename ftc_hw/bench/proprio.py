@@ -33,7 +33,7 @@ from rich.table import Table
 
 from ftc_hw.app.calibration.identify import identify
 from ftc_hw.app.calibration.identify_joints import identify_joints
-from ftc_hw.bench.joint import CHI2_3_95, arm_rate, probes, summarize, sweep
+from ftc_hw.bench.joint import arm_rate, judge_events, probes, summarize, sweep
 from ftc_hw.bench.report import table_console
 from ftc_hw.calibration.free_motion import MotionData
 from ftc_hw.calibration.joint_motion import JointMotionData
@@ -148,16 +148,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
                                       tau_j=s.tau_j if sensing.joint_torques else None, wrench=wrench)
         costs.append(time.thread_time() - c0)
         active.append(res.detection.active)
-        for e in res.events:
-            if e.kind == "onset":
-                onsets.append((s.t, e.link))
-            if e.kind in ("onset", "update") and main is not None and "no_estimate" not in e.flags:
-                err = np.asarray(e.point) - main.point
-                std = np.maximum(np.asarray(e.point_std), 1e-9)
-                events.append({"t": s.t, "link": e.link, "true_link": main.link, "flags": list(e.flags),
-                               "err_mm": float(np.linalg.norm(err)) * 1e3,
-                               "covered": bool(np.sum((err / std) ** 2) <= CHI2_3_95),
-                               "force": float(np.linalg.norm(main.force)), "probability": e.probability})
+        judge_events(res.events, s.t, main, onsets, events)
     return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
             "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt)}
 
