@@ -24,15 +24,15 @@ fi
 stamp="$venv/.ftc-installed"
 want="$(cat "$root/pyproject.toml" | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  echo "[bootstrap] installing ftc-hw and its dependencies into .venv" >&2
+  echo "[bootstrap] installing ftc-hw, its ROS 2 extra and its test dependencies into .venv" >&2
   # uv installs the same pins in seconds where pip takes about a minute (CI's 15-minute budget); pip
   # installs them if uv cannot be had. Byte-compiled at install, as pip does: with PYTHONDONTWRITEBYTECODE
   # set (CI sets it) every emulator and CLI process would otherwise compile numpy, MuJoCo's bindings and
   # the rest from source at each start
   if ! { "$venv/bin/python" -m pip install --quiet --disable-pip-version-check uv >&2 \
-         && "$venv/bin/python" -m uv pip install --quiet --compile-bytecode --python "$venv/bin/python" -e "$root[test]" >&2; }; then
+         && "$venv/bin/python" -m uv pip install --quiet --compile-bytecode --python "$venv/bin/python" -e "$root[test,ros]" >&2; }; then
     echo "[bootstrap] uv unavailable or failed: installing with pip" >&2
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$root[test]" >&2
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -e "$root[test,ros]" >&2
   fi
   echo "$want" > "$stamp"
   rm -f "$venv/.ftc-warmed"  # numba itself may have changed

@@ -20,6 +20,7 @@ LAYERS = "Layers: each imports only from the layers below it"
 EMULATORS = "Emulators see the world only through the link"
 NAMESPACE = "Namespace: devices, calibration, sim_devices only as ftc_hw.<folder>"
 APP = "App: its packages import only from those below them"
+ROS = "ROS: rclpy, ROS messages and rosbags only in ftc_hw.app.ros"
 
 
 def _lint(root: Path) -> subprocess.CompletedProcess:
@@ -83,6 +84,11 @@ CASES = [  # (module, an import it must not make, the contract that forbids it)
     ("ftc_hw/app/web/feed.py", "import ftc_hw.app.serving.serve", APP),  # siblings, independent
     ("ftc_hw/app/serving/serve.py", "import ftc_hw.app.web.feed", APP),
     ("ftc_hw/app/setup/rig.py", "import ftc_hw.app.serving.remote_rig", APP),
+    ("ftc_hw/app/ros/availability.py", "import ftc_hw.app.web.feed", APP),  # siblings, independent
+    ("ftc_hw/app/web/feed.py", "import ftc_hw.app.ros.availability", APP),
+    ("ftc_hw/app/monitor/session.py", "import rclpy", ROS),
+    ("ftc_hw/record/writer.py", "import rosbags.rosbag2", ROS),
+    ("ftc_hw/devices/base.py", "from sensor_msgs.msg import JointState", ROS),
 ]
 
 
