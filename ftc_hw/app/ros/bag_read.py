@@ -23,10 +23,12 @@ from rosbags.typesys import Stores, get_typestore
 from ftc_hw.record.reader import RecordingError
 from ftc_hw.record.ur_csv import PhysicalBounds, Timing
 from ftc_hw.record.ur_csv.bounds import DEFAULT_BOUNDS
-from ftc_hw.record.ur_csv.rows import _in_time_order  # one rule for stamps out of order, CSV and bag alike
+from ftc_hw.record.ur_csv.rows import in_time_order  # one rule for stamps out of order, CSV and bag alike
 from ftc_hw.record.ur_csv.timing import timing_of
 from ftc_hw.scene import Scene
 
+from .bag_form import mcap_profile
+from .bag_stream import McapStreamBag
 from .decode import joint_index, joint_state_arrays, stamp_ns, wrench_array
 from .topic_map import TopicMap
 
@@ -105,7 +107,7 @@ class BagRecording:
         return "\n".join(lines)
 
 
-def _storage(reader: Reader, path: Path) -> str:
+def _storage(reader: Reader | McapStreamBag, path: Path) -> str:
     if path.is_dir():
         ids = {type(s).__name__ for s in getattr(reader.storage, "storages", [])}
         return "mcap" if any("Mcap" in i for i in ids) else "sqlite3"
@@ -121,14 +123,25 @@ def read_bag(path: Path | str, topic_map: TopicMap, scene: Scene, *,
         reader = Reader(path)
         reader.open()
     except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds on a file that is not a bag
-        raise BagError(f"{path}: cannot open as a ROS 2 bag: {exc}") from None
+        reader = _cut_mcap(path, exc)
     try:
         return _read(reader, path, topic_map, scene, bounds)
     finally:
         reader.close()
 
 
-def _connections(reader: Reader, path: Path, topic: str, msgtype: str, required: bool) -> list:
+def _cut_mcap(path: Path, exc: Exception) -> McapStreamBag:
+    """A ros2 MCAP file rosbags cannot open (no footer: a recorder killed), read from its start instead."""
+    if not (path.is_file() and mcap_profile(path) == "ros2"):
+        raise BagError(f"{path}: cannot open as a ROS 2 bag: {exc}") from None
+    reader = McapStreamBag(path)
+    reader.open()
+    if not reader.connections:
+        raise BagError(f"{path}: cannot open as a ROS 2 bag ({exc}), and no channel before the file breaks off")
+    return reader
+
+
+def _connections(reader: Reader | McapStreamBag, path: Path, topic: str, msgtype: str, required: bool) -> list:
     conns = [c for c in reader.connections if c.topic == topic]
     if not conns:
         if not required:
@@ -142,7 +155,8 @@ def _connections(reader: Reader, path: Path, topic: str, msgtype: str, required:
     return conns
 
 
-def _read(reader: Reader, path: Path, tmap: TopicMap, scene: Scene, bounds: PhysicalBounds) -> BagRecording:
+def _read(reader: Reader | McapStreamBag, path: Path, tmap: TopicMap, scene: Scene,
+          bounds: PhysicalBounds) -> BagRecording:
     js = tmap.joint_states
     wanted = js.bag_names(scene.robot.joints)
     joint_conns = _connections(reader, path, js.topic, JOINT_STATE, True)
@@ -237,7 +251,7 @@ def _stream(topic: str, rows: list, messages: int, name: str, bounds: PhysicalBo
             skipped[f"{name}:{reason}"] += int(bad.sum())
             keep &= ~bad
     local: Counter[str] = Counter()
-    _in_time_order(t, keep, local)
+    in_time_order(t, keep, local)
     for k, n in local.items():
         skipped[f"{name}:{k}"] += n
     values = {("effort" if k in ("current", "torque") else k): np.ascontiguousarray(v[keep]) for k, v in values.items()}

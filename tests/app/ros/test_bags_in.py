@@ -197,12 +197,40 @@ def test_a_truncated_bag_is_read_up_to_where_it_breaks(tmp_path, small_bag):
     whole = read_bag(storage_file(small_bag), default_map(UR10E), UR10E)
     cut = tmp_path / "cut.mcap"
     data = storage_file(small_bag).read_bytes()
-    cut.write_bytes(data[: len(data) * 2 // 3])
-    try:
-        part = read_bag(cut, default_map(UR10E), UR10E)
-    except BagError as exc:  # what remains may not open at all: said, not a crash
-        assert "cut.mcap" in str(exc)
-        return
-    assert not part.complete or len(part.joints.t_ns) < len(whole.joints.t_ns)
-    assert len(part.joints.t_ns) <= len(whole.joints.t_ns)
+    cut.write_bytes(data[: len(data) * 2 // 3])  # what a recorder killed leaves: no summary, no footer
+    part = read_bag(cut, default_map(UR10E), UR10E)
+    assert not part.complete and "cut short" in part.summary()
+    assert 0.4 * len(whole.joints.t_ns) < len(part.joints.t_ns) < len(whole.joints.t_ns)
+    np.testing.assert_array_equal(part.joints.values["q"], whole.joints.values["q"][: len(part.joints.t_ns)])
+
+
+def test_a_cut_bag_with_compressed_chunks_keeps_its_whole_chunks_and_says_what_was_lost(tmp_path):
+    """rosbag2's MCAP plugin may compress its chunks (zstd): a cut chunk cannot be read, the ones before it can."""
+    from mcap.writer import CompressionType, Writer  # lazy: this test alone writes MCAP by hand
+
+    from tests.app.ros.world_bag import JOINT_STATE, STORE, _joint_state
+
+    path, n, names = tmp_path / "zstd.mcap", 600, list(UR.names)
+    with open(path, "wb") as f:
+        writer = Writer(f, chunk_size=4096, compression=CompressionType.ZSTD)
+        writer.start(profile="ros2", library="test")
+        msgdef = STORE.generate_msgdef(JOINT_STATE)[0]
+        schema = writer.register_schema(JOINT_STATE, "ros2msg", msgdef.encode())
+        channel = writer.register_channel("/joint_states", "cdr", schema)
+        for i in range(n):
+            t = 1_000_000_000 + 2_000_000 * i
+            writer.add_message(channel, t, _joint_state(t, names, np.full(6, i * 1e-3), np.zeros(6), np.zeros(6)), t)
+        writer.finish()
+    whole = read_bag(path, default_map(UR10E), UR10E)
+    assert whole.complete and len(whole.joints.t_ns) == n
+    data, at, chunks = path.read_bytes(), 8, []
+    while data[at] != 0x02:  # up to the data end record: where each chunk starts and ends
+        end = at + 9 + int.from_bytes(data[at + 1:at + 9], "little")
+        chunks += [(at, end)] if data[at] == 0x06 else []
+        at = end
+    start, end = chunks[len(chunks) // 2]
+    (tmp_path / "cut.mcap").write_bytes(data[: (start + end) // 2])  # cut inside a chunk
+    part = read_bag(tmp_path / "cut.mcap", default_map(UR10E), UR10E)
+    assert not part.complete and "zstd-compressed chunk" in part.error and "messages are lost" in part.error
+    assert 0 < len(part.joints.t_ns) < n
     np.testing.assert_array_equal(part.joints.values["q"], whole.joints.values["q"][: len(part.joints.t_ns)])
