@@ -13,12 +13,18 @@ read theirs in their ``from_spec``.
 Every kind's params, with types, ranges and defaults: :data:`ftc_hw.scene.device_params.KINDS`
 (the scene loader checks them).
 
+Kinds whose adapters live above this layer (:data:`PLUGINS`: the ROS inputs, which import rclpy, allowed
+only in ``ftc_hw.app.ros``) are loaded on the first adapter asked of one, as python-can loads an
+interface's backend when a bus of it is made: importing their module registers them
+(:func:`register_kind`); their roles are known without it.
+
 Roles: a device fills its kind's role, and an arm that reads its own F/T sensor fills the ``ft`` role
 too (:func:`roles_of`): a UR e-Series reading its flange sensor (``ur-rtde``'s ``ft`` param, by default
 on when the scene's pipeline uses a flange sensor and no device of an F/T kind is declared).
 """
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -183,20 +189,50 @@ ADAPTERS: dict[str, AdapterKind] = {
 }
 
 
+@dataclass(frozen=True)
+class PluginKind:
+    role: Role
+    module: str  # importing it registers the kind (register_kind); it may raise why it cannot (a missing extra)
+
+
+PLUGINS: dict[str, PluginKind] = {
+    "ros-joint-state": PluginKind("arm", "ftc_hw.app.ros.inputs"),
+    "ros-wrench": PluginKind("ft", "ftc_hw.app.ros.inputs"),
+}
+_registered: dict[str, AdapterKind] = {}
+
+
+def register_kind(kind: str, entry: AdapterKind) -> None:
+    """Called by a plugin kind's module when imported: its adapters from now on."""
+    plugin = PLUGINS.get(kind)
+    if plugin is None or plugin.role != entry.role:
+        raise ValueError(f"{kind!r} is no plugin kind of role {entry.role!r} (PLUGINS)")
+    _registered[kind] = entry
+
+
+def _entry(kind: str) -> AdapterKind | None:
+    """The kind's adapter entry; a plugin kind's module imported first (whatever it raises propagates)."""
+    entry = ADAPTERS.get(kind) or _registered.get(kind)
+    if entry is None and kind in PLUGINS:
+        importlib.import_module(PLUGINS[kind].module)
+        entry = _registered.get(kind)
+    return entry
+
+
 def kinds(role: Role) -> tuple[str, ...]:
-    """The device kinds of a role, in the registry's order."""
-    return tuple(k for k, a in ADAPTERS.items() if a.role == role)
+    """The device kinds of a role, in the registry's order (plugin kinds last)."""
+    return (*(k for k, a in ADAPTERS.items() if a.role == role), *(k for k, p in PLUGINS.items() if p.role == role))
 
 
 def moves_on_goals(kind: str) -> bool:
     """True for an arm kind whose protocol takes goal positions."""
-    entry = ADAPTERS.get(kind)
+    entry = ADAPTERS.get(kind)  # no plugin kind moves the arm
     return entry is not None and entry.moves_on_goals
 
 
 def role_of(kind: str) -> Role | None:
     """The role of a device kind (an arm kind's device may fill the ``ft`` role too: :func:`roles_of`)."""
-    entry = ADAPTERS.get(kind)
+    entry = ADAPTERS.get(kind) or PLUGINS.get(kind)
     return entry.role if entry is not None else None
 
 
@@ -205,7 +241,8 @@ def roles_of(device: DeviceSpec, scene: Scene | None = None) -> frozenset[Role]:
     F/T sensor (a UR's flange sensor; see the module doc)."""
     entry = ADAPTERS.get(device.kind)
     if entry is None:
-        return frozenset()
+        role = role_of(device.kind)
+        return frozenset() if role is None else frozenset({role})
     if entry.reads_ft is None:
         return frozenset({entry.role})
     other = scene is not None and any(role_of(d.kind) == "ft" for d in scene.devices)
@@ -217,8 +254,9 @@ def make_adapter(device: DeviceSpec, bus: Bus, endpoint: Mapping[str, Any] | str
     """The adapter of ``device`` (not opened). ``endpoint``: the device's entry of the ``ftc sim``
     line (None: use ``device.address``). ``scene``: gives the sensor range when neither the device
     model nor ``params.range`` does, and the UR joints' torque constants. ``overrides``: keyword
-    arguments for the adapter class."""
-    entry = ADAPTERS.get(device.kind)
+    arguments for the adapter class. A plugin kind whose module cannot load raises what it raises
+    (the ROS kinds: ``RosUnavailable`` without the ``ros`` extra)."""
+    entry = _entry(device.kind)
     if entry is None:
-        raise DeviceError(f"no adapter for device kind {device.kind!r} (known: {', '.join(ADAPTERS)})")
+        raise DeviceError(f"no adapter for device kind {device.kind!r} (known: {', '.join([*ADAPTERS, *PLUGINS])})")
     return entry.build(device, bus, endpoint, scene, overrides)

@@ -90,6 +90,8 @@ bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: print a table, -
 app.add_typer(bench_app, name="bench")
 devices_app = typer.Typer(no_args_is_help=True, help="Real devices: what answers where.")
 app.add_typer(devices_app, name="devices")
+ros_app = typer.Typer(no_args_is_help=True, help="ROS 2 (the ros extra; docs/ros.md).")
+app.add_typer(ros_app, name="ros")
 
 # Pointing a scene at one's own devices (monitor, calibrate): docs/hardware.md
 DeviceOption = Annotated[Optional[list[str]], typer.Option(  # noqa: UP045
@@ -677,6 +679,43 @@ def devices_probe(
 
     raise typer.Exit(run_probe_command(scene, tuple(device or ()), rig, ports=port or [], can=can or [],
                                        addresses=address or [], bauds=baud or [], timeout=timeout))
+
+
+@ros_app.command("publish")
+def ros_publish(
+    scene: Annotated[str, typer.Option(help="Built-in scene name or scene file.")],
+    sim: Annotated[bool, typer.Option("--sim", help="Read the scene's emulated devices in a simulated world (else "
+                                                    "the devices where the scene, --rig, --device say).")] = False,
+    scenario: Annotated[str, typer.Option(help="With --sim: the scenario (ftc sim --list).")] = "static-pokes",
+    duration: Annotated[float, typer.Option(min=0.0, help="With --sim: simulated seconds of the scenario; else "
+                                                          "seconds to publish (0: until Ctrl-C).")] = 10.0,
+    seed: Annotated[int, typer.Option(help="With --sim: random seed.")] = 0,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.typical, "With --sim: ")] = RealityChoice.typical,
+    hold: Annotated[float, typer.Option(min=0.0, help="With --sim: seconds the world holds its start pose once "
+                                                      "every topic has a subscriber (a monitor tares its "
+                                                      "sensor on the still arm), before the scenario.")] = 1.0,
+    truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth (JSON "  # noqa: UP045
+                                                       "lines).")] = None,
+    joints_topic: Annotated[Optional[str], typer.Option(help="The JointState topic (default the arm's driver's: "  # noqa: UP045
+                                                             "/joint_states, /franka/joint_states).")] = None,
+    wrench_topic: Annotated[Optional[str], typer.Option(help="The WrenchStamped topic (default "  # noqa: UP045
+                                                             "/force_torque_sensor_broadcaster/wrench).")] = None,
+    frame_id: Annotated[Optional[str], typer.Option(help="The wrench's header.frame_id (default tool0_controller "  # noqa: UP045
+                                                         "for a UR's own sensor, else the scene's sensor "
+                                                         "site).")] = None,
+    joint_prefix: Annotated[Optional[str], typer.Option(help="Prefixed to the scene's joint names (default "  # noqa: UP045
+                                                           "fr3_ or panda_ for a Franka, else none).")] = None,
+    device: DeviceOption = None,
+    rig: RigOption = None,
+) -> None:
+    """Publish a scene's arm (sensor_msgs/JointState) and F/T sensor (geometry_msgs/WrenchStamped) on ROS 2 as
+    their vendors' drivers do, read through ftc's adapters: from emulators with --sim, else from the devices."""
+    from ftc_hw.cli.ros import run_publish_command  # lazy: CLI start-up
+
+    raise typer.Exit(run_publish_command(
+        scene=scene, devices=tuple(device or ()), rig=rig, sim=sim, scenario=scenario, reality=reality.value, seed=seed,
+        duration=duration, hold_s=hold, joints_topic=joints_topic, wrench_topic=wrench_topic, frame_id=frame_id,
+        joint_prefix=joint_prefix, truth=truth))
 
 
 @app.command(hidden=True)

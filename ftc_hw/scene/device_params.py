@@ -14,12 +14,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
-ParamType = Literal["int", "number", "str", "bool", "ints", "numbers", "number_or_numbers", "name_or_table",
-                    "table"]
+ParamType = Literal["int", "number", "str", "bool", "ints", "numbers", "strs", "number_or_numbers",
+                    "name_or_table", "table"]
 
 _FORMS: dict[str, str] = {
     "int": "an integer (19200, 0x10)", "number": "a number (0.05, 500)", "str": "a string", "bool": "true or false",
     "ints": "a list of integers (11,12,13)", "numbers": "a list of numbers (300,300,500,30,30,30)",
+    "strs": "a list of names (joint_a,joint_b)",
     "number_or_numbers": "a number or a list of numbers", "name_or_table": "a name or a table",
     "table": "a table",
 }
@@ -98,6 +99,19 @@ _MODBUS = (
     _STALE_S, _RANGE,
 )
 _MODBUS_ADDRESS = "the serial port of its RS-485 adapter, or host[:port] with transport modbus-tcp"
+# ESTIMATE: 1000 messages hold 1 s of a 1 kHz stream while the reader is held up (a keep-last history drops
+# its oldest, reliable or not; a loaded 2-core host held the monitor up to 140 ms at a time). A reliable
+# subscription matches the drivers' publishers (rclcpp's SystemDefaultsQoS: reliable under Fast DDS and
+# Cyclone DDS); best_effort also matches a SensorDataQoS publisher.
+_ROS_QOS = (
+    Param("reliability", "str", "the subscription's QoS reliability: reliable matches only reliable publishers "
+          "(the drivers' default), best_effort matches every publisher but is never resent a lost message",
+          "reliable", choices=("reliable", "best_effort")),
+    Param("depth", "int", "the subscription's QoS history depth (keep last), messages", 1000, 1, 100_000),
+    Param("rate_hz", "number", "the driver's publishing rate, Hz: messages missing between two header stamps "
+          "more than 1.5 periods apart are counted lost and the next frame flagged SEQ_GAP (default: no such "
+          "check)", lo=0.0, hi=100_000.0, above=True),
+)
 
 KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
     DeviceKind("ft300", ("modbus-rtu", "modbus-tcp"), _MODBUS_ADDRESS, "/dev/ttyUSB0", (
@@ -210,6 +224,33 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
         Param("stop_timeout", "number", "seconds stop() waits for the controller's reply to StopMove", 1.0, 0.0,
               60.0, above=True),
     )),
+    DeviceKind("ros-joint-state", ("ros",), "a ROS 2 topic of sensor_msgs/JointState (params.topic)",
+               "/joint_states", (
+        Param("topic", "str", "the topic a ROS driver publishes the arm's sensor_msgs/JointState on (docs/ros.md)",
+              required=True),
+        Param("effort", "str", "what the message's effort is: current (A: ur_robot_driver), torque (N m: "
+              "franka_ros2's tau_J) or none (ignored); default torque where the scene has [joint_torque], else "
+              "current where it has torque constants, else none", choices=("current", "torque", "none")),
+        Param("joints", "strs", "the message's joint name of each scene joint, in the scene's order (default: "
+              "joint_prefix + the scene's joint names); joints are matched by name, never by position"),
+        Param("joint_prefix", "str", "prefixed to the scene's joint names when joints is not given (a driver's "
+              "tf_prefix; fr3_ for franka_ros2 on an FR3)", ""),
+        Param("torque_constant", "numbers", "N m / A per joint with effort current (default the scene's)", lo=0.0,
+              above=True),
+        *_ROS_QOS,
+        Param("stale_after", "number", "seconds without a message before a stale event (default max(50 ms, 10 "
+              "periods) with rate_hz, else 0.1 s)", lo=0.0, hi=60.0, above=True),
+    ), locators=("topic",)),
+    DeviceKind("ros-wrench", ("ros",), "a ROS 2 topic of geometry_msgs/WrenchStamped (params.topic)",
+               "/force_torque_sensor_broadcaster/wrench", (
+        Param("topic", "str", "the topic a ROS driver publishes the sensor's geometry_msgs/WrenchStamped on "
+              "(docs/ros.md)", required=True),
+        Param("frame_id", "str", "the driver's header.frame_id, which must be the scene's sensor frame (a message "
+              "in another frame is not used: an error event, counted in wrong_frame); default the scene's "
+              "[sensor] site"),
+        *_ROS_QOS,
+        _STALE_S, _RANGE,
+    ), locators=("topic",)),
 )}
 
 # The keys of a device beside its params (overrides may set them too).
@@ -308,7 +349,7 @@ def _problem(p: Param, value: Any) -> str | None:
             return ""
         items = [value]
     else:
-        each = _is_int if p.type == "ints" else _is_number
+        each = {"ints": _is_int, "strs": lambda v: isinstance(v, str) and bool(v)}.get(p.type, _is_number)
         if not isinstance(value, list) or not value or not all(each(v) for v in value):
             return ""
         if p.length is not None and len(value) != p.length:
@@ -333,8 +374,10 @@ def _parse(kind: str, text: str) -> Any:
         if text.lower() not in words:
             raise ValueError(text)
         return words[text.lower()]
-    if kind in ("ints", "numbers") or (kind == "number_or_numbers" and "," in text):
+    if kind in ("ints", "numbers", "strs") or (kind == "number_or_numbers" and "," in text):
         parts = [t.strip() for t in text.strip("[]").split(",")]
+        if kind == "strs":
+            return parts
         return [int(t, 0) if kind == "ints" else float(t) for t in parts]
     if kind == "number_or_numbers":
         return float(text)

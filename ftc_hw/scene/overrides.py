@@ -4,6 +4,10 @@ table per device name with the same keys). KEY is ``address``, ``transport`` or 
 device's kind (:data:`.device_params.KINDS`); values are typed and checked by that schema. The rig
 file applies first, then the ``--device`` options, in order.
 
+A rig file may also change a device's ``kind`` (a cell whose arm is read from its ROS driver's topic:
+``kind = "ros-joint-state"``): the device then starts afresh as that kind (its transport the kind's first,
+no address, none of the scene's params, which were the other kind's) and takes the table's other keys.
+
 ```toml
 # rig.toml
 [ft]
@@ -64,6 +68,9 @@ def parse_device_option(text: str, scene: Scene) -> tuple[str, str, Any]:
         raise SceneError(CLI, text, "expected NAME.KEY=VALUE (ft.address=/dev/ttyUSB0, arm.baudrate=57600)")
     spec = _device(scene, name, CLI, target)
     try:
+        if key == "kind":
+            raise ParamError(key, "a device's kind changes in a rig file (--rig FILE.toml: kind and the new kind's "
+                             "keys in the device's table)")
         param = _param(spec, key)
         value = raw if param is None else parse_value(param, raw)
         if key == "transport":
@@ -101,6 +108,8 @@ def apply_overrides(scene: Scene, overrides: Mapping[str, Mapping[str, Any]], so
 
 def _apply(spec: DeviceSpec, changes: Mapping[str, Any], source: str) -> DeviceSpec:
     try:
+        if "kind" in changes:
+            spec, changes = _rekind(spec, changes)
         for key, value in changes.items():
             param = _param(spec, key)
             if param is not None:
@@ -115,6 +124,17 @@ def _apply(spec: DeviceSpec, changes: Mapping[str, Any], source: str) -> DeviceS
     except ParamError as exc:
         raise SceneError(source, f"{spec.name}.{exc.key}", f"device {spec.name!r}: {exc.problem}") from None
     return out
+
+
+def _rekind(spec: DeviceSpec, changes: Mapping[str, Any]) -> tuple[DeviceSpec, dict[str, Any]]:
+    """The device as a fresh one of ``changes["kind"]`` (unchanged if it is that kind already), and the rest."""
+    kind, rest = changes["kind"], {k: v for k, v in changes.items() if k != "kind"}
+    if not isinstance(kind, str):
+        raise ParamError("kind", f"expected a device kind's name, got {kind!r}")
+    if kind == spec.kind:
+        return spec, rest
+    entry = device_kind(kind)
+    return DeviceSpec(spec.name, entry.kind, entry.transports[0]), rest
 
 
 def _device(scene: Scene, name: str, source: str, key: str) -> DeviceSpec:

@@ -6,7 +6,7 @@ import pytest
 
 from ftc_hw.bus import Bus
 from ftc_hw.codecs.dxl_table import BAUD_CODES, MODELS
-from ftc_hw.devices.registry import ADAPTERS, make_adapter
+from ftc_hw.devices.registry import ADAPTERS, PLUGINS, make_adapter
 from ftc_hw.scene import DeviceSpec
 from ftc_hw.scene.device_params import KINDS
 
@@ -14,7 +14,7 @@ pytestmark = pytest.mark.compute  # computes only (nothing timed): runs with the
 
 
 def test_the_schema_has_exactly_the_registry_kinds():
-    assert list(KINDS) == list(ADAPTERS)
+    assert list(KINDS) == [*ADAPTERS, *PLUGINS]
 
 
 def test_dynamixel_choices_are_the_control_table_s():

@@ -29,8 +29,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_every_kind_has_an_adapter_and_an_emulator():
-    assert set(kinds("ft")) == {"ft300", "modbus-ft", "ft-serial-stream", "ft-can", "ft-rdt"}
-    assert set(kinds("arm")) == {"dynamixel", "ur-rtde", "franka"}
+    assert set(kinds("ft")) == {"ft300", "modbus-ft", "ft-serial-stream", "ft-can", "ft-rdt", "ros-wrench"}
+    assert set(kinds("arm")) == {"dynamixel", "ur-rtde", "franka", "ros-joint-state"}  # ROS: read, not emulated
     assert set(ADAPTERS) == set(EMULATORS)
 
 

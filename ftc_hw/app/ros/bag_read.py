@@ -4,7 +4,7 @@ and reason and left out, never used; a bag cut short is read up to where it brea
 
 Reasons (``BagRecording.skipped`` keys ``<stream>:<reason>``, stream ``joints`` or ``wrench``), in the
 order a message is checked: ``undecodable`` (its bytes are not the type's CDR), ``missing_joint`` (a
-mapped joint is not in its ``name`` list), ``cut_short`` (position, velocity or effort shorter than its
+mapped joint is not in its ``name`` list, or named twice), ``cut_short`` (position, velocity or effort shorter than its
 names), ``no_velocity`` / ``no_effort`` (the field empty where it is used), ``wrong_frame`` (a wrench in
 another frame than the map's), ``no_stamp`` (header stamp 0), ``not_finite``, ``out_of_range`` (past
 :class:`~ftc_hw.record.ur_csv.PhysicalBounds`), ``time_jump`` / ``time_repeated`` / ``time_backwards``
@@ -29,7 +29,7 @@ from ftc_hw.scene import Scene
 
 from .bag_form import mcap_profile
 from .bag_stream import McapStreamBag
-from .decode import joint_index, joint_state_arrays, stamp_ns, wrench_array
+from .decode import JointNamesError, RosInputError, extra_joints, joint_arrays, joint_index, stamp_ns, wrench_array
 from .topic_map import TopicMap
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -209,27 +209,25 @@ def _read(reader: Reader | McapStreamBag, path: Path, tmap: TopicMap, scene: Sce
 
 
 def _joint_row(msg, wanted: list[str], effort: str, skipped: Counter[str], other: set[str]) -> dict | None:
-    index = joint_index(msg.name, wanted)
-    other.update(n for n in msg.name if n not in wanted)
-    if index is None:
+    other.update(extra_joints(msg.name, wanted))
+    try:
+        index = joint_index(msg.name, wanted)
+    except JointNamesError:
         skipped["joints:missing_joint"] += 1
         return None
-    try:
-        q, qd, eff = joint_state_arrays(msg, index)
-    except IndexError:
-        skipped["joints:cut_short"] += 1
-        return None
-    if not q.size:
-        skipped["joints:cut_short"] += 1
-        return None
-    if not qd.size:
+    if not len(msg.velocity):
         skipped["joints:no_velocity"] += 1
         return None
-    if effort != "none" and not eff.size:
+    if effort != "none" and not len(msg.effort):
         skipped["joints:no_effort"] += 1
         return None
+    try:
+        q, qd, eff = joint_arrays(msg, index, effort=effort)
+    except RosInputError:
+        skipped["joints:cut_short"] += 1
+        return None
     row = {"q": q, "qd": qd}
-    if effort != "none":
+    if eff is not None:
         row[effort] = eff
     return row
 

@@ -10,6 +10,18 @@ import os
 
 import pytest
 
+# a rig file of ur5e's devices as a UR driver and the F/T broadcaster publish them (docs/ros.md)
+UR_RIG = """
+[ft]
+kind = "ros-wrench"
+topic = "/force_torque_sensor_broadcaster/wrench"
+rate_hz = 1000.0
+[arm]
+kind = "ros-joint-state"
+topic = "/joint_states"
+rate_hz = 500.0
+"""
+
 DOMAIN_ID = int(os.environ.get("FTC_TEST_ROS_DOMAIN_ID", 60 + os.getpid() % 40))
 
 
