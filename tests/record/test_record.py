@@ -83,7 +83,8 @@ def test_round_trip_is_bit_exact_with_one_channel_per_topic(tmp_path):
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
     channels = {c.topic: c for c in summary.channels.values()}
-    assert set(channels) == {"wrench/ft", "joints/arm", MONITOR_INPUT, MONITOR_JUDGED, "events/contact", "events/device"}
+    assert set(channels) == {"wrench/ft", "joints/arm", MONITOR_INPUT, MONITOR_JUDGED, "events/contact",
+                             "events/device"}
     for c in channels.values():
         schema = summary.schemas[c.schema_id]
         assert c.message_encoding == "json" and schema.encoding == "jsonschema"
