@@ -159,3 +159,17 @@ def test_what_the_publisher_cannot_send_is_counted_never_silent():
     ros._pubs = {t.full_name("/ftc"): _Refuses() for t in L.TOPICS if t.live}
     ros._publish(ros.view.feed(JudgedFrame(T0, None, 0, "ft", np.zeros(6), 0.0, False)))
     assert ros.failed == {"/ftc/external_wrench": 1} and "rmw said no" in ros.error and not ros.counts
+
+
+def test_the_bags_mcap_is_the_ros2_profile_with_ros2msg_schemas(bag):
+    from mcap.reader import make_reader
+
+    (mcap_file,) = bag[0].glob("*.mcap")
+    with open(mcap_file, "rb") as f:
+        reader = make_reader(f)
+        header, summary = reader.get_header(), reader.get_summary()
+    assert header.profile == "ros2"
+    assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+    assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
+    names = {s.name for s in summary.schemas.values()}
+    assert {"geometry_msgs/msg/WrenchStamped", "tf2_msgs/msg/TFMessage", "visualization_msgs/msg/MarkerArray"} <= names
