@@ -4,23 +4,29 @@ are in its folder's ``conftest.py``.
 
 Real-time tests are marked where they are defined. A test whose world, emulators or streams run
 against the wall clock is marked ``realtime`` (``pytestmark = pytest.mark.realtime`` at a module's
-top, or ``@pytest.mark.realtime`` on the test): ``./run-tests`` runs those one at a time, after the
-others, which it runs on every core (``-m "not realtime"`` with pytest-xdist). A test that uses the
+top, or ``@pytest.mark.realtime`` on the test): ``./run-tests`` runs those one at a time, and the
+others beside them on every core at idle priority (``-m "not realtime"`` with pytest-xdist). A test that uses the
 ``world_feeder`` fixture is real-time without saying so (the hook below). In the folders where most
 tests are real-time (``app``, ``devices``, ``sim``, ``cli``, ``record``) every test says which it is:
 ``realtime``, or ``compute`` (it only computes: worlds stepped as fast as they go, files, codecs,
-refusals); ``tests/test_markers.py`` fails on a test there that says neither."""
+refusals); ``tests/test_markers.py`` fails on a test there that says neither. ``./run-tests`` runs the
+computing tests beside the real-time ones at idle priority, so a computing test's wall time says nothing:
+Hypothesis runs without its per-example deadline (speed is measured by ``ftc bench``)."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings as hypothesis_settings
 
 from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import SECTION_TYPES, PipelineSettings
 from ftc_hw.scene import Scene, load_scene
 from ftc_hw.sim_devices.world.scenarios import sample_contacts
+
+hypothesis_settings.register_profile("ftc", deadline=None)
+hypothesis_settings.load_profile("ftc")
 
 
 def settings(**values) -> PipelineSettings:

@@ -32,7 +32,8 @@ def run_world(scene: Scene, world_scene: Scene, scenario: str, seconds: float, s
     setup = build_scenario(scenario, scene, ArmModel(scene), seed, seconds)
     world = World(world_scene, setup, seed=seed)
     every = round(1.0 / (RATE_HZ * world.dt))
-    rows: dict[str, list] = {k: [] for k in ("timestamp", "actual_q", "actual_qd", "actual_current", "ft_raw_wrench")}
+    rows: dict[str, list] = {k: [] for k in ("timestamp", "actual_q", "actual_qd", "actual_current", "ft_raw_wrench",
+                                             "joint_torques")}
     contact, link, force = [], [], []
     for _ in range(int(round(seconds / world.dt))):
         s = world.step()
@@ -43,13 +44,18 @@ def run_world(scene: Scene, world_scene: Scene, scenario: str, seconds: float, s
         rows["actual_qd"].append(s.qd)
         rows["actual_current"].append(world.read_current(s))
         rows["ft_raw_wrench"].append(world.read_sensor(s).wrench if s.wrench is not None else np.zeros(6))
+        rows["joint_torques"].append(world.read_joint_torques(s))  # a Franka's tau_J (tests/app/ros: bags)
         main = max(s.contacts, key=lambda c: float(np.linalg.norm(c.force)), default=None)
         contact.append(main is not None)
         link.append(main.link if main is not None else None)
         force.append(float(np.linalg.norm(main.force)) if main is not None else 0.0)
     columns = {k: np.array(v) for k, v in rows.items()}
-    if world_scene.sensor is None or world_scene.sensor.mount != "flange":
+    if world_scene.sensor is not None and world_scene.sensor.mount == "base":  # a Net F/T under the base
+        columns["base_ft_wrench"] = columns.pop("ft_raw_wrench")  # (tests/app/ros: bags)
+    elif world_scene.sensor is None:
         del columns["ft_raw_wrench"]
+    if world_scene.joint_torque is None:
+        del columns["joint_torques"]
     return WorldRun(columns, np.array(contact), link, np.array(force))
 
 

@@ -110,6 +110,10 @@ SensingOption = Annotated[Optional[str], typer.Option(  # noqa: UP045
     metavar="KIND,...", help="Which of the scene's sensing to use: base_ft, flange_ft, joint_torques, currents, "
     "comma-separated (default: the scene's own; docs/scenes.md, Sensing). Without base_ft the arm is judged "
     "(and identified) from its joints.")]
+TopicsOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
+    "--topics", metavar="MAP.toml", help="A ROS 2 bag's topic map: which topic is the joint states (effort as "
+    "current or torque, the driver's joint names to the scene's), which the wrench and its frame (default: the "
+    "drivers' defaults for the scene's arm; docs/ros.md, Bags in).")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
 # monitor, demo, replay: the live page
@@ -340,8 +344,9 @@ def monitor(
 
 @app.command()
 def replay(
-    path: Annotated[Path, typer.Argument(help="An MCAP file recorded by ftc monitor --record, or a UR recording "
-                                         "(the CSV of UR's RTDE client or of ur_rtde; with --scene).")],
+    path: Annotated[Path, typer.Argument(help="An MCAP file recorded by ftc monitor --record, a UR recording "
+                                         "(the CSV of UR's RTDE client or of ur_rtde; with --scene), or a ROS 2 bag "
+                                         "(MCAP or sqlite3, the bag's folder or file; with --scene, --topics).")],
     speed: Annotated[float, typer.Option(min=0.0, help="Pace: 1 = as recorded, 0 = as fast as possible.")] = 1.0,
     events: Annotated[Optional[Path], typer.Option(help="Write the replayed events, one JSON line each.")] = None,  # noqa: UP045
     calibration: Annotated[Optional[Path], typer.Option(help="Replay with this calibration instead.")] = None,  # noqa: UP045
@@ -356,8 +361,10 @@ def replay(
     view_hz: Annotated[float, typer.Option(min=0.5, max=60.0, help=(
         "With --view web: the page's updates a second of the recording's time (the arm's pose; the plots and "
         "text once a second)."))] = 10.0,
-    scene: Annotated[Optional[str], typer.Option(help="A UR recording's scene (ur10e, ur5e, ... or a file).")] = None,  # noqa: UP045
+    scene: Annotated[Optional[str], typer.Option(help="A UR recording's or a ROS 2 bag's scene (ur10e, ur5e, fr3, "  # noqa: UP045
+                                                 "... or a file).")] = None,
     sensing: SensingOption = None,
+    topics: TopicsOption = None,
 ) -> None:
     """Feed a recording through the same pipeline; compare the events with the recorded ones."""
     from ftc_hw.app.monitor.config import ReplayOptions  # lazy: CLI start-up
@@ -365,7 +372,8 @@ def replay(
     from ftc_hw.cli.monitor import replay_exit_code, view_options  # lazy: CLI start-up
 
     shown = view_options((View.none if no_view else view).value, host, port, view_hz)
-    options = ReplayOptions(path, speed, events, calibration, shown, scene=scene, sensing=sensing_kinds(sensing))
+    options = ReplayOptions(path, speed, events, calibration, shown, scene=scene, sensing=sensing_kinds(sensing),
+                            topics=topics)
     raise typer.Exit(replay_exit_code(options, check))
 
 
@@ -535,8 +543,8 @@ def bench_reflex(
 @app.command()
 def identify(
     recording: Annotated[Optional[list[Path]], typer.Argument(  # noqa: UP045
-        help="Recordings of the arm moving: MCAP (ftc monitor --record), or UR recordings (the CSV of UR's RTDE "
-             "client or of ur_rtde; with --scene), one or several.")] = None,
+        help="Recordings of the arm moving: MCAP (ftc monitor --record), UR recordings (the CSV of UR's RTDE "
+             "client or of ur_rtde; with --scene) or ROS 2 bags (with --scene, --topics), one or several.")] = None,
     scene: Annotated[Optional[str], typer.Option(  # noqa: UP045
         help="Built-in scene or scene file (default: the recording's).")] = None,
     sim: Annotated[bool, typer.Option("--sim", help="Record the emulated devices first, then identify.")] = False,
@@ -561,6 +569,7 @@ def identify(
                                        "arm's loads (gain, crosstalk, mount).")] = True,
     plot: Annotated[bool, typer.Option("--plot/--no-plot", help=PLOT_HELP)] = True,
     sensing: SensingOption = None,
+    topics: TopicsOption = None,
     device: DeviceOption = None,
     rig: RigOption = None,
 ) -> None:
@@ -569,7 +578,7 @@ def identify(
     from ftc_hw.cli.identify import run_identify_command  # lazy: CLI start-up
 
     opts = IdentifyOptions(out=out, calibration=calibration, json_path=json_path, keep_contacts=keep_contacts,
-                           gain=gain, plot=plot)
+                           gain=gain, plot=plot, topics=topics)
     raise typer.Exit(run_identify_command(recording, scene, sim=sim, plan=plan, plan_file=plan_file,
                                           scenario=scenario, duration=duration, seed=seed, reality=reality.value,
                                           opts=opts, device_overrides=tuple(device or ()), rig=rig,

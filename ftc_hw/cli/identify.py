@@ -10,6 +10,7 @@ from ftc_hw.app.calibration.device_session import SessionError
 from ftc_hw.app.calibration.identify import IdentifyOptions, run_identify, run_planned_identify
 from ftc_hw.app.monitor.replay_csv import is_mcap
 from ftc_hw.app.monitor.view import make_console
+from ftc_hw.app.ros.bag_form import is_ros_bag
 from ftc_hw.calibration.excitation import plan_excitation
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.replay import ReplayError, recorded_scene
@@ -30,8 +31,8 @@ def run_identify_command(recording: list[Path] | None, scene_name: str | None, *
     if recording is not None and (sim or plan_file or plan):
         raise typer.BadParameter("a recording, or --sim / --plan / --plan-file, not both", param_hint="RECORDING")
     if recording is not None:
-        if scene_name is None and not all(is_mcap(p) for p in recording if p.is_file()):
-            raise typer.BadParameter("a UR recording holds no scene: give --scene (ur10e, ur5e, ...)",
+        if scene_name is None and any(is_ros_bag(p) or (p.is_file() and not is_mcap(p)) for p in recording):
+            raise typer.BadParameter("a UR recording or a ROS 2 bag holds no scene: give --scene (ur10e, ur5e, ...)",
                                      param_hint="--scene")
         scene = scene_or_exit(scene_name) if scene_name else _recorded(recording[0])
         return run_identify(with_sensing(scene, sensing), recording, opts, console=console)

@@ -10,8 +10,10 @@ import typer
 
 from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, ReplayOptions, ViewOptions
 from ftc_hw.app.monitor.replay import run_replay
+from ftc_hw.app.monitor.replay_bag import run_bag_replay
 from ftc_hw.app.monitor.replay_csv import is_mcap, run_csv_replay
 from ftc_hw.app.monitor.view import make_console
+from ftc_hw.app.ros.bag_form import is_ros_bag
 from ftc_hw.app.web.feed import WebOptions
 from ftc_hw.record.replay import ReplayError
 from ftc_hw.sim_devices.world import SCENARIOS
@@ -58,8 +60,17 @@ def outcome_or_exit(run: Callable[[], T]) -> T:
 
 def replay_exit_code(options: ReplayOptions, check: bool) -> int:
     """``ftc replay``: 1 when it cannot read or replay, and with ``check`` when the events differ; else 0.
-    A UR recording (not MCAP) replays through ``--scene``'s monitor; it holds no events to check."""
+    A UR recording (not MCAP) or a ROS 2 bag replays through ``--scene``'s monitor; it holds no events to check."""
     try:
+        if is_ros_bag(options.recording):
+            if check:
+                typer.echo("error: --check compares with recorded events: a ROS 2 bag holds none", err=True)
+                return 2
+            run_bag_replay(options, make_console())
+            return 0
+        if options.topics is not None:
+            typer.echo("error: --topics maps a ROS 2 bag's topics: this is not one", err=True)
+            return 2
         if not is_mcap(options.recording):
             if check:
                 typer.echo("error: --check compares with recorded events: a UR recording holds none", err=True)
@@ -67,7 +78,8 @@ def replay_exit_code(options: ReplayOptions, check: bool) -> int:
             run_csv_replay(options, make_console())
             return 0
         if options.scene is not None or options.sensing is not None:
-            typer.echo("error: --scene and --sensing are for UR recordings: an MCAP recording holds its own",
+            typer.echo("error: --scene and --sensing are for UR recordings and ROS 2 bags: an MCAP recording of "
+                       "ftc monitor holds its own",
                        err=True)
             return 2
         result = run_replay(options, make_console())

@@ -28,6 +28,7 @@ from rich.console import Console
 from ftc_hw.app.monitor.config import MonitorOptions, MonitorSetupError, SimOptions, ViewOptions
 from ftc_hw.app.monitor.replay_csv import is_mcap
 from ftc_hw.app.monitor.session import run_monitor
+from ftc_hw.app.ros.bag_form import is_ros_bag
 from ftc_hw.app.setup.rig import RigError
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE
 from ftc_hw.calibration.applied import merge_inertials
@@ -56,6 +57,7 @@ from ftc_hw.sim_devices.host import WorldHostError
 from .device_session import DeviceSession, SessionError
 from .drive_excitation import drive_excitation
 from .fit_figure import plot_beside
+from .identify_bag import bag_ft_motion, bag_joint_motion
 from .identify_joints import identify_joints, joint_segments, record_joint_motion, report_joints, uses_joints
 from .identify_plot import draw_identification
 
@@ -73,6 +75,7 @@ class IdentifyOptions:
     keep_contacts: bool = False
     gain: bool = True
     plot: bool = True  # the fit drawn to a PNG beside ``out``
+    topics: Path | None = None  # a ROS 2 bag's topic map (None: the drivers' defaults for the scene)
 
 
 def motion_segments(rec: Recording, keep_contacts: bool = False) -> tuple[list[MotionData], dict[str, int]]:
@@ -208,7 +211,8 @@ def run_identify(scene: Scene, recording: Path | Sequence[Path] | None, opts: Id
     if uses_joints(scene):
         return _run_joint_identify(scene, recordings, opts, sim=sim, scenario=scenario, duration=duration, seed=seed,
                                    reality=reality, console=console, drive=drive)
-    if len(recordings) > 1 or (recordings and not is_mcap(recordings[0])):
+    bags = bool(recordings) and all(is_ros_bag(p) for p in recordings)
+    if not bags and (len(recordings) > 1 or (recordings and not is_mcap(recordings[0]))):
         console.print("[red]cannot identify:[/] the F/T sensor's readings come from one MCAP recording (a UR "
                       "recording holds no base F/T sensor: --sensing currents identifies the arm from its joints)")
         return 1
@@ -219,6 +223,9 @@ def run_identify(scene: Scene, recording: Path | Sequence[Path] | None, opts: Id
             segments, counts = _driven(scene, duration, seed, sim, reality, console)
             source = (f"ftc identify --plan, driven through the arm's protocol: {duration:g} s, seed {seed}"
                       + (f", emulated, reality {reality}" if sim else ""))
+        elif bags:
+            segments, counts = bag_ft_motion(scene, recordings, opts.topics, console)
+            source = ", ".join(str(p) for p in recordings)
         else:
             with tempfile.TemporaryDirectory(prefix="ftc-identify-") as tmp:
                 if sim:
@@ -286,10 +293,12 @@ def _run_joint_identify(scene: Scene, recordings: list[Path], opts: IdentifyOpti
 def _recorded_joint_motion(scene: Scene, recordings: list[Path], opts: IdentifyOptions,
                            console: Console) -> tuple[list, dict[str, int]]:
     """The free motion of every recording: an MCAP's joint frames (contacts and lost streams cut), a UR
-    recording's kept rows (what it holds said first)."""
+    recording's kept rows, a ROS 2 bag's kept joint states (what each holds said first)."""
     segments, counts = [], Counter()
     for path in recordings:
-        if is_mcap(path):
+        if is_ros_bag(path):
+            more, n = bag_joint_motion(scene, path, opts.topics, console)
+        elif is_mcap(path):
             rec = read_recording(path)
             spans = _spans(rec, "lost") + ([] if opts.keep_contacts else _spans(rec, "contact"))
             more, n = joint_segments(rec, scene, spans)

@@ -107,13 +107,14 @@ class DemoOptions:
 class ReplayOptions:
     """``ftc replay``: a recording's pipeline inputs through the same pipeline."""
 
-    recording: Path  # an MCAP file of ftc monitor --record, or a UR recording (CSV)
+    recording: Path  # an MCAP file of ftc monitor --record, a UR recording (CSV) or a ROS 2 bag
     speed: float = 1.0  # 1: as recorded; 0: as fast as possible
     events: Path | None = None  # the replayed events written here
     calibration: Path | None = None  # instead of the recording's
     view: ViewOptions = ViewOptions()
     scene: str | None = None  # a UR recording's scene (an MCAP recording holds its own)
     sensing: tuple[str, ...] | None = None  # a UR recording: which sensing (None: what the file allows)
+    topics: Path | None = None  # a ROS 2 bag: its topic map (None: the drivers' defaults for the scene)
 
 
 @dataclass

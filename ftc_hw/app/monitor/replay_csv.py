@@ -29,7 +29,7 @@ def is_mcap(path) -> bool:
 
 @dataclass(frozen=True)
 class CsvReplayResult:
-    recording: URRecording
+    recording: URRecording  # or a ROS 2 bag's BagRecording (replay_bag.py)
     inputs: int
     events: list[ContactEvent]
     counters: dict[str, int]
@@ -68,14 +68,19 @@ def run_csv_replay(options: ReplayOptions, console: Console) -> CsvReplayResult:
     for inp in inputs:
         monitor.consume(inp)
     events = [e for e in sub.drain() if isinstance(e, ContactEvent)]
+    return say_replayed(CsvReplayResult(rec, len(inputs), events, dict(monitor.counters)), options, console, "rows")
+
+
+def say_replayed(result: CsvReplayResult, options: ReplayOptions, console: Console, what: str) -> CsvReplayResult:
+    """The replayed events written (``--events``) and counted; ``what`` the inputs were (rows, messages)."""
+    events = result.events
     if options.events is not None:
         with open(options.events, "w", encoding="utf-8") as f:
             for e in events:
                 f.write(event_line(e) + "\n")
-    result = CsvReplayResult(rec, len(inputs), events, dict(monitor.counters))
     kinds = {k: sum(e.kind == k for e in events) for k in ("onset", "update", "offset")}
-    errors = monitor.counters.get("errors", 0)
-    console.print(f"replayed {len(inputs)} rows: {len(events)} contact events {kinds}"
-                  + (f", [red]{errors} rows the pipeline could not judge[/]" if errors else "")
+    errors = result.counters.get("errors", 0)
+    console.print(f"replayed {result.inputs} {what}: {len(events)} contact events {kinds}"
+                  + (f", [red]{errors} {what} the pipeline could not judge[/]" if errors else "")
                   + (f" -> {options.events}" if options.events else ""))
     return result

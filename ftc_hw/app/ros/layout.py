@@ -35,12 +35,16 @@ CONTACT_POSE = Topic("contact_pose", "geometry_msgs/msg/PoseStamped", depth=1, l
 MARKERS = Topic("contact_markers", "visualization_msgs/msg/MarkerArray", depth=1, latched=True)
 EVENTS = Topic("events", "std_msgs/msg/String", depth=100, latched=True)
 DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", depth=10)
-# bags only: rclpy has no tf2_msgs (not on the package index), the inputs are the drivers' to publish
+# bags only: rclpy has no tf2_msgs (not on the package index), the inputs are the drivers' to publish (their
+# names here are ur_robot_driver's and ros2_net_ft_driver's; a bag takes the scene's drivers' defaults:
+# ftc_hw.app.ros.topic_map.default_map)
 TF = Topic("/tf", "tf2_msgs/msg/TFMessage", depth=100, live=False)
 JOINT_STATES = Topic("/joint_states", "sensor_msgs/msg/JointState", depth=1000, live=False)
 FT_WRENCH = Topic("/force_torque_sensor_broadcaster/wrench", WRENCH_STAMPED, depth=1000, live=False)
+RAW_WRENCH = Topic("raw_wrench", WRENCH_STAMPED, depth=1000, live=False)  # a flange sensor's: no driver's default
 
-TOPICS = (EXTERNAL_WRENCH, CONTACT_WRENCH, CONTACT_POSE, MARKERS, EVENTS, DIAGNOSTICS, TF, JOINT_STATES, FT_WRENCH)
+TOPICS = (EXTERNAL_WRENCH, CONTACT_WRENCH, CONTACT_POSE, MARKERS, EVENTS, DIAGNOSTICS, TF, JOINT_STATES, FT_WRENCH,
+          RAW_WRENCH)
 
 
 def check_namespace(namespace: str) -> str:

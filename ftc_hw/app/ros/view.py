@@ -8,8 +8,9 @@ translation behind ``ftc monitor --ros`` (live) and ``--record-format ros2`` (a 
   markers; in a bag also ``/tf`` with the contact frame and the links at the event's time;
 - ``events/device``: the monitor's stream events (``sensor_lost``, ...) as JSON on the same topic, and the
   streams' state in the diagnostics;
-- bag only: the raw inputs as the drivers publish them (``/joint_states``, the F/T broadcaster's
-  ``WrenchStamped``) and ``/tf`` of the links (the Foxglove view's transforms, 50 Hz).
+- bag only: the raw inputs as the drivers publish them, by the drivers' defaults that ``ftc replay`` and
+  ``ftc identify`` read bags with (:func:`.topic_map.default_map`: topic, joint names, what ``effort``
+  holds, the wrench's topic and frame id), and ``/tf`` of the links (the Foxglove view's transforms, 50 Hz).
 
 Stamps are ROS time: the frames' host monotonic ns plus ``clock_offset_ns`` (the system clock's offset from
 the monotonic one, taken once), so a bag and live topics carry dates as every ROS node's do.
@@ -19,7 +20,7 @@ from __future__ import annotations
 import json
 import time
 from collections import Counter, deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -35,6 +36,7 @@ from . import encode as enc
 from . import layout as L
 from .health import StreamHealth, counters_status
 from .markers import MarkerScale, contact_markers
+from .topic_map import default_map
 
 EVENT_SCHEMA = "ftc_hw/ros/event/1"  # the events topic's JSON: docs/ros.md, "The event JSON"
 _NUM, _INT, _STR = {"type": "number"}, {"type": "integer"}, {"type": "string"}
@@ -96,6 +98,14 @@ class RosView:
         self.health: dict[str, StreamHealth] = {}
         self.prefix = namespace.strip("/") or "ftc"
         self._link_T: tuple[int, np.ndarray] | None = None  # (contact id, base_T_link) of its newest estimate
+        drivers = default_map(scene)  # the raw inputs as the scene's drivers would publish them
+        js = drivers.joint_states
+        self.joint_topic = replace(L.JOINT_STATES, name=js.topic)
+        self.joint_names, self.effort = tuple(js.bag_names(scene.robot.joints)), js.effort
+        # no driver publishes a flange sensor's raw reading by default (UR's wrench topic is its TCP estimate)
+        w = drivers.wrench
+        self.wrench_topic = L.RAW_WRENCH if w is None else replace(L.FT_WRENCH, name=w.topic)
+        self.wrench_frame = self.sensor_frame if w is None else w.frame_id
 
     def ros_time(self, t_host_ns: int) -> int:
         return int(t_host_ns) + self.offset
@@ -228,9 +238,10 @@ class RosView:
 
     def _raw_wrench(self, frame: WrenchFrame) -> RosMessage:
         t = self.ros_time(frame.t_host_ns)
-        return RosMessage(L.FT_WRENCH, t, enc.wrench_stamped(t, self.sensor_frame, frame.wrench))
+        return RosMessage(self.wrench_topic, t, enc.wrench_stamped(t, self.wrench_frame, frame.wrench))
 
     def _joint_state(self, frame: JointFrame) -> RosMessage:
         t = self.ros_time(frame.t_host_ns)
-        effort = frame.tau if frame.tau is not None else frame.current
-        return RosMessage(L.JOINT_STATES, t, enc.joint_state(t, self.scene.robot.joints, frame.q, frame.qd, effort))
+        effort = {"current": frame.current, "torque": frame.tau}.get(self.effort)
+        return RosMessage(self.joint_topic, t, enc.joint_state(t, self.joint_names, frame.q, frame.qd,
+                                                               () if effort is None else effort))

@@ -110,7 +110,7 @@ def _spikes(t: np.ndarray) -> np.ndarray:
     return out
 
 
-def _in_time_order(t: np.ndarray, keep: np.ndarray, skipped: Counter[str]) -> None:
+def in_time_order(t: np.ndarray, keep: np.ndarray, skipped: Counter[str]) -> None:
     """Keeps a row only if its time is after every earlier kept row's (the running maximum: a row not
     kept never raised it); a lone row ahead of its neighbours goes first (``time_jump``)."""
     idx = np.flatnonzero(keep)
@@ -143,6 +143,6 @@ def parse_rows(lines: Sequence[str], layout: Layout, *, first_line: int, termina
         at += len(cols)
     keep = parsed.copy()
     _check(values, keep, bounds, skipped)
-    _in_time_order(values["timestamp"][:, 0], keep, skipped)
+    in_time_order(values["timestamp"][:, 0], keep, skipped)
     kept = {f: np.ascontiguousarray(v[keep]) for f, v in values.items()}
     return Rows(kept, np.asarray(numbers, dtype=np.int64)[keep], len(lines), +skipped)

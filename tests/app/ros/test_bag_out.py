@@ -173,3 +173,41 @@ def test_the_bags_mcap_is_the_ros2_profile_with_ros2msg_schemas(bag):
     assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
     names = {s.name for s in summary.schemas.values()}
     assert {"geometry_msgs/msg/WrenchStamped", "tf2_msgs/msg/TFMessage", "visualization_msgs/msg/MarkerArray"} <= names
+
+
+def test_ftcs_own_reader_of_drivers_bags_reads_it_back_with_the_drivers_defaults(bag):
+    """``ftc replay`` / ``ftc identify`` read a bag through ``read_bag`` with the drivers' defaults: what the bag
+    holds of the arm and the sensor comes back as written (ur5e: ur_robot_driver's joints, a Net F/T's wrench)."""
+    from ftc_hw.app.ros.bag_read import read_bag
+    from ftc_hw.app.ros.topic_map import default_map
+
+    scene = load_scene("ur5e")
+    rec = read_bag(bag[0], default_map(scene), scene)
+    frames = _frames(scene)
+    joints = [f for f in frames if isinstance(f, JointFrame)]
+    wrenches = [f for f in frames if isinstance(f, WrenchFrame)]
+    assert not rec.skipped and rec.joints.values["q"].shape == (N // 2, 6)
+    assert rec.wrench.values["wrench"].shape == (N, 6)
+    np.testing.assert_array_equal(rec.joints.values["q"], [f.q for f in joints])
+    np.testing.assert_array_equal(rec.joints.values["effort"], [f.current for f in joints])  # UR: currents, A
+    np.testing.assert_array_equal(rec.wrench.values["wrench"], [f.wrench for f in wrenches])
+
+
+def test_a_franka_bag_has_franka_ros2s_joint_names_and_torques(tmp_path):
+    from ftc_hw.app.ros.bag_read import read_bag
+    from ftc_hw.app.ros.topic_map import default_map
+
+    scene = load_scene("fr3")
+    q = np.asarray(scene.robot.home, dtype=float)
+    writer = RosBagWriter(path=str(tmp_path / "fr3"), scene=scene)
+    sent = [JointFrame.make(T0 + i * 1_000_000, q + 1e-3 * i, 0 * q, 0 * q, q * 0 + 2.5, source="arm", seq=i)
+            for i in range(50)]
+    for f in sent:
+        writer.write(f)
+    writer.finish({})
+    _, messages = _read(tmp_path / "fr3")
+    (first, *_) = [deserialize_message(raw, JointState) for topic, _, _, raw in messages
+                   if topic == "/franka/joint_states"]
+    assert list(first.name) == [f"fr3_{j}" for j in scene.robot.joints] and list(first.effort) == [2.5] * 7
+    rec = read_bag(tmp_path / "fr3", default_map(scene), scene)
+    np.testing.assert_array_equal(rec.joints.values["q"], [f.q for f in sent])
