@@ -59,6 +59,7 @@ from .pipeline import FrameResult, PipelineSettings, pipeline_for
 from .scene import Scene
 
 MONITOR_INPUT = "monitor/input"
+MONITOR_JUDGED = "monitor/judged"
 LATE_NS = 50_000_000  # an F/T frame received this long after its (aligned) time counts as late
 # an F/T frame judged this long after its adapter received it: the monitor fell behind (a host that
 # cannot keep up); the joint wait (max_gap_ms, 20 ms) stays well inside it
@@ -90,6 +91,22 @@ class PipelineInput:
     tau_j: np.ndarray | None = None
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class JudgedFrame:
+    """What the pipeline made of one input (on ``monitor/judged`` when the monitor is asked to publish them:
+    ROS outputs, the ROS 2 recording). ``t_host_ns``, ``t_device_ns``, ``seq``, ``source``: the input's;
+    ``external`` (6,) the external contact wrench (sensor frame, the scene's sign convention, as
+    ``FrameResult.external``); ``d2`` the detection statistic; ``in_contact`` the detector's state."""
+
+    t_host_ns: int
+    t_device_ns: int | None
+    seq: int
+    source: str
+    external: np.ndarray
+    d2: float
+    in_contact: bool
+
+
 @dataclass(frozen=True, slots=True)
 class MonitoredFrame:
     t_host_ns: int
@@ -106,7 +123,8 @@ class LiveMonitor:
     def __init__(self, bus: Bus, scene: Scene, *, ft_source: str = "ft", arm_source: str = "arm",
                  tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
                  max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, ft_lost_s: float = LOST_S,
-                 arm_lost_s: float = LOST_S, settings: PipelineSettings | None = None) -> None:
+                 arm_lost_s: float = LOST_S, settings: PipelineSettings | None = None,
+                 publish_judged: bool = False) -> None:
         self.bus = bus
         self.scene = scene
         self.pipeline = pipeline_for(scene, settings)
@@ -123,6 +141,7 @@ class LiveMonitor:
         self.wait_s = max_gap_ms / 1e3
         self.keep_frames = keep_frames
         self.publish_inputs = publish_inputs
+        self.publish_judged = publish_judged  # each judged frame on monitor/judged (ROS outputs need them)
         self.frames: list[MonitoredFrame] = []
         self.latest: MonitoredFrame | None = None
         self.counters: Counter[str] = Counter()
@@ -417,6 +436,10 @@ class LiveMonitor:
             self.counters[f"error:{type(exc).__name__}"] += 1
             return None
         self.counters["frames"] += 1
+        if self.publish_judged:  # before its events: a subscriber has the frame's wrench when they come
+            det = result.detection
+            self.bus.publish(MONITOR_JUDGED, JudgedFrame(inp.t_host_ns, inp.t_device_ns, inp.seq, inp.source,
+                                                         result.external, float(det.d2), bool(det.active)))
         for event in result.events:
             self.counters[f"event_{event.kind}"] += 1
             self.bus.publish(EVENTS_CONTACT, event)

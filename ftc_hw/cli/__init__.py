@@ -49,6 +49,12 @@ class Reflex(StrEnum):
     stop = "stop"
 
 
+class RecordFormat(StrEnum):
+    ftc = "ftc"
+    ros2 = "ros2"
+    both = "both"
+
+
 class Readers(StrEnum):
     """Where the devices' readers run: each in its own process (as ftc serve runs them), in threads here,
     or auto (processes, except with --sim on a host of fewer than 4 cores)."""
@@ -269,6 +275,14 @@ def monitor(
     calibration: Annotated[Optional[Path], typer.Option(help="Calibration file (ftc calibrate): bias and payload; "  # noqa: UP045
                                                         "without one the sensor is tared on the first 0.1 s.")] = None,
     record: Annotated[Optional[Path], typer.Option(help="Record every bus topic to this MCAP file.")] = None,  # noqa: UP045
+    record_format: Annotated[RecordFormat, typer.Option(
+        help="What --record writes: ftc (MCAP of the bus's channels, which ftc replay reads), ros2 (a ROS 2 bag "
+             "directory at the path: the drivers' topics, the outputs of --ros and /tf; needs the ros extra), "
+             "both (the ftc file, and the bag beside it as STEM_ros2/; docs/ros.md).")] = RecordFormat.ftc,
+    ros: Annotated[bool, typer.Option("--ros", metavar="", help="Publish the outputs on ROS 2 (external wrench, "
+                                      "contact pose and wrench, markers, events, /diagnostics; docs/ros.md); "
+                                      "needs the ros extra.")] = False,
+    ros_namespace: Annotated[str, typer.Option(help="With --ros: the outputs' namespace.")] = "/ftc",
     reflex: Annotated[Optional[Reflex], typer.Option(help="stop: a contact onset commands the arm to stop.")] = None,  # noqa: UP045
     resume_after: Annotated[Optional[float], typer.Option(  # noqa: UP045
         min=0.0, metavar="S", help="With --sim and a UR arm: the emulated controller's operator presses play S s "
@@ -322,6 +336,7 @@ def monitor(
     options = MonitorOptions(scene, sensing_kinds(sensing), sim=sim, world=world, duration=duration,
                              calibration=calibration,
                              level=None if level is Level.scene else level.value, refine=refine, record=record,
+                             record_format=record_format.value, ros_namespace=ros_namespace if ros else None,
                              events=events, reflex=reflex.value if reflex else None,
                              view=view_options((View.none if no_view else view).value, host, port, view_hz),
                              devices=devices)

@@ -32,6 +32,8 @@ def check_monitor(options: MonitorOptions) -> None:
             (world.resume_after_s is not None and not options.sim,
              "--resume-after needs --sim (the emulated controller's operator resumes the arm)"),
             (bool(world.faults) and not options.sim, "--fault needs --sim (faults are played on the emulated devices)"),
+            (options.record_format != "ftc" and options.record is None,
+             f"--record-format {options.record_format} needs --record PATH"),
             (options.sim and world.scenario not in SCENARIOS,
              f"unknown scenario {world.scenario!r} (known: {', '.join(SCENARIOS)})")):
         if wrong:

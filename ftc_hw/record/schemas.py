@@ -16,7 +16,7 @@ import numpy as np
 import orjson
 
 from ftc_hw.bus import ContactEvent, DeviceEvent, JointFrame, WrenchFrame, frame_topic
-from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
+from ftc_hw.monitor import MONITOR_INPUT, MONITOR_JUDGED, JudgedFrame, PipelineInput
 
 _INT = {"type": "integer"}
 _STR = {"type": "string"}
@@ -71,6 +71,13 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "tau_j": {"type": ["array", "null"], "items": _NUM,
                   "description": "N m, the joint torque sensors' reading where used; absent in older recordings"}},
         optional=("joint_gap_ns", "tau_j")),
+    "ftc_hw.JudgedFrame": _schema("ftc_hw.JudgedFrame", "what the pipeline made of one input (recorded when the "
+                                  "monitor publishes them: ROS outputs)", {
+        "t_host_ns": {"type": "integer", "description": "the input's aligned host time, ns"},
+        "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR,
+        "external": _vec(6, "N, N m: the external contact wrench, sensor frame, scene sign convention"),
+        "d2": {"type": "number", "description": "the detection statistic (chi-square)"},
+        "in_contact": {"type": "boolean"}}),
 }
 
 
@@ -80,7 +87,9 @@ def _list(a) -> list[float]:
 
 def topic_of(frame: Any) -> str | None:
     """The topic a frame is published on (the bus conventions), None for an unknown type."""
-    return MONITOR_INPUT if isinstance(frame, PipelineInput) else frame_topic(frame)
+    if isinstance(frame, PipelineInput):
+        return MONITOR_INPUT
+    return MONITOR_JUDGED if isinstance(frame, JudgedFrame) else frame_topic(frame)
 
 
 def encode(frame: Any) -> tuple[str, bytes]:
@@ -113,6 +122,10 @@ def encode(frame: Any) -> tuple[str, bytes]:
                                            "current": _list(frame.current), "saturated": bool(frame.saturated),
                                            "tare": bool(frame.tare), "joint_gap_ns": int(frame.joint_gap_ns),
                                            "tau_j": None if frame.tau_j is None else _list(frame.tau_j)}
+    elif isinstance(frame, JudgedFrame):
+        name, d = "ftc_hw.JudgedFrame", {"t_host_ns": frame.t_host_ns, "t_device_ns": frame.t_device_ns,
+                                         "seq": frame.seq, "source": frame.source, "external": _list(frame.external),
+                                         "d2": float(frame.d2), "in_contact": bool(frame.in_contact)}
     else:
         raise TypeError(f"no schema for {type(frame).__name__}")
     try:
@@ -171,4 +184,10 @@ def decode(schema: str, data: bytes) -> Any:
         return PipelineInput(int(d["t_host_ns"]), d["t_device_ns"], int(d["seq"]), str(d["source"]), wrench,
                              arr("q"), arr("qd"), arr("current"), bool(d["saturated"]), bool(d["tare"]),
                              int(d.get("joint_gap_ns", 0)), None if d.get("tau_j") is None else arr("tau_j"))
+    if schema == "ftc_hw.JudgedFrame":
+        external = np.array(d["external"], dtype=np.float64)
+        if external.shape != (6,):
+            raise ValueError(f"JudgedFrame.external: expected 6 values, got {external.shape}")
+        return JudgedFrame(int(d["t_host_ns"]), d["t_device_ns"], int(d["seq"]), str(d["source"]), external,
+                           float(d["d2"]), bool(d["in_contact"]))
     raise ValueError(f"unknown schema {schema!r}")

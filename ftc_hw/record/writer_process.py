@@ -11,6 +11,10 @@ Nothing is lost silently: a full bus queue drops its oldest frames (``drops``, a
 recorder); a writer process that dies or cannot open the file is ``error`` (the frames not written
 are counted in ``lost``), and the session reports both. A monitor that is killed leaves the writer to
 finish the file from what reached it (a complete file, without the run's final metadata).
+
+Other writers can run in the same process, on the same frames (``sinks``: the ROS 2 bag of
+``ftc monitor --record-format ros2|both``, made by ``ftc_hw.app.ros``, which this layer does not import);
+with ``ftc=False`` they are the only ones.
 """
 from __future__ import annotations
 
@@ -20,14 +24,15 @@ import pickle
 import threading
 import time
 from collections import Counter
-from dataclasses import fields
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ftc_hw.bus import Bus, WrenchFrame
-from ftc_hw.monitor import PipelineInput
+from ftc_hw.monitor import JudgedFrame, PipelineInput
 from ftc_hw.priority import name_process
 from ftc_hw.scene import Scene
 
@@ -35,7 +40,8 @@ from .schemas import decode, encode, topic_of
 from .writer import McapRecorder, end_polling
 
 # the frequent frame types, sent as columns: their array fields stacked, the rest as lists
-COLUMNS: dict[type, tuple[str, ...]] = {WrenchFrame: ("wrench",), PipelineInput: ("wrench", "q", "qd", "current")}
+COLUMNS: dict[type, tuple[str, ...]] = {WrenchFrame: ("wrench",), PipelineInput: ("wrench", "q", "qd", "current"),
+                                        JudgedFrame: ("external",)}
 _CODE = {cls: i + 1 for i, cls in enumerate(COLUMNS)}  # 0: another kind, sent in its JSON
 _FRAMES, _STOP = b"F", b"S"
 
@@ -96,14 +102,26 @@ def _rows(cls: type, cols: dict[str, Any]) -> list[Any]:
     return [cls(*row) for row in zip(*(cols[n] for n in names), strict=True)]
 
 
+@dataclass(frozen=True)
+class Sink:
+    """Another writer in the recorder's process: ``make(**kwargs)`` there (a module-level function: it reaches
+    the process by its name) gives an object with ``write(frame)``, ``flush()`` and ``finish(final_metadata)
+    -> dict`` (its summary: counts, errors). An exception in it is counted, never the ftc file's loss."""
+
+    make: Callable[..., Any]
+    kwargs: dict[str, Any] = field(default_factory=dict)
+
+
 class RecorderProcess:
     """``McapRecorder``'s ``start`` / ``stop(final_metadata)`` / ``counts`` / ``drops`` / ``path``, with the
     writing in a process of its own (see the module doc); ``error`` says what went wrong, if anything."""
 
     def __init__(self, bus: Bus, path: Path | str, *, metadata: dict[str, dict[str, str]] | None = None,
                  prefix: str = "", scene: Scene | None = None, maxsize: int = 200_000, poll_s: float = 0.02,
-                 flush_s: float = 0.2, start_timeout_s: float = 60.0) -> None:
+                 flush_s: float = 0.2, start_timeout_s: float = 60.0, sinks: tuple[Sink, ...] = (),
+                 ftc: bool = True) -> None:
         self.bus, self.path, self.prefix = bus, Path(path), prefix
+        self.sinks, self.ftc = tuple(sinks), ftc
         self.metadata = dict(metadata or {})
         self.scene, self.maxsize, self.poll_s, self.flush_s = scene, maxsize, poll_s, flush_s
         self.start_timeout_s = start_timeout_s
@@ -124,7 +142,8 @@ class RecorderProcess:
         ctx = mp.get_context("spawn")
         here, there = ctx.Pipe()
         self._proc = ctx.Process(target=_writer_main, name="ftc-recorder", daemon=True,
-                                 args=(there, str(self.path), self.metadata, self.scene, self.flush_s))
+                                 args=(there, str(self.path) if self.ftc else None, self.metadata, self.scene,
+                                       self.flush_s, self.sinks))
         self._proc.start()
         there.close()
         self._conn = here
@@ -207,17 +226,80 @@ class RecorderProcess:
         self.stop()
 
 
-def _writer_main(conn: Any, path: str, metadata: dict, scene: Scene | None, flush_s: float) -> None:
-    """The writer process: frames from the pipe to the file until stop (or the monitor's end of the pipe
-    closes: then the file is finished from what came)."""
-    name_process("ftc-recorder")
+class _Sinks:
+    """The sinks of the writer process, each fed apart: one that raises is counted and left, not the rest."""
+
+    def __init__(self, specs: tuple[Sink, ...]) -> None:
+        self.items = [spec.make(**spec.kwargs) for spec in specs]
+        self.errors = [0] * len(self.items)
+        self.first_error = [""] * len(self.items)
+
+    def _guard(self, i: int, call: Callable[[], Any]) -> Any:
+        try:
+            return call()
+        except Exception as exc:  # noqa: BLE001 - counted and said in the summary
+            self.errors[i] += 1
+            self.first_error[i] = self.first_error[i] or f"{type(exc).__name__}: {exc}"
+            return None
+
+    def write(self, frame: Any) -> None:
+        for i, sink in enumerate(self.items):
+            self._guard(i, lambda s=sink: s.write(frame))
+
+    def flush(self) -> None:
+        for i, sink in enumerate(self.items):
+            self._guard(i, sink.flush)
+
+    def finish(self, final: dict | None) -> list[dict[str, Any]]:
+        out = []
+        for i, sink in enumerate(self.items):
+            summary = self._guard(i, lambda s=sink: s.finish(final)) or {}
+            out.append({**summary, "errors": self.errors[i], "error": self.first_error[i]})
+        return out
+
+
+class _NoFile:
+    """The ftc file's place when only sinks write (``ftc=False``)."""
+
+    def __init__(self) -> None:
+        self.counts: Counter[str] = Counter()
+        self.skipped = self.drops = self.foxglove_errors = 0
+        self.cpu_s = 0.0
+
+    def write(self, frame: Any) -> None:
+        self.counts["frames"] += 1
+
+    def flush(self) -> None:
+        pass
+
+    def finish(self, final: Any) -> None:
+        pass
+
+
+def _open(conn: Any, path: str | None, metadata: dict, scene: Scene | None, flush_s: float,
+          sinks: tuple[Sink, ...]) -> tuple[Any, _Sinks] | None:
     try:
-        rec = McapRecorder(Bus(), path, metadata=metadata, scene=scene, flush_s=flush_s)
-        rec.open()
+        rec: Any = _NoFile()
+        if path is not None:
+            rec = McapRecorder(Bus(), path, metadata=metadata, scene=scene, flush_s=flush_s)
+            rec.open()
+        extra = _Sinks(sinks)
     except Exception as exc:  # noqa: BLE001 - said to the monitor, which raises it
-        conn.send(f"cannot write {path}: {type(exc).__name__}: {exc}")
-        return
+        conn.send(f"cannot write {path or 'the recording'}: {type(exc).__name__}: {exc}")
+        return None
     conn.send("ready")
+    return rec, extra
+
+
+def _writer_main(conn: Any, path: str | None, metadata: dict, scene: Scene | None, flush_s: float,
+                 sinks: tuple[Sink, ...] = ()) -> None:
+    """The writer process: frames from the pipe to the file (and the sinks) until stop (or the monitor's end
+    of the pipe closes: then the file is finished from what came)."""
+    name_process("ftc-recorder")
+    opened = _open(conn, path, metadata, scene, flush_s, sinks)
+    if opened is None:
+        return
+    rec, extra = opened
     drops, final = 0, None
     last_flush = time.monotonic()
     cpu0 = time.process_time()
@@ -233,14 +315,17 @@ def _writer_main(conn: Any, path: str, metadata: dict, scene: Scene | None, flus
                         rec.skipped += 1
                     else:
                         rec.write(frame)
+                        extra.write(frame)
             if time.monotonic() - last_flush >= flush_s:
                 rec.flush()
+                extra.flush()
                 last_flush = time.monotonic()
     except (EOFError, OSError):  # the monitor is gone: finish the file with what came
         pass
     rec.drops = drops
     rec.cpu_s = time.process_time() - cpu0
     rec.finish(final)
+    sink_summaries = extra.finish(final)
     with contextlib.suppress(OSError, EOFError):  # the monitor is gone: nobody to tell
         conn.send({"counts": dict(rec.counts), "cpu_s": rec.cpu_s, "skipped": rec.skipped,
-                   "foxglove_errors": rec.foxglove_errors})
+                   "foxglove_errors": rec.foxglove_errors, "sinks": sink_summaries})

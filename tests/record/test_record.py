@@ -15,7 +15,7 @@ import pytest
 from mcap.reader import make_reader
 
 from ftc_hw.bus import Bus, ContactEvent, DeviceEvent, JointFrame, WrenchFlag, WrenchFrame
-from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
+from ftc_hw.monitor import MONITOR_INPUT, MONITOR_JUDGED, JudgedFrame, PipelineInput
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.writer import McapRecorder
 
@@ -38,6 +38,8 @@ def frames(n: int):
         out.append((MONITOR_INPUT, PipelineInput(t + 2, 7 * k + 3, k, "ft", RNG.normal(size=6), RNG.normal(size=3),
                                                  RNG.normal(size=3), RNG.normal(size=3), k % 5 == 0, k < 3,
                                                  joint_gap_ns=7_000_000 if k % 4 == 1 else 0)))
+        if k % 3 == 0:  # what a monitor asked for its judged frames publishes (ROS outputs)
+            out.append((MONITOR_JUDGED, JudgedFrame(t + 2, None, k, "ft", RNG.normal(size=6), float(k), k % 2 == 0)))
     out.append(("events/contact", ContactEvent.make(2_000_000_000, "onset", "link3", [0.1, 0.2, 0.3],
                                                     [1.0, -2.0, 3.5], [0.001, 0.002, 0.003], flags=("ambiguous",),
                                                     probability=0.75)))
@@ -48,10 +50,10 @@ def frames(n: int):
 
 def same(a, b) -> bool:
     for name in ("t_host_ns", "t_device_ns", "seq", "source", "flags", "kind", "link", "probability", "message",
-                 "saturated", "tare", "joint_gap_ns"):
+                 "saturated", "tare", "joint_gap_ns", "d2", "in_contact"):
         if getattr(a, name, None) != getattr(b, name, None):
             return False
-    for name in ("wrench", "q", "qd", "current", "tau", "point", "force", "point_std"):
+    for name in ("wrench", "q", "qd", "current", "tau", "point", "force", "point_std", "external"):
         x, y = getattr(a, name, None), getattr(b, name, None)
         if (x is None) != (y is None) or (x is not None and not np.array_equal(x, y)):
             return False
@@ -81,7 +83,8 @@ def test_round_trip_is_bit_exact_with_one_channel_per_topic(tmp_path):
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
     channels = {c.topic: c for c in summary.channels.values()}
-    assert set(channels) == {"wrench/ft", "joints/arm", MONITOR_INPUT, "events/contact", "events/device"}
+    assert set(channels) == {"wrench/ft", "joints/arm", MONITOR_INPUT, MONITOR_JUDGED, "events/contact",
+                             "events/device"}
     for c in channels.values():
         schema = summary.schemas[c.schema_id]
         assert c.message_encoding == "json" and schema.encoding == "jsonschema"

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ftc_hw.bus import Bus, ContactEvent, DeviceEvent, JointFrame, WrenchFlag, WrenchFrame
-from ftc_hw.monitor import MONITOR_INPUT, PipelineInput
+from ftc_hw.monitor import MONITOR_INPUT, JudgedFrame, PipelineInput
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.writer_process import RecorderProcess, pack, unpack
 
@@ -31,6 +31,7 @@ def _frames(n: int, rng: np.random.Generator) -> list:
                                     flags=WrenchFlag.SATURATED if i % 7 == 0 else WrenchFlag.NONE))
         out.append(PipelineInput(t, t - 7, i, "ft", w, rng.normal(size=6), rng.normal(size=6), rng.normal(size=6),
                                  saturated=i % 3 == 0, tare=i < 3, joint_gap_ns=i))
+        out.append(JudgedFrame(t, t - 7, i, "ft", rng.normal(size=6), float(i), i % 2 == 0))
         if i % 10 == 0:
             out.append(JointFrame.make(t, rng.normal(size=6), rng.normal(size=6), rng.normal(size=6), source="arm",
                                        seq=i // 10, t_device_ns=t))

@@ -20,6 +20,7 @@ class MonitorSetupError(Exception):
 
 
 VIEWS = ("terminal", "web", "none")
+RECORD_FORMATS = ("ftc", "ros2", "both")
 
 
 @dataclass(frozen=True)
@@ -82,6 +83,8 @@ class MonitorOptions:
     level: str | None = "dynamics"  # compensation level; None: the scene's
     refine: bool = False  # keep refining the calibration's identified model while the arm moves free
     record: Path | None = None
+    record_format: str = "ftc"  # what --record writes: "ftc" (MCAP, the bus's JSON), "ros2" (a ROS 2 bag), "both"
+    ros_namespace: str | None = None  # --ros: publish the outputs on ROS 2 under this namespace (None: not)
     events: Path | None = None
     reflex: str | None = None  # "stop"
     view: ViewOptions = ViewOptions()
@@ -131,3 +134,4 @@ class MonitorOutcome:
     remote: dict[str, Any] = field(default_factory=dict)  # with remote: frames taken, dropped, events sent
     device_counters: dict[str, dict[str, int]] = field(default_factory=dict)  # per device: its adapter's counters
     web: dict[str, Any] = field(default_factory=dict)  # with the page: its URL, ticks sent, dropped
+    ros: dict[str, Any] = field(default_factory=dict)  # with --ros: messages published, failed, frames dropped

@@ -40,7 +40,7 @@ from ftc_hw.devices.registry import role_of
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.pipeline import Corrections, PipelineSettings
 from ftc_hw.record.events import EventWriter, event_record, read_truth
-from ftc_hw.record.writer_process import RecorderProcess
+from ftc_hw.record.writer_process import RecorderProcess, Sink
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
@@ -102,6 +102,7 @@ def run_monitor(cfg: MonitorOptions, console: Console | None = None) -> MonitorO
     except SceneError as exc:
         raise MonitorSetupError(str(exc)) from None
     _check_remote(cfg)
+    _check_ros(cfg)
     ft_dev, arm_dev = _devices(scene, cfg.sim, cfg.devices.remote is not None)
     try:
         faults = [Fault.parse(f) for f in cfg.world.faults]
@@ -149,6 +150,47 @@ def _check_remote(cfg: MonitorOptions) -> None:
     if clash:  # the faults act on emulators this process starts
         raise MonitorSetupError(f"--remote takes the devices' frames from ftc serve: not with {', '.join(clash)} "
                                 "(start the world with ftc serve --sim)")
+
+
+def _check_ros(cfg: MonitorOptions) -> None:
+    """``--ros`` and the ROS 2 recording need the ``ros`` extra: said before anything starts."""
+    wanted = [what for what, on in (("--ros", cfg.ros_namespace is not None),
+                                    (f"--record-format {cfg.record_format}", cfg.record and cfg.record_format != "ftc"))
+              if on]
+    if not wanted:
+        return
+    from ftc_hw.app.ros import RosUnavailable, require_ros  # lazy: ROS only for its options
+    try:
+        require_ros(" and ".join(wanted))
+    except RosUnavailable as exc:
+        raise MonitorSetupError(str(exc)) from None
+    if cfg.ros_namespace is not None:
+        from ftc_hw.app.ros.layout import check_namespace  # lazy: ROS only for its options
+        try:
+            check_namespace(cfg.ros_namespace)
+        except ValueError as exc:
+            raise MonitorSetupError(f"--ros-namespace: {exc}") from None
+
+
+def _ros_sinks(cfg: MonitorOptions, scene: Scene) -> tuple[Sink, ...]:
+    """The ROS 2 bag's writer for the recorder's process (``--record-format ros2|both``)."""
+    if cfg.record_format == "ftc":
+        return ()
+    from ftc_hw.app.ros.bag import bag_path, bag_sink  # lazy: ROS only for its options
+    path = bag_path(cfg.record, cfg.record_format)
+    if path.exists():
+        raise MonitorSetupError(f"--record-format {cfg.record_format}: {path} exists (a ROS 2 bag is a new directory)")
+    return (bag_sink(path=path, scene=scene, namespace=cfg.ros_namespace or "/ftc"),)
+
+
+def _start_ros(cfg: MonitorOptions, console: Console, scene: Scene, bus: Bus, stack: contextlib.ExitStack):
+    """``--ros``: the node publishing the outputs (docs/ros.md), from a thread of its own."""
+    from ftc_hw.app.ros.publisher import RosPublisher  # lazy: ROS only for its options
+    ros = RosPublisher(bus, scene, namespace=cfg.ros_namespace).start()
+    stack.callback(ros.stop)  # on a failed start; a no-op after the stop below
+    console.print(f"ROS 2: node ftc_monitor publishing under {cfg.ros_namespace} (ROS_DOMAIN_ID "
+                  f"{os.environ.get('ROS_DOMAIN_ID', '0')})")
+    return ros
 
 
 def _stop_on_sigterm(stack: contextlib.ExitStack) -> None:
@@ -214,7 +256,8 @@ def _start_recorder(cfg: MonitorOptions, scene: Scene, bus: Bus, monitor_meta: d
     if cal_meta is not None:
         meta["calibration"] = cal_meta
     try:
-        return RecorderProcess(bus, cfg.record, metadata=meta, scene=scene).start()
+        return RecorderProcess(bus, cfg.record, metadata=meta, scene=scene, sinks=_ros_sinks(cfg, scene),
+                               ftc=cfg.record_format != "ros2").start()
     except OSError as exc:
         raise MonitorSetupError(f"--record {cfg.record}: {exc}") from None
 
@@ -247,6 +290,7 @@ class _Live:
     view: LiveView
     pump: _EventPump
     reflex: StopReflex | None = None
+    ros: object | None = None  # the RosPublisher with --ros
 
 
 class _EventPump:
@@ -288,8 +332,10 @@ def _start(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSp
            stack: contextlib.ExitStack) -> _Live:
     """The page, the world, the bus, the monitor, the recorder, the events file and the rig (not opened yet)."""
     web = _serve_page(cfg, console, scene, stack) if cfg.view.web is not None else None
-    world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.world.truth)
     bus = Bus()
+    # first: ROS discovery (up to ~2 s) runs while the world starts, so subscribers match before the first frame
+    ros = _start_ros(cfg, console, scene, bus, stack) if cfg.ros_namespace is not None else None
+    world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.world.truth)
     try:
         plan = FaultPlan(faults, world, bus) if faults and world is not None else None
     except FaultError as exc:
@@ -312,8 +358,10 @@ def _start(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSp
     if arm_dev is None:
         rig.add(SimJointSource(arm_name, bus, world))
     view = LiveView(bus, monitor, topics, ft_topic=topics[0], title=cfg.title)
+    if ros is not None:
+        ros.counters = lambda: monitor.counters  # the diagnostics' monitor status
     return _Live(bus, topics, monitor, rig, world, truth_path, plan, web, recorder, view,
-                 _EventPump(ev_sub, view, out, writer))
+                 _EventPump(ev_sub, view, out, writer), ros=ros)
 
 
 def _start_monitor(cfg: MonitorOptions, console: Console, scene: Scene, bus: Bus, ft_name: str, arm_name: str,
@@ -328,8 +376,9 @@ def _start_monitor(cfg: MonitorOptions, console: Console, scene: Scene, bus: Bus
         console.print("[yellow]--refine: the calibration holds no identification (ftc identify): nothing to "
                       "refine[/]")
     console.print("loading the pipeline (its compiled kernels) ...")
-    monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s,
-                          settings=settings)
+    ros_outputs = cfg.ros_namespace is not None or bool(cfg.record and cfg.record_format != "ftc")
+    monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, settings=settings,
+                          publish_judged=ros_outputs)
     console.print(f"contact points on the scene's {monitor.pipeline.surface_source}"
                   + (" (its vendor meshes are not fetched: ftc scenes --fetch-meshes)"
                      if scene.robot.vendor_shell and monitor.pipeline.surface_source == "primitives" else ""))
@@ -387,6 +436,12 @@ def _stop(live: _Live, out: MonitorOutcome) -> None:
     if live.web is not None:
         live.web.close()
         out.web = live.web.summary
+    if live.ros is not None:  # after the devices: every frame they gave is published
+        live.ros.stop()
+        out.ros = live.ros.summary()
+        lost = sum(out.ros["failed"].values()) + out.ros["dropped"]
+        if lost:
+            out.problems.append(f"ROS: {lost} messages or frames not published ({out.ros['error'] or 'queue full'})")
 
 
 def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, out: MonitorOutcome) -> None:
@@ -403,6 +458,15 @@ def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, 
             out.degraded.append(f"reader processes restarted {rig.readers.restarts}x (crashed or killed)")
     judge_degraded(monitor, rig.adapters, out, cfg.sim)
     out.device_counters = {a.name: dict(a.counters) for a in rig.adapters}
+    for sink in live.recorder.summary.get("sinks", []) if live.recorder is not None else []:
+        console.print(f"ROS 2 bag: {sum(sink.get('counts', {}).values())} messages -> {sink.get('path', '?')}",
+                      highlight=False)
+    if out.ros:
+        published = out.ros["published"]
+        console.print(f"ROS 2: published {sum(published.values())} messages ("
+                      + ", ".join(f"{k} {v}" for k, v in sorted(published.items()))
+                      + f"); failed {sum(out.ros['failed'].values())}, frames dropped {out.ros['dropped']}",
+                      highlight=False)
     print_summary(console, cfg, _served(cfg), live.bus, live.topics, out, rig.adapters, live.recorder)
 
 
@@ -482,6 +546,9 @@ def _finish(cfg: MonitorOptions, scene: Scene, live: _Live, out: MonitorOutcome)
         if out.evaluation is not None:
             final["evaluation"] = {"json": json.dumps(out.evaluation.to_dict())}
         recorder.stop(final)
+        for sink in recorder.summary.get("sinks", []):
+            if sink.get("errors"):
+                out.degraded.append(f"the ROS 2 bag {sink.get('path', '')}: {sink['errors']} errors ({sink['error']})")
         if recorder.drops:
             out.problems.append(f"recorder dropped {recorder.drops} frames")
         if recorder.error is not None:
