@@ -106,6 +106,10 @@ SensingOption = Annotated[Optional[str], typer.Option(  # noqa: UP045
     "(and identified) from its joints.")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
+LimitsOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
+    metavar="FILE", help="The cell's body limits (TOML: body regions to links and workspace zones, docs/limits.md); "
+    "every contact event carries its margin to its region's limit, an exceedance is an event of its own. "
+    "Default: the built-in ISO/TS 15066 regions, every link the default region.")]
 # monitor, demo, replay: the live page
 ViewOption = Annotated[View, typer.Option(
     help="The live view: terminal (a table), web (a 3-D page in the browser, served on --host:--port; "
@@ -269,6 +273,7 @@ def monitor(
         "after each stop, and the arm goes on with the scenario where it stopped (with --reflex stop, every "
         "contact of a sweep meets a stop).")] = None,
     events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
+    limits: LimitsOption = None,
     truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
     noise: Annotated[bool, typer.Option("--noise/--no-noise", metavar="", help="With --sim: sensor noise.")] = True,
     view: ViewOption = View.terminal,
@@ -316,7 +321,7 @@ def monitor(
     options = MonitorOptions(scene, sensing_kinds(sensing), sim=sim, world=world, duration=duration,
                              calibration=calibration,
                              level=None if level is Level.scene else level.value, refine=refine, record=record,
-                             events=events, reflex=reflex.value if reflex else None,
+                             events=events, reflex=reflex.value if reflex else None, limits=limits,
                              view=view_options((View.none if no_view else view).value, host, port, view_hz),
                              devices=devices)
     check_monitor(options)
@@ -330,6 +335,9 @@ def replay(
     speed: Annotated[float, typer.Option(min=0.0, help="Pace: 1 = as recorded, 0 = as fast as possible.")] = 1.0,
     events: Annotated[Optional[Path], typer.Option(help="Write the replayed events, one JSON line each.")] = None,  # noqa: UP045
     calibration: Annotated[Optional[Path], typer.Option(help="Replay with this calibration instead.")] = None,  # noqa: UP045
+    limits: Annotated[Optional[Path], typer.Option(  # noqa: UP045
+        metavar="FILE", help="Judge the contacts against this cell's body limits (TOML, docs/limits.md) instead of "
+        "the recorded ones (a recording made without: none).")] = None,
     check: Annotated[bool, typer.Option("--check", metavar="",
                                         help="Exit 1 when the events differ from the recorded.")] = False,
     view: Annotated[View, typer.Option(
@@ -350,7 +358,8 @@ def replay(
     from ftc_hw.cli.monitor import replay_exit_code, view_options  # lazy: CLI start-up
 
     shown = view_options((View.none if no_view else view).value, host, port, view_hz)
-    options = ReplayOptions(path, speed, events, calibration, shown, scene=scene, sensing=sensing_kinds(sensing))
+    options = ReplayOptions(path, speed, events, calibration, shown, scene=scene, sensing=sensing_kinds(sensing),
+                            limits=limits)
     raise typer.Exit(replay_exit_code(options, check))
 
 

@@ -84,6 +84,7 @@ class MonitorOptions:
     record: Path | None = None
     events: Path | None = None
     reflex: str | None = None  # "stop"
+    limits: Path | None = None  # the cell's body limits (docs/limits.md); None: the built-in ISO/TS 15066 regions
     view: ViewOptions = ViewOptions()
     devices: DeviceOptions = DeviceOptions()
     title: str = "ftc monitor"
@@ -109,6 +110,7 @@ class ReplayOptions:
     events: Path | None = None  # the replayed events written here
     calibration: Path | None = None  # instead of the recording's
     view: ViewOptions = ViewOptions()
+    limits: Path | None = None  # the cell's body limits instead of the recording's (docs/limits.md)
     scene: str | None = None  # a UR recording's scene (an MCAP recording holds its own)
     sensing: tuple[str, ...] | None = None  # a UR recording: which sensing (None: what the file allows)
 
