@@ -363,6 +363,27 @@ def replay(
     raise typer.Exit(replay_exit_code(options, check))
 
 
+@app.command()
+def report(
+    path: Annotated[Path, typer.Argument(help="An MCAP file recorded by ftc monitor --record.")],
+    out: Annotated[Optional[Path], typer.Option(help="The page (default: beside the recording, .html).")] = None,  # noqa: UP045
+    limits: Annotated[Optional[Path], typer.Option(  # noqa: UP045
+        metavar="FILE", help="Judge the contacts against this cell's body limits (TOML, docs/limits.md), replaying "
+        "the recording; default: its recorded judgement, or the built-in regions where it has none.")] = None,
+) -> None:
+    """One HTML page of a run's contacts against the body limits: force over time against the limit, class,
+    margin, effective mass, speed against the permissible speed, where on the arm (readable offline)."""
+    typer.echo(LOADING, err=True)
+    from ftc_hw.app.monitor.run_report import ReportError, write_report  # lazy: CLI start-up (MuJoCo, matplotlib)
+
+    try:
+        page = write_report(path, out, limits)
+    except ReportError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"report: {page}")
+
+
 @bench_app.command("solver")
 def bench_solver(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045

@@ -67,6 +67,9 @@ class LimitAssessor:
         self._data = mujoco.MjData(self.arm.model)
         self._recent: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=RECENT_FRAMES)
         self._onset_speed: dict[int, float] = {}
+        # per open contact: the joint state at its onset (its first judged event may come later: an impact's
+        # onset has no estimate yet), whose velocities give the onset speed at the first judged point
+        self._onset_state: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._exceeded: set[tuple[int, str]] = set()
 
     def observe(self, t_ns: int, q: np.ndarray, qd: np.ndarray) -> None:
@@ -77,6 +80,9 @@ class LimitAssessor:
         """The events with their limit checks, each exceedance after the event that crossed."""
         out: list[ContactEvent] = []
         for ev in events:
+            if ev.kind == "onset":
+                self._onset_state[ev.contact_id] = self._state_at(ev.t_host_ns) if self._recent else None
+                self._onset_speed.pop(ev.contact_id, None)
             check = self.check(ev)
             if check is None:
                 out.append(ev)
@@ -89,6 +95,7 @@ class LimitAssessor:
                 out.append(replace(judged, kind="exceedance"))
             if ev.kind == "offset":
                 self._onset_speed.pop(ev.contact_id, None)
+                self._onset_state.pop(ev.contact_id, None)
         return out
 
     def check(self, ev: ContactEvent) -> LimitCheck | None:
@@ -99,12 +106,14 @@ class LimitAssessor:
             return None
         normal = -force / magnitude
         body = self.arm.model.body(ev.link).id
-        q, qd = self._state_at(ev.t_host_ns if ev.kind == "onset" else None)
         m, d, joints = self.arm.model, self._data, self.arm.joints
+        if ev.contact_id not in self._onset_speed:  # the contact's first judged event: at the onset's state
+            q, qd = self._onset_state.get(ev.contact_id) or self._state_at(ev.t_host_ns)
+            pose_for_inertia(m, d, joints, q)
+            self._onset_speed[ev.contact_id] = point_speed(m, d, joints, body, ev.point, normal, qd)
+        q = self._state_at(ev.t_host_ns if ev.kind == "onset" else None)[0]
         pose_for_inertia(m, d, joints, q)
         mass = min(effective_mass(m, d, joints, body, ev.point, normal), IMMOVABLE_KG)
-        if ev.kind == "onset" or ev.contact_id not in self._onset_speed:
-            self._onset_speed[ev.contact_id] = point_speed(m, d, joints, body, ev.point, normal, qd)
         region, origin = self.limits.region_at(ev.link, ev.point)
         kind = contact_class_of(ev)
         limit_kind = kind or "quasi_static"
