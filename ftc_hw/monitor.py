@@ -39,7 +39,7 @@ import queue
 import threading
 import time
 from collections import Counter, deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -56,7 +56,9 @@ from .bus import (
     wrench_topic,
 )
 from .pipeline import FrameResult, PipelineSettings, pipeline_for
+from .pipeline.limits import LimitAssessor
 from .scene import Scene
+from .scene.limits import CellLimits
 
 MONITOR_INPUT = "monitor/input"
 MONITOR_JUDGED = "monitor/judged"
@@ -124,10 +126,12 @@ class LiveMonitor:
                  tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
                  max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, ft_lost_s: float = LOST_S,
                  arm_lost_s: float = LOST_S, settings: PipelineSettings | None = None,
-                 publish_judged: bool = False) -> None:
+                 publish_judged: bool = False, limits: CellLimits | None = None) -> None:
+        """``limits``: judge every contact event against the cell's body limits (None: not judged)."""
         self.bus = bus
         self.scene = scene
         self.pipeline = pipeline_for(scene, settings)
+        self.limits = None if limits is None else LimitAssessor(scene, settings or PipelineSettings(), limits)
         self.sensing = sensing = scene.sensing  # one object: Scene.sensing builds it on every call
         self.driver = "ft" if sensing.ft == "base" else "joints"
         self.uses_ft = sensing.ft is not None
@@ -328,8 +332,9 @@ class LiveMonitor:
         if ev.kind in ("sensor_lost", "arm_lost") and self.pipeline.in_contact:
             self.counters["contacts_lost"] += 1
             event = self.pipeline.close_contact(ev.t_host_ns, lost=True)
-            self.counters["event_offset"] += 1
-            self.bus.publish(EVENTS_CONTACT, event)
+            for e in (self.limits.judge([event]) if self.limits is not None else [event]):
+                self.counters[f"event_{e.kind}"] += 1
+                self.bus.publish(EVENTS_CONTACT, e)
         elif ev.kind == "arm_back":
             self.pipeline.restart_motion()
 
@@ -431,6 +436,10 @@ class LiveMonitor:
             return None
         try:
             result = self._process(inp)
+            if self.limits is not None:
+                self.limits.observe(inp.t_host_ns, inp.q, inp.qd)
+                if result.events:
+                    result = replace(result, events=tuple(self.limits.judge(result.events)))
         except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor (nor a replay)
             self.counters["errors"] += 1
             self.counters[f"error:{type(exc).__name__}"] += 1

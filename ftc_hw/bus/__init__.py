@@ -18,6 +18,7 @@ from .frames import (
     FrameError,
     JointFlag,
     JointFrame,
+    LimitCheck,
     WrenchFlag,
     WrenchFrame,
 )
@@ -45,6 +46,7 @@ __all__ = [
     "FrameError",
     "JointFlag",
     "JointFrame",
+    "LimitCheck",
     "SamplingPolicy",
     "StaleDataError",
     "StateHistory",

@@ -37,6 +37,7 @@ __all__ = [
     "FrameError",
     "JointFlag",
     "JointFrame",
+    "LimitCheck",
     "WrenchFlag",
     "WrenchFrame",
 ]
@@ -70,7 +71,8 @@ class JointFlag(enum.IntFlag):
     HELD = 32
 
 
-ContactKind = Literal["onset", "update", "offset"]
+# exceedance: the contact's force went past its body region's limit (its ``limits`` say which and by how much)
+ContactKind = Literal["onset", "update", "offset", "exceedance"]
 # sensor_lost / arm_lost: the monitor lost the F/T or the joint stream (it is blind: no contact is
 # judged; an open contact is closed by an offset flagged "lost"); sensor_back / arm_back: it returned
 # stopped: an arm's reader stopped it on a remote monitor's command (ftc serve), its latency in the counters
@@ -209,12 +211,34 @@ class JointFrame:
         return int(self.q.shape[0])
 
 
+@dataclass(frozen=True, slots=True)
+class LimitCheck:
+    """A contact event against its body region's limits (ISO/TS 15066, docs/limits.md): the ``region``
+    (and ``region_from``: ``zone``, ``link`` or ``default``), the limit that applies by the contact's class
+    (``limit_kind``: ``transient`` or ``quasi_static``; ``class_assumed``: the contact had no class, so the
+    stricter quasi-static limit), that limit ``limit_n`` (N) and the ``margin_n`` to it (N, the limit less
+    the event's force: < 0 exceeded); the arm's ``effective_mass_kg`` at the point along the contact's
+    normal (the force's line), the arm's ``speed_mps`` there along it at the onset (m/s, > 0 into the
+    contact) and the region's ``permissible_speed_mps`` for a transient contact with that mass."""
+
+    region: str
+    region_from: str
+    limit_kind: str
+    class_assumed: bool
+    limit_n: float
+    margin_n: float
+    effective_mass_kg: float
+    speed_mps: float
+    permissible_speed_mps: float
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class ContactEvent:
     """A contact estimate: ``point`` (m, base frame) where ``force`` (N, applied to the arm) acts.
     ``contact_id`` (from 1 in a run; 0: none) pairs a contact's onset, updates and offset; the
     contact's figures so far: ``duration_s`` (s since its onset), ``peak_force`` (N, the largest
-    external force) and ``impulse`` (N s, the external force's magnitude integrated over time)."""
+    external force) and ``impulse`` (N s, the external force's magnitude integrated over time).
+    ``limits``: the event against its body region's limits (None: not judged)."""
 
     t_host_ns: int
     kind: ContactKind
@@ -228,6 +252,7 @@ class ContactEvent:
     duration_s: float = 0.0
     peak_force: float = 0.0
     impulse: float = 0.0
+    limits: LimitCheck | None = None
 
     @classmethod
     def make(
@@ -245,6 +270,7 @@ class ContactEvent:
         duration_s: float = 0.0,
         peak_force: float = 0.0,
         impulse: float = 0.0,
+        limits: LimitCheck | None = None,
     ) -> ContactEvent:
         """Validate and build; ``point_std`` (m) must be >= 0, ``probability`` in [0, 1], the contact's
         id and figures >= 0."""
@@ -270,6 +296,7 @@ class ContactEvent:
             _count("contact_id", contact_id),
             *(_non_negative(k, v) for k, v in (("duration_s", duration_s), ("peak_force", peak_force),
                                                ("impulse", impulse))),
+            limits,
         )
 
 

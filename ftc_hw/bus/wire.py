@@ -9,9 +9,11 @@ little-endian, fields in the order below. Times are int64 ns, ``t_device_ns`` ab
 - wrench: ``t_host_ns, t_device_ns, seq`` (i64), ``flags`` (u32), ``source``, 6 floats;
 - joints: ``t_host_ns, t_device_ns, seq``, ``flags``, ``n`` (u8), ``has_tau`` (u8), ``source``,
   ``q, qd, current`` (n floats each), ``tau`` (n floats if ``has_tau``);
-- contact event: ``t_host_ns``, ``kind`` (u8: onset, update, offset), ``contact_id`` (u32),
+- contact event: ``t_host_ns``, ``kind`` (u8: onset, update, offset, exceedance), ``contact_id`` (u32),
   ``probability, duration_s, peak_force, impulse`` (f64), ``link``, ``point, force, point_std`` (3
-  floats each), the flags (u8 count, then each a string);
+  floats each), the flags (u8 count, then each a string); since 1.1 whether it carries its limits (u8),
+  then, if it does, ``region``, ``region_from``, ``limit_kind`` (strings), ``class_assumed`` (u8),
+  ``limit_n, margin_n, effective_mass_kg, speed_mps, permissible_speed_mps`` (f64);
 - device event: ``t_host_ns``, ``source``, ``kind``, ``message`` (u16 length), the counters (u8
   count, then each a name and an f64);
 - batch (kind 5): ``count`` (u16), then each message (u32 length, then the message, header and all):
@@ -39,14 +41,15 @@ from .frames import (
     FrameError,
     JointFlag,
     JointFrame,
+    LimitCheck,
     WrenchFlag,
     WrenchFrame,
 )
 
 MAGIC = b"FT"
-MAJOR, MINOR = 1, 0
+MAJOR, MINOR = 1, 1
 KIND_WRENCH, KIND_JOINTS, KIND_CONTACT, KIND_DEVICE, KIND_BATCH = 1, 2, 3, 4, 5
-CONTACT_KIND_CODES = {"onset": 0, "update": 1, "offset": 2}
+CONTACT_KIND_CODES = {"onset": 0, "update": 1, "offset": 2, "exceedance": 3}
 _CONTACT_KINDS = {v: k for k, v in CONTACT_KIND_CODES.items()}
 NO_DEVICE_TIME = -(2**63)
 
@@ -56,6 +59,7 @@ _WRENCH_HEAD = struct.Struct("<2sBBBqqqIB")  # header, sensor fields, the source
 _WRENCH_VALUES = struct.Struct("<6d")
 _JOINTS_N = struct.Struct("<BB")
 _CONTACT = struct.Struct("<qBIdddd")
+_LIMIT_VALUES = struct.Struct("<B5d")  # class_assumed, limit_n, margin_n, effective_mass_kg, speed, permissible
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 MAX_BATCH = 0xFFFF
@@ -90,7 +94,8 @@ def encode(frame: Any) -> bytes:
                              frame.duration_s, frame.peak_force, frame.impulse)
         vectors = np.concatenate([frame.point, frame.force, frame.point_std]).astype("<f8").tobytes()
         flags = bytes([len(frame.flags)]) + b"".join(_str(f) for f in frame.flags)
-        return _HEADER.pack(MAGIC, MAJOR, MINOR, KIND_CONTACT) + head + _str(frame.link) + vectors + flags
+        return (_HEADER.pack(MAGIC, MAJOR, MINOR, KIND_CONTACT) + head + _str(frame.link) + vectors + flags
+                + _limits(frame.limits))
     if isinstance(frame, DeviceEvent):
         counters = bytes([len(frame.counters)]) + b"".join(_str(k) + _F64.pack(float(v))
                                                            for k, v in frame.counters.items())
@@ -259,9 +264,22 @@ def _contact(r: _Reader) -> ContactEvent:
     link = r.string()
     point, force, std = r.floats(3), r.floats(3), r.floats(3)
     flags = tuple(r.string() for _ in range(r.byte()))
+    limits = None
+    if r.pos < len(r.buf) and r.byte():  # a 1.0 message ends after its flags
+        region, origin, limit_kind = r.string(), r.string(), r.string()
+        assumed, *values = r.unpack(_LIMIT_VALUES)
+        limits = LimitCheck(region, origin, limit_kind, bool(assumed), *values)
     return ContactEvent.make(t_host, _CONTACT_KINDS[kind], link, point, force, std, flags=flags,
                              probability=probability, contact_id=cid, duration_s=duration, peak_force=peak,
-                             impulse=impulse)
+                             impulse=impulse, limits=limits)
+
+
+def _limits(c: LimitCheck | None) -> bytes:
+    if c is None:
+        return b"\x00"
+    return (b"\x01" + _str(c.region) + _str(c.region_from) + _str(c.limit_kind)
+            + _LIMIT_VALUES.pack(c.class_assumed, c.limit_n, c.margin_n, c.effective_mass_kg, c.speed_mps,
+                                 c.permissible_speed_mps))
 
 
 def _device(r: _Reader) -> DeviceEvent:

@@ -118,6 +118,10 @@ TopicsOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "drivers' defaults for the scene's arm; docs/ros.md, Bags in).")]
 RigOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
     "--rig", metavar="FILE.toml", help="A rig file: a [NAME] table per scene device with the --device keys.")]
+LimitsOption = Annotated[Optional[Path], typer.Option(  # noqa: UP045
+    metavar="FILE", help="The cell's body limits (TOML: body regions to links and workspace zones, docs/limits.md); "
+    "every contact event carries its margin to its region's limit, an exceedance is an event of its own. "
+    "Default: the built-in ISO/TS 15066 regions, every link the default region.")]
 # monitor, demo, replay: the live page
 ViewOption = Annotated[View, typer.Option(
     help="The live view: terminal (a table), web (a 3-D page in the browser, served on --host:--port; "
@@ -289,6 +293,7 @@ def monitor(
         "after each stop, and the arm goes on with the scenario where it stopped (with --reflex stop, every "
         "contact of a sweep meets a stop).")] = None,
     events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
+    limits: LimitsOption = None,
     truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
     noise: Annotated[bool, typer.Option("--noise/--no-noise", metavar="", help="With --sim: sensor noise.")] = True,
     view: ViewOption = View.terminal,
@@ -337,7 +342,7 @@ def monitor(
                              calibration=calibration,
                              level=None if level is Level.scene else level.value, refine=refine, record=record,
                              record_format=record_format.value, ros_namespace=ros_namespace if ros else None,
-                             events=events, reflex=reflex.value if reflex else None,
+                             events=events, reflex=reflex.value if reflex else None, limits=limits,
                              view=view_options((View.none if no_view else view).value, host, port, view_hz),
                              devices=devices)
     check_monitor(options)
@@ -352,6 +357,9 @@ def replay(
     speed: Annotated[float, typer.Option(min=0.0, help="Pace: 1 = as recorded, 0 = as fast as possible.")] = 1.0,
     events: Annotated[Optional[Path], typer.Option(help="Write the replayed events, one JSON line each.")] = None,  # noqa: UP045
     calibration: Annotated[Optional[Path], typer.Option(help="Replay with this calibration instead.")] = None,  # noqa: UP045
+    limits: Annotated[Optional[Path], typer.Option(  # noqa: UP045
+        metavar="FILE", help="Judge the contacts against this cell's body limits (TOML, docs/limits.md) instead of "
+        "the recorded ones (a recording made without: none).")] = None,
     check: Annotated[bool, typer.Option("--check", metavar="",
                                         help="Exit 1 when the events differ from the recorded.")] = False,
     view: Annotated[View, typer.Option(
@@ -375,8 +383,29 @@ def replay(
 
     shown = view_options((View.none if no_view else view).value, host, port, view_hz)
     options = ReplayOptions(path, speed, events, calibration, shown, scene=scene, sensing=sensing_kinds(sensing),
-                            topics=topics)
+                            topics=topics, limits=limits)
     raise typer.Exit(replay_exit_code(options, check))
+
+
+@app.command()
+def report(
+    path: Annotated[Path, typer.Argument(help="An MCAP file recorded by ftc monitor --record.")],
+    out: Annotated[Optional[Path], typer.Option(help="The page (default: beside the recording, .html).")] = None,  # noqa: UP045
+    limits: Annotated[Optional[Path], typer.Option(  # noqa: UP045
+        metavar="FILE", help="Judge the contacts against this cell's body limits (TOML, docs/limits.md), replaying "
+        "the recording; default: its recorded judgement, or the built-in regions where it has none.")] = None,
+) -> None:
+    """One HTML page of a run's contacts against the body limits: force over time against the limit, class,
+    margin, effective mass, speed against the permissible speed, where on the arm (readable offline)."""
+    typer.echo(LOADING, err=True)
+    from ftc_hw.app.monitor.run_report import ReportError, write_report  # lazy: CLI start-up (MuJoCo, matplotlib)
+
+    try:
+        page = write_report(path, out, limits)
+    except ReportError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"report: {page}")
 
 
 @bench_app.command("solver")

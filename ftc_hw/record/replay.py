@@ -14,6 +14,7 @@ from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.pipeline import PipelineSettings, SettingsError
 from ftc_hw.record.events import event_record
 from ftc_hw.scene import Scene, SceneError, load_scene
+from ftc_hw.scene.limits import CellLimits, LimitsError
 
 from .reader import Recording
 
@@ -51,6 +52,18 @@ def recorded_settings(rec: Recording) -> PipelineSettings:
         raise ReplayError(f"{rec.path}: {exc}") from None
 
 
+def recorded_limits(rec: Recording) -> CellLimits | None:
+    """The body limits the recording was made with (None: recorded before them, or without; ReplayError if
+    unreadable)."""
+    text = rec.metadata.get("monitor", {}).get("limits")
+    if not text:
+        return None
+    try:
+        return CellLimits.from_json(text)
+    except (LimitsError, ValueError, KeyError, TypeError) as exc:
+        raise ReplayError(f"{rec.path}: the recorded limits: {exc}") from None
+
+
 @dataclass
 class ReplayResult:
     inputs: int
@@ -78,19 +91,27 @@ class ReplayResult:
 
 def replay(rec: Recording, *, scene: Scene | None = None, settings: PipelineSettings | None = None,
            speed: float = 0.0, bus: Bus | None = None, on_message: Callable[[LiveMonitor], None] | None = None,
-           monitor_ready: Callable[[LiveMonitor], None] | None = None) -> ReplayResult:
+           monitor_ready: Callable[[LiveMonitor], None] | None = None,
+           limits: CellLimits | None = None) -> ReplayResult:
     """``speed``: 0 as fast as possible, else the recording's pace times ``speed``. ``settings``:
-    instead of the recorded ones (e.g. another calibration). ``on_message``: called after each message."""
+    instead of the recorded ones (e.g. another calibration). ``on_message``: called after each message.
+    ``limits``: the body limits instead of the recorded ones (recorded none: the events are not judged)."""
     scene = scene or recorded_scene(rec)
     meta = rec.metadata.get("monitor", {})
     settings = recorded_settings(rec) if settings is None else settings
+    limits = recorded_limits(rec) if limits is None else limits
     tare = meta.get("tare_s", "0.1")
     inputs = [m for m in rec.messages if m.topic == MONITOR_INPUT]
     if not inputs:
         raise ReplayError(f"{rec.path}: no {MONITOR_INPUT} messages (not recorded by ftc monitor)")
     bus = bus or Bus()
-    monitor = LiveMonitor(bus, scene, ft_source=meta.get("ft_source", "ft"), arm_source=meta.get("arm_source", "arm"),
-                          tare_s=None if tare in ("", "None") else float(tare), publish_inputs=False, settings=settings)
+    try:
+        monitor = LiveMonitor(bus, scene, ft_source=meta.get("ft_source", "ft"),
+                              arm_source=meta.get("arm_source", "arm"),
+                              tare_s=None if tare in ("", "None") else float(tare), publish_inputs=False,
+                              settings=settings, limits=limits)
+    except LimitsError as exc:
+        raise ReplayError(str(exc)) from None
     if monitor_ready is not None:
         monitor_ready(monitor)
     sub = bus.subscribe("events/", maxsize=None)

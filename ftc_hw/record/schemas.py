@@ -18,6 +18,8 @@ import orjson
 from ftc_hw.bus import ContactEvent, DeviceEvent, JointFrame, WrenchFrame, frame_topic
 from ftc_hw.monitor import MONITOR_INPUT, MONITOR_JUDGED, JudgedFrame, PipelineInput
 
+from .events import LIMIT_FIELDS, limit_check_of, limit_record
+
 _INT = {"type": "integer"}
 _STR = {"type": "string"}
 _NUM = {"type": "number"}
@@ -45,16 +47,21 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "t_host_ns": _HOST, "t_device_ns": _DEVICE_TIME, "seq": _INT, "source": _STR, "q": _vec(None, "rad"),
         "qd": _vec(None, "rad/s"), "current": _vec(None, "A"), "tau": {"type": ["array", "null"], "items": _NUM},
         "flags": _INT}),
-    "ftc_hw.ContactEvent": _schema("ftc_hw.ContactEvent", "contact onset/update/offset, base frame", {
-        "t_host_ns": _HOST, "kind": {"enum": ["onset", "update", "offset"]}, "link": _STR,
+    "ftc_hw.ContactEvent": _schema("ftc_hw.ContactEvent", "contact onset/update/offset/exceedance, base frame", {
+        "t_host_ns": _HOST, "kind": {"enum": ["onset", "update", "offset", "exceedance"]}, "link": _STR,
         "point": _vec(3, "m"), "force": _vec(3, "N applied to the arm"), "point_std": _vec(3, "m, 1 sigma"),
         "flags": {"type": "array", "items": _STR}, "probability": _NUM,
         "contact_id": {"type": "integer", "description": "pairs a contact's events (from 1; absent in older "
                        "recordings)"},
         "duration_s": {"type": "number", "description": "s since the contact's onset"},
         "peak_force": {"type": "number", "description": "N, the contact's largest external force so far"},
-        "impulse": {"type": "number", "description": "N s, the external force's magnitude integrated"}},
-        optional=("contact_id", "duration_s", "peak_force", "impulse")),
+        "impulse": {"type": "number", "description": "N s, the external force's magnitude integrated"},
+        "limits": {"type": "object", "description": "the event against its body region's limits (docs/limits.md)",
+                   "properties": {"region": _STR, "region_from": _STR, "limit_kind": _STR,
+                                  "class_assumed": {"type": "boolean"}, "limit_n": _NUM, "margin_n": _NUM,
+                                  "effective_mass_kg": _NUM, "speed_mps": _NUM, "permissible_speed_mps": _NUM},
+                   "required": list(LIMIT_FIELDS)}},
+        optional=("contact_id", "duration_s", "peak_force", "impulse", "limits")),
     "ftc_hw.DeviceEvent": _schema("ftc_hw.DeviceEvent", "device or stream event", {
         "t_host_ns": _HOST, "source": _STR, "kind": _STR, "message": _STR,
         "counters": {"type": "object", "additionalProperties": _NUM}}),
@@ -111,6 +118,8 @@ def encode(frame: Any) -> tuple[str, bytes]:
                                           "probability": float(frame.probability), "contact_id": frame.contact_id,
                                           "duration_s": frame.duration_s, "peak_force": frame.peak_force,
                                           "impulse": frame.impulse}
+        if frame.limits is not None:
+            d["limits"] = limit_record(frame.limits)
     elif isinstance(frame, DeviceEvent):
         name, d = "ftc_hw.DeviceEvent", {"t_host_ns": frame.t_host_ns, "source": frame.source, "kind": frame.kind,
                                          "message": frame.message,
@@ -168,7 +177,7 @@ def decode(schema: str, data: bytes) -> Any:
         return ContactEvent.make(d["t_host_ns"], d["kind"], d["link"], d["point"], d["force"], d["point_std"],
                                  flags=d["flags"], probability=d["probability"], contact_id=d.get("contact_id", 0),
                                  duration_s=d.get("duration_s", 0.0), peak_force=d.get("peak_force", 0.0),
-                                 impulse=d.get("impulse", 0.0))
+                                 impulse=d.get("impulse", 0.0), limits=limit_check_of(d.get("limits")))
     if schema == "ftc_hw.DeviceEvent":
         return DeviceEvent.make(d["t_host_ns"], d["source"], d["kind"], d["message"], d["counters"])
     if schema == "ftc_hw.PipelineInput":

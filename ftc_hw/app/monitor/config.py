@@ -87,6 +87,7 @@ class MonitorOptions:
     ros_namespace: str | None = None  # --ros: publish the outputs on ROS 2 under this namespace (None: not)
     events: Path | None = None
     reflex: str | None = None  # "stop"
+    limits: Path | None = None  # the cell's body limits (docs/limits.md); None: the built-in ISO/TS 15066 regions
     view: ViewOptions = ViewOptions()
     devices: DeviceOptions = DeviceOptions()
     title: str = "ftc monitor"
@@ -112,6 +113,7 @@ class ReplayOptions:
     events: Path | None = None  # the replayed events written here
     calibration: Path | None = None  # instead of the recording's
     view: ViewOptions = ViewOptions()
+    limits: Path | None = None  # the cell's body limits instead of the recording's (docs/limits.md)
     scene: str | None = None  # a UR recording's scene (an MCAP recording holds its own)
     sensing: tuple[str, ...] | None = None  # a UR recording: which sensing (None: what the file allows)
     topics: Path | None = None  # a ROS 2 bag: its topic map (None: the drivers' defaults for the scene)

@@ -194,7 +194,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             else:
                 onsets_in[k] = onsets_in.get(k, 0) + 1
                 first_onset.setdefault(k, t)
-        if ev["kind"] == "offset" or not ev["link"] or "no_estimate" in ev["flags"]:
+        # an offset repeats the last estimate, an exceedance the event that crossed its limit
+        if ev["kind"] in ("offset", "exceedance") or not ev["link"] or "no_estimate" in ev["flags"]:
             continue
         i = int(np.searchsorted(th, t, side="right")) - 1
         if i < 0 or not contact[i]:

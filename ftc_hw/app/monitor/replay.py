@@ -10,6 +10,7 @@ from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import event_line
 from ftc_hw.record.reader import RecordingError, read_recording
 from ftc_hw.record.replay import ReplayError, ReplayResult, recorded_scene, recorded_settings, replay
+from ftc_hw.scene.limits import LimitsError, load_limits
 
 from .config import MonitorSetupError, ReplayOptions
 from .session import load_pipeline_calibration
@@ -28,7 +29,8 @@ def run_replay(options: ReplayOptions, console: Console) -> ReplayResult:
         settings = recorded_settings(rec)
         if calibration:  # the recorded settings with this calibration's corrections
             settings = settings.replace(corrections=load_pipeline_calibration(calibration, scene)[0])
-    except (RecordingError, ReplayError, OSError) as exc:
+        limits = load_limits(options.limits) if options.limits is not None else None
+    except (RecordingError, ReplayError, LimitsError, OSError) as exc:
         raise MonitorSetupError(str(exc)) from None
     counts = rec.counts()
     console.print(f"{path}: {sum(counts.values())} messages on {len(counts)} topics "
@@ -72,7 +74,7 @@ def run_replay(options: ReplayOptions, console: Console) -> ReplayResult:
             live.start()
         result = replay(rec, scene=scene, settings=settings, speed=0.0 if timeline else speed, bus=bus,
                         on_message=on_message,
-                        monitor_ready=ready)
+                        monitor_ready=ready, limits=limits)
     finally:
         if live is not None:
             live.stop()
@@ -81,7 +83,7 @@ def run_replay(options: ReplayOptions, console: Console) -> ReplayResult:
             for e in result.events:
                 f.write(event_line(e) + "\n")
     contacts = [e for e in result.events if isinstance(e, ContactEvent)]
-    kinds = {k: sum(e.kind == k for e in contacts) for k in ("onset", "update", "offset")}
+    kinds = {k: sum(e.kind == k for e in contacts) for k in ("onset", "update", "offset", "exceedance")}
     lost = len(result.events) - len(contacts)
     console.print(f"replayed {result.inputs} pipeline inputs: {len(contacts)} contact events {kinds}"
                   + (f", {lost} stream lost/back events (recorded)" if lost else "")

@@ -42,6 +42,7 @@ from ftc_hw.pipeline import Corrections, PipelineSettings
 from ftc_hw.record.events import EventWriter, event_record, read_truth
 from ftc_hw.record.writer_process import RecorderProcess, Sink
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
+from ftc_hw.scene.limits import CellLimits, LimitsError, builtin_limits, load_limits
 from ftc_hw.sim_devices.host import WorldHost
 
 from .config import MonitorOptions, MonitorOutcome, MonitorSetupError
@@ -72,6 +73,18 @@ def load_pipeline_calibration(path: Path, scene: Scene) -> tuple[Corrections, di
     if applied:
         meta["applied"] = ", ".join(applied)
     return corrections, meta
+
+
+def cell_limits(path: Path | None, console: Console) -> CellLimits:
+    """The cell's body limits (``--limits``; None: the built-in regions), said; MonitorSetupError on a bad file."""
+    try:
+        limits = load_limits(path) if path is not None else builtin_limits()
+    except LimitsError as exc:
+        raise MonitorSetupError(str(exc)) from None
+    console.print(f"body limits {path or 'built-in (ISO/TS 15066)'}: {len(limits.regions)} regions, "
+                  f"{len(limits.links)} links and {len(limits.zones)} zones assigned, the rest "
+                  f"{limits.default_region} (docs/limits.md)")
+    return limits
 
 
 def _devices(scene: Scene, sim: bool, remote: bool = False) -> tuple[DeviceSpec | None, DeviceSpec | None]:
@@ -377,8 +390,12 @@ def _start_monitor(cfg: MonitorOptions, console: Console, scene: Scene, bus: Bus
                       "refine[/]")
     console.print("loading the pipeline (its compiled kernels) ...")
     ros_outputs = cfg.ros_namespace is not None or bool(cfg.record and cfg.record_format != "ftc")
-    monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s, settings=settings,
-                          publish_judged=ros_outputs)
+    limits = cell_limits(cfg.limits, console)
+    try:
+        monitor = LiveMonitor(bus, scene, ft_source=ft_name, arm_source=arm_name, tare_s=tare_s,
+                              settings=settings, publish_judged=ros_outputs, limits=limits)
+    except LimitsError as exc:
+        raise MonitorSetupError(str(exc)) from None
     console.print(f"contact points on the scene's {monitor.pipeline.surface_source}"
                   + (" (its vendor meshes are not fetched: ftc scenes --fetch-meshes)"
                      if scene.robot.vendor_shell and monitor.pipeline.surface_source == "primitives" else ""))
@@ -386,7 +403,7 @@ def _start_monitor(cfg: MonitorOptions, console: Console, scene: Scene, bus: Bus
     if cfg.record:
         recorder = _start_recorder(cfg, scene, bus, {
             "ft_source": ft_name, "arm_source": arm_name, "tare_s": str(tare_s),
-            "pipeline": settings.to_json(), "ftc_hw": __version__, "sim": str(cfg.sim),
+            "pipeline": settings.to_json(), "limits": limits.to_json(), "ftc_hw": __version__, "sim": str(cfg.sim),
             "scenario": cfg.world.scenario if cfg.sim else "", "seed": str(cfg.world.seed),
             "started_host_ns": str(time.monotonic_ns())}, cal_meta)
         stack.callback(recorder.stop)  # on a failed start; a no-op after the final stop below

@@ -89,12 +89,25 @@ def contact_table(result, fused: ContactEvent | None = None, lost: frozenset[str
 def event_text(ev, t0_ns: int) -> str:
     t = (ev.t_host_ns - t0_ns) / 1e9
     if isinstance(ev, ContactEvent):
-        return (f"{t:8.3f} s  {ev.kind:6s} {ev.link or '-':14s} point {np.round(np.asarray(ev.point) * 1e3, 1)} mm  "
+        text = (f"{t:8.3f} s  {ev.kind:6s} {ev.link or '-':14s} point {np.round(np.asarray(ev.point) * 1e3, 1)} mm  "
                 f"|F| {np.linalg.norm(ev.force):5.1f} N  +-{np.linalg.norm(ev.point_std) * 1e3:.1f} mm  "
                 f"{','.join(ev.flags)}")
+        return text + limits_text(ev)
     if isinstance(ev, DeviceEvent):
         return f"{t:8.3f} s  device {ev.source}: {ev.kind} {ev.message}"
     return f"{t:8.3f} s  {ev!r}"
+
+
+def limits_text(ev: ContactEvent) -> str:
+    """The event against its body region's limit (docs/limits.md): the margin, the effective mass, the onset
+    speed against the permissible (``?``: no class, quasi-static assumed); an exceedance marked ``!!``."""
+    c = ev.limits
+    if c is None:
+        return ""
+    kind = c.limit_kind.replace("_", "-") + ("?" if c.class_assumed else "")
+    text = (f"  {c.region} {kind} {c.limit_n:.0f} N margin {c.margin_n:+.1f} N  m_R {c.effective_mass_kg:.3g} kg  "
+            f"v {c.speed_mps:.2f}/{c.permissible_speed_mps:.2f} m/s")
+    return f"  !!{text}" if ev.kind == "exceedance" else text
 
 
 class LiveView:

@@ -45,6 +45,14 @@ def _fmt_mm(v) -> str:
     return " ".join(f"{1e3 * float(x):.1f}" for x in v)
 
 
+
+def _limits_md(c: dict[str, Any] | None) -> str:
+    """An event's margin to its body region's limit (docs/limits.md), or nothing."""
+    if not c:
+        return ""
+    return (f", {c['region']} {c['limit_kind'].replace('_', '-')} limit {c['limit_n']:.0f} N, "
+            f"margin **{c['margin_n']:+.1f} N**")
+
 class Page:
     """The page's state; ``apply(tick)`` draws one tick, ``reset()`` forgets what time made (a seek)."""
 
@@ -171,7 +179,7 @@ class Page:
         if ev["kind"] != "update":
             self.events.appendleft((t, f"{t:7.2f} s #{ev['contact_id']} **{ev['kind']}** `{ev['link'] or '-'}` "
                                        f"{force:.1f} N, ± {_fmt_mm(ev['point_std'])} mm"
-                                       + (f" [{flags}]" if flags else "")))
+                                       + (f" [{flags}]" if flags else "") + _limits_md(ev.get("limits"))))
 
     def _draw_contact(self, t: float, ev: dict[str, Any]) -> None:
         cid = int(ev["contact_id"])
