@@ -23,6 +23,12 @@ from .events import LIMIT_FIELDS, limit_check_of, limit_record
 _INT = {"type": "integer"}
 _STR = {"type": "string"}
 _NUM = {"type": "number"}
+# a contact event's judgement against its body region's limits (docs/limits.md): the recordings' and ROS's
+LIMITS_JSON_SCHEMA = {"type": "object", "description": "the event against its body region's limits (docs/limits.md)",
+                      "properties": {"region": _STR, "region_from": _STR, "limit_kind": _STR,
+                                     "class_assumed": {"type": "boolean"}, "limit_n": _NUM, "margin_n": _NUM,
+                                     "effective_mass_kg": _NUM, "speed_mps": _NUM, "permissible_speed_mps": _NUM},
+                      "required": list(LIMIT_FIELDS), "additionalProperties": False}
 _DEVICE_TIME = {"type": ["integer", "null"], "description": "device clock, ns (null: the device sends none)"}
 
 
@@ -56,11 +62,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "duration_s": {"type": "number", "description": "s since the contact's onset"},
         "peak_force": {"type": "number", "description": "N, the contact's largest external force so far"},
         "impulse": {"type": "number", "description": "N s, the external force's magnitude integrated"},
-        "limits": {"type": "object", "description": "the event against its body region's limits (docs/limits.md)",
-                   "properties": {"region": _STR, "region_from": _STR, "limit_kind": _STR,
-                                  "class_assumed": {"type": "boolean"}, "limit_n": _NUM, "margin_n": _NUM,
-                                  "effective_mass_kg": _NUM, "speed_mps": _NUM, "permissible_speed_mps": _NUM},
-                   "required": list(LIMIT_FIELDS)}},
+        "limits": LIMITS_JSON_SCHEMA},
         optional=("contact_id", "duration_s", "peak_force", "impulse", "limits")),
     "ftc_hw.DeviceEvent": _schema("ftc_hw.DeviceEvent", "device or stream event", {
         "t_host_ns": _HOST, "source": _STR, "kind": _STR, "message": _STR,

@@ -25,11 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.bus import STREAM_EVENT_KINDS, ContactEvent, DeviceEvent, JointFrame, WrenchFrame
+from ftc_hw.bus import CONTACT_KINDS, STREAM_EVENT_KINDS, ContactEvent, DeviceEvent, JointFrame, WrenchFrame
 from ftc_hw.monitor import JudgedFrame, PipelineInput
 from ftc_hw.record.events import event_record
 from ftc_hw.record.foxglove_messages import FRAME_TRANSFORMS
 from ftc_hw.record.foxglove_view import ROOT_FRAME, FoxgloveView
+from ftc_hw.record.schemas import LIMITS_JSON_SCHEMA
 from ftc_hw.scene import Scene
 
 from . import encode as enc
@@ -46,7 +47,8 @@ _COMMON = {"schema": {"const": EVENT_SCHEMA}, "stamp_ns": _INT, "frame_id": _STR
 EVENT_JSON_SCHEMA = {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": EVENT_SCHEMA, "oneOf": [
     {"type": "object", "additionalProperties": False, "required": [*_COMMON, "kind", "contact_id", "link", "point",
      "force", "point_std", "flags", "probability", "duration_s", "peak_force", "impulse"], "properties": {
-        **_COMMON, "kind": {"enum": ["onset", "update", "offset"]}, "contact_id": _INT, "link": _STR, "point": _VEC3,
+        **_COMMON, "kind": {"enum": sorted(CONTACT_KINDS)}, "limits": LIMITS_JSON_SCHEMA, "contact_id": _INT,
+        "link": _STR, "point": _VEC3,
         "force": _VEC3, "point_std": _VEC3, "flags": {"type": "array", "items": _STR}, "probability": _NUM,
         "duration_s": _NUM, "peak_force": _NUM, "impulse": _NUM}},
     {"type": "object", "additionalProperties": False, "required": [*_COMMON, "kind", "source", "message"],
