@@ -63,6 +63,9 @@ class Identification:
     sensing: str = "base_ft"
     joint_residual_std: dict[str, np.ndarray] = field(default_factory=dict)  # signal -> (n,) N m
     joint_noise_std: dict[str, np.ndarray] = field(default_factory=dict)  # signal -> (n,) N m
+    # the per-joint terms ``covariance`` holds after the bodies' block (joint-signal identification: keys of
+    # ``joints``, n each, their own units), fitted with the inertials
+    covariance_joints: tuple[str, ...] = ()
 
     def told_gain(self) -> np.ndarray:
         """What the pipeline undoes on a contact's wrench: ``contact_gain``; for a file without it, the
@@ -77,7 +80,7 @@ class Identification:
         """What the identified model may still get wrong, as the pipeline takes it."""
         if self.covariance is None:
             return None
-        return ModelErrorSpec(tuple(self.inertials), self.covariance.copy(), self.gain_fitted)
+        return ModelErrorSpec(tuple(self.inertials), self.covariance.copy(), self.gain_fitted, self.covariance_joints)
 
     def to_dict(self) -> dict[str, Any]:
         out = {"date": self.date, "source": self.source, "verdict": self.verdict, "reasons": list(self.reasons),
@@ -89,6 +92,8 @@ class Identification:
         if self.covariance is not None:
             out["covariance"] = [_floats(r) for r in self.covariance]
             out["gain_fitted"] = self.gain_fitted
+            if self.covariance_joints:
+                out["covariance_joints"] = list(self.covariance_joints)
         if self.contact_gain is not None:
             out["contact_gain"] = [_floats(r) for r in self.contact_gain]
         out["sensing"] = self.sensing
@@ -123,8 +128,12 @@ class Identification:
             if any(np.any(v < 0) for v in stds[key].values()):
                 raise CalibrationError(f"{where}: {key}: expected standard deviations >= 0")
         cov = None
+        cov_joints = tuple(str(k) for k in data.get("covariance_joints", ()))
+        if set(cov_joints) - set(joints):
+            raise CalibrationError(f"{where}: covariance_joints: expected keys of joints, got {list(cov_joints)}")
         if "covariance" in data:
             n = 10 * len(inertials) + (36 if data.get("gain_fitted", True) else 0)
+            n += sum(joints[k].size for k in cov_joints)
             try:
                 cov = np.array(data["covariance"], dtype=float)
             except (TypeError, ValueError):
@@ -135,7 +144,8 @@ class Identification:
                               [str(r) for r in data.get("reasons", [])], gain, inertials,
                               [str(u) for u in data.get("untold", [])], dict(data.get("figures", {})), joints,
                               cov, bool(data.get("gain_fitted", True)), contact_gain,
-                              str(data.get("sensing", "base_ft")), stds["joint_residual_std"], stds["joint_noise_std"])
+                              str(data.get("sensing", "base_ft")), stds["joint_residual_std"], stds["joint_noise_std"],
+                              cov_joints)
 
 
 def _joint_vector(table: dict, key: str, where: str) -> np.ndarray:

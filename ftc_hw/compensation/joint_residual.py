@@ -88,5 +88,5 @@ class JointResidual:
             cov += self.velocity_var * (m @ m.T)
         cov[np.diag_indices(self.n)] += self.signals.white_var * f_white + self._slow**2
         if self.model_error is not None:
-            cov += self.model_error.cov(t_ns, q, qd, obs.qdd)
+            cov += self.model_error.cov(t_ns, q, qd, obs.qdd, current)
         return r, cov, True

@@ -62,8 +62,9 @@ class JointContactPipeline(PipelineView):
         self.residual = JointResidual(model_scene, model, self.source, gain=js.observer_gain,
                                       friction_rel_std=js.friction_rel_std, model_rel_std=js.model_rel_std,
                                       velocity_noise_std=js.velocity_noise_std,
-                                      model_error=None if me is None else JointModelError(model, me.bodies, me.cov,
-                                                                                          me.gain),
+                                      model_error=None if me is None else JointModelError(
+                                          model, me.bodies, me.cov, me.gain, joints=me.joints,
+                                          source=self.source),
                                       offset=joints.get("torque_offset") if self.source == "joint_torques" else None,
                                       identified_std=identified)
         self.flange = FlangeWrench(scene, model, settings) if sensing.ft == "flange" else None

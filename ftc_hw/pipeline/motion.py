@@ -47,7 +47,8 @@ class MotionStage:
                                        contact_gain=c.contact_gain)
         self.level = self.compensator.level
         self.identified_error = (None if c.model_error is None else
-                                 ModelError(model, list(c.model_error.bodies), c.model_error.cov, c.model_error.gain))
+                                 ModelError(model, list(c.model_error.bodies), c.model_error.body_cov,
+                                            c.model_error.gain))
         self.refiner = (OnlineRefiner(self.compensator, self.identified_error, scene.sensor.noise_cov)
                         if m.refine and self.identified_error is not None else None)
         n = scene.n_joints

@@ -47,6 +47,15 @@ class ModelErrorSpec:
     bodies: tuple[str, ...]
     cov: np.ndarray
     gain: bool
+    # joint-signal identification: per-joint terms (JOINT_TERMS, n each, absolute units) after the bodies'
+    # block, fitted with it: the currents' common scale lies along kt and the inertials at once
+    joints: tuple[str, ...] = ()
+
+    @property
+    def body_cov(self) -> np.ndarray:
+        """The bodies' parameters' (and the gain's) covariance alone: what an F/T sensor's wrench sees."""
+        k = 10 * len(self.bodies) + (36 if self.gain else 0)
+        return self.cov[:k, :k]
 
 
 @dataclass(frozen=True, eq=False)
@@ -241,7 +250,7 @@ def _value_out(v: Any) -> Any:
     if isinstance(v, Payload):
         return {"mass": v.mass, "com": list(v.com)}
     if isinstance(v, ModelErrorSpec):
-        return {"bodies": list(v.bodies), "cov": np.asarray(v.cov).tolist(), "gain": v.gain}
+        return {"bodies": list(v.bodies), "cov": np.asarray(v.cov).tolist(), "gain": v.gain, "joints": list(v.joints)}
     if isinstance(v, Mapping):
         return {k: _value_out(x) for k, x in v.items()}
     return v.tolist() if hasattr(v, "tolist") else v
@@ -278,7 +287,8 @@ def _value_in(key: str, v: Any) -> Any:
         if key == "payload":
             return Payload(float(v["mass"]), tuple(float(x) for x in v["com"]))
         if key == "model_error":
-            return ModelErrorSpec(tuple(v["bodies"]), np.asarray(v["cov"], dtype=float), bool(v["gain"]))
+            return ModelErrorSpec(tuple(v["bodies"]), np.asarray(v["cov"], dtype=float), bool(v["gain"]),
+                                  tuple(v.get("joints", ())))
         if key in ("inertials", "joints", "joint_residual_std", "joint_noise_std"):
             return {k: np.asarray(x, dtype=float) for k, x in v.items()}
         return np.asarray(v, dtype=float)

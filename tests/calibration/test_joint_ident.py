@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from ftc_hw.app.calibration.identify_joints import joint_covariance
 from ftc_hw.calibration.file import Calibration, Identification, load_calibration, save_calibration
 from ftc_hw.calibration.free_motion import IdentificationError
 from ftc_hw.calibration.joint_ident import JointIdentifier
@@ -17,7 +18,7 @@ from ftc_hw.calibration.joint_motion import V_EPS, JointMotionData
 from ftc_hw.model import ArmModel
 from ftc_hw.model.build import moves
 from ftc_hw.model.inertials import body_params, joint_regressor
-from ftc_hw.pipeline import PipelineSettings
+from ftc_hw.pipeline import PipelineSettings, pipeline_for
 from ftc_hw.scene import load_scene
 
 UR5E = load_scene("ur5e")
@@ -191,6 +192,20 @@ def test_the_joint_identification_reaches_the_pipeline_through_the_file(tmp_path
     assert np.any(back.joints["torque_offset"] < 0)  # an offset has either sign
     np.testing.assert_allclose(back.joint_residual_std["currents"], fit.residual_std["currents"])
     assert back.model_error.cov.shape == (10 * nb, 10 * nb) and not back.model_error.gain
+    # identify_joints keeps the joint terms' rows: the pipeline's residual covariance needs them
+    cov, keys = joint_covariance(fit, np.asarray(UR5E.robot.torque_constant, dtype=float))
+    full = load_calibration(save_calibration(Calibration("ur5e", None, "2026-01-01", np.zeros(6), None,
+                                                         identification=dataclasses.replace(
+                                                             ident, covariance=cov, covariance_joints=keys)),
+                                             tmp_path / "full.toml"), scene=UR5E).corrections(UR5E)
+    assert full.model_error.joints == keys == ("torque_constant", "friction_viscous", "friction_coulomb",
+                                               "rotor_inertia", "torque_offset")
+    assert full.model_error.cov.shape == (10 * nb + 30, 10 * nb + 30)
+    np.testing.assert_allclose(full.model_error.body_cov, back.model_error.cov)
+    pipe = pipeline_for(UR5E.with_sensing(["currents"]), PipelineSettings(corrections=full))
+    assert pipe.residual.model_error.joints == keys and pipe.residual.model_error.source == "currents"
+    again = PipelineSettings.from_json(PipelineSettings(corrections=full).to_json()).corrections
+    assert again.model_error.joints == keys
     settings = PipelineSettings(corrections=back)
     again = PipelineSettings.from_json(settings.to_json()).corrections
     np.testing.assert_allclose(again.joint_residual_std["joint_torques"], fit.residual_std["joint_torques"])

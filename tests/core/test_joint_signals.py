@@ -346,6 +346,31 @@ def test_the_identified_parameters_covariance_reaches_the_joint_torques(ur5e_cur
     assert extra[1, 1] > 0 and extra[2, 2] > 0  # the shoulder's and elbow's torques carry those bodies
 
 
+def test_the_currents_common_scale_leaves_the_residual_certain(ur5e_currents, ur5e_model, pressed):
+    """The currents cannot tell a common scale of the torque constants, the inertials and the friction
+    (joint_ident's notes): a covariance along that scale alone must leave the residual's covariance about
+    zero without contact, while the inertials' block of it alone puts the scale on the gravity torques."""
+    m = ur5e_model.model
+    bodies = [m.body(b).name for b in range(1, m.nbody) if m.body_mass[b] > 0 and ur5e_model.moving_joints(b).any()]
+    r = ur5e_currents.robot
+    scale = np.concatenate([*(body_params(m, m.body(b).id) for b in bodies), r.torque_constant,
+                            r.friction_viscous, r.friction_coulomb, np.zeros(6)])
+    cov = np.outer(scale, scale) * 0.03**2  # a 3 % common scale, the joint terms in their order
+    terms = ("torque_constant", "friction_viscous", "friction_coulomb", "rotor_inertia")
+    joint = JointModelError(ur5e_model, bodies, cov, False, joints=terms)
+    inertial = JointModelError(ur5e_model, bodies, cov[:10 * len(bodies), :10 * len(bodies)], False)
+    t, q, qd, current, tau_ext, truth, qdd = pressed[300]
+    assert truth is None and 0.5 < t < 0.85 and np.all(np.abs(qd) > 0.05)  # free motion, every joint moving
+    sd_joint = np.sqrt(np.maximum(np.diag(joint.cov(0, q, qd, qdd, current)), 0.0))
+    sd_inertial = np.sqrt(np.diag(inertial.cov(0, q, qd, qdd)))
+    assert sd_inertial[1:3].min() > 0.15  # 3 % of the shoulder's and elbow's gravity torques
+    assert np.all(sd_joint < 0.01 * sd_inertial.max())
+    with pytest.raises(ValueError, match="unknown joint terms"):
+        JointModelError(ur5e_model, bodies, cov, False, joints=("gear_ratio",))
+    with pytest.raises(ValueError, match="expected"):
+        JointModelError(ur5e_model, bodies, cov, False, joints=terms[:3])
+
+
 def test_the_joint_pipeline_on_joint_torque_sensors(ur5e_currents, ur5e_model, pressed):
     spec = JointTorqueSpec(noise_std=np.full(6, 0.05), range=np.full(6, 300.0), offset=np.zeros(6))
     scene = dataclasses.replace(ur5e_currents, joint_torque=spec, uses=frozenset({"joint_torques"}))

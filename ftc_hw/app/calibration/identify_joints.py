@@ -113,24 +113,40 @@ def identify_joints(scene: Scene, segments: list[JointMotionData], base: Calibra
     replaced, not added to) and return the updated calibration."""
     c = dataclasses.replace(base, identification=None).corrections(scene) if base is not None else Corrections()
     arm = ArmModel(scene, c.payload, c.inertials)
-    fit = JointIdentifier(arm).fit(segments)
-    nb = len(fit.bodies)
+    identifier = JointIdentifier(arm)
+    fit = identifier.fit(segments)
     joints = {"torque_constant": fit.torque_constant, "friction_viscous": np.maximum(fit.friction_viscous, 0.0),
               "friction_coulomb": np.maximum(fit.friction_coulomb, 0.0)}
     if "currents" in fit.kinds:
         joints["rotor_inertia"] = fit.rotor_inertia
     if "joint_torques" in fit.kinds:
         joints["torque_offset"] = fit.offset
+    cov, cov_joints = joint_covariance(fit, identifier.kt0)
     ident = Identification(now_iso(), source, fit.verdict, list(fit.reasons), np.eye(6),
                            {b: d for b, d in zip(fit.bodies, fit.delta_pi, strict=True)}, list(fit.untold),
-                           _figures(fit), joints, fit.cov[:10 * nb, :10 * nb].copy(), False, None,
-                           ",".join(fit.kinds), dict(fit.residual_std), dict(fit.noise_std))
+                           _figures(fit), joints, cov, False, None,
+                           ",".join(fit.kinds), dict(fit.residual_std), dict(fit.noise_std), cov_joints)
     if base is None:
         cal = Calibration(scene=scene.name, sensor_serial=None, date=now_iso(), bias=np.zeros(6), payload=None,
                           verdict=fit.verdict, reasons=list(fit.reasons), identification=ident)
     else:
         cal = dataclasses.replace(base, identification=ident)
     return cal, fit
+
+
+def joint_covariance(fit: JointIdentFit, kt0: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The fit's whole covariance in the units the corrections hold (the torque constants' relative scale
+    taken to N m/A through the scene's ``kt0``), and the per-joint terms it holds after the bodies'. The
+    joint terms stay: the currents cannot tell a common scale of the torque constants and the inertials,
+    so the inertials alone look far less certain than the torques they predict from the currents."""
+    keys = tuple(k for kind, ks in (("currents", ("torque_constant", "friction_viscous", "friction_coulomb",
+                                                  "rotor_inertia")), ("joint_torques", ("torque_offset",)))
+                 if kind in fit.kinds for k in ks)
+    scale = np.ones(fit.cov.shape[0])
+    if "currents" in fit.kinds:
+        col = 10 * len(fit.bodies)
+        scale[col:col + kt0.size] = kt0
+    return fit.cov * np.outer(scale, scale), keys
 
 
 def _figures(fit: JointIdentFit) -> dict[str, Any]:
