@@ -313,6 +313,20 @@ class DynamixelArm(ArmAdapter):
         ticks = np.rint(self.zero + self.direction * q / self.model.rad_per_tick).astype(int)
         self.write_item(116, 4, {i: int(t) for i, t in zip(self.ids, ticks, strict=True)})
 
+    servo_period_s = 0.005  # a Sync Write of Goal Position every 5 ms between the 2 ms Sync Reads
+
+    def prepare_servo(self) -> None:
+        """Nothing to open: a setpoint is a Sync Write of Goal Position on the bus the reader uses."""
+        self._require_link()
+
+    def servo(self, q: Sequence[float]) -> None:
+        """The next setpoint of a stream: Goal Position for every joint (one Sync Write, no answer)."""
+        self.set_goal(q)
+        self.counters["setpoints"] += 1
+
+    def end_servo(self) -> None:
+        """The servos hold the last Goal Position: nothing to send."""
+
     def torque_states(self) -> dict[int, bool]:
         states = self.read_item(64, 1)
         if states is None:

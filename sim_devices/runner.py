@@ -35,6 +35,15 @@ class AppliedCommand:
     t_rx_ns: int = 0  # when the emulator read the request that caused it (0: not recorded)
 
 
+def _velocity(qd: Any, n: int) -> np.ndarray | None:
+    """A goal command's joint velocities, or None when it carries none or not n finite numbers (then held)."""
+    try:
+        v = np.asarray(qd, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return v if v.shape == (n,) and np.all(np.isfinite(v)) else None
+
+
 class SimRunner:
     """The world and the emulators of ``devices``. ``start()``, then ``step()``/``run()``; ``stop()``
     cleans up. ``applied`` lists every command the world applied, with when."""
@@ -106,7 +115,8 @@ class SimRunner:
         self.applied.append(AppliedCommand(time.monotonic_ns(), t, cmd.kind, cmd.q, cmd.on, cmd.t_sent_ns,
                                            self.due_ns(t) or 0, int(cmd.extra.get("t_rx_ns", 0))))
         if cmd.kind == "goal" and cmd.q is not None:
-            self.world.set_goal(np.asarray(cmd.q, dtype=float))
+            qd = _velocity(cmd.extra.get("qd"), len(cmd.q))  # a servo stream's feed-forward (the UR program's servoj)
+            self.world.set_goal(np.asarray(cmd.q, dtype=float), qd, float(cmd.extra.get("horizon_s", 0.0)))
         elif cmd.kind == "stop":
             self.world.halt()
         elif cmd.kind == "resume":

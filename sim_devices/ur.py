@@ -58,6 +58,8 @@ from typing import Any
 
 import numpy as np
 
+from ftc_hw.codecs.ur_control_loop import ControlLoopRegisters
+
 from . import ur_data as D
 from .emulator import Emulator, serve_with
 from .link import Command, JointRecord
@@ -67,6 +69,7 @@ from .thermal import ThermalModel
 from .ur_dashboard import answer, serve_connection
 from .ur_ft import FlangeSamples
 from .ur_model import URKinematics, flange_wrench_base
+from .ur_program import ControlLoopProgram
 
 
 def parse_version(text: str) -> tuple[int, int, int, int]:
@@ -105,11 +108,14 @@ class Controller:
         self.input_double = [0.0] * 48
         self.input_bits = 0  # input bit registers 0..127
         self.external_wrench = [0.0] * 6
+        self.control_loop: ControlLoopProgram | None = None  # the program that follows streamed joint setpoints
         self.halts = 0
         self._t_rx_ns = 0  # when the dashboard line being handled was read (monotonic ns)
 
     def halt(self) -> None:
         self.halts += 1
+        if self.control_loop is not None:
+            self.control_loop.halt()
         self.world.send(Command(self.source, "stop", extra={"t_rx_ns": self._t_rx_ns}))
         if self.resume_after_s is not None and self.robot_mode == D.ROBOT_RUNNING:
             if self._operator is not None:
@@ -121,6 +127,14 @@ class Controller:
     def _operator_plays(self) -> None:
         with self.lock:
             answer(self, "play")
+
+    def watchdog_pause(self) -> None:
+        """``rtde_set_watchdog(..., "PAUSE")`` fired: the program pauses, the arm halts where it is."""
+        with self.lock:
+            if self.runtime == D.RUNTIME_PLAYING:
+                self.runtime = D.RUNTIME_PAUSED
+                self.log.append("RTDE input watchdog: program paused")
+            self.halt()
 
     def play(self) -> None:
         if self.runtime != D.RUNTIME_PLAYING:
@@ -141,7 +155,8 @@ class Controller:
     def joint_mode(self) -> int:
         return {D.ROBOT_POWER_OFF: D.JOINT_POWER_OFF, D.ROBOT_IDLE: D.JOINT_IDLE}.get(self.robot_mode, D.JOINT_RUNNING)
 
-    def apply_input(self, values: dict[str, Any]) -> None:
+    def apply_input(self, values: dict[str, Any], t_rx_ns: int = 0) -> None:
+        """An input data package's values (``t_rx_ns``: when it was read, monotonic ns)."""
         with self.lock:
             def masked(name: str, shift: int) -> None:
                 mask = values.get(f"{name}_mask")
@@ -172,6 +187,10 @@ class Controller:
                     self.input_bits = (self.input_bits & ~(0xFFFFFFFF << 32)) | (int(v) << 32)
                 elif name == "external_force_torque":
                     self.external_wrench = list(v)
+            program = self.control_loop
+            if program is not None and program.registers.flag_name in values and self.runtime == D.RUNTIME_PLAYING:
+                program.on_flag(int(values[program.registers.flag_name]), self.input_double, self.input_int,
+                                t_rx_ns)
 
     # -- dashboard ------------------------------------------------------------------------------------------
     @property
@@ -413,7 +432,7 @@ class RtdeSession:
                 self.text(f"data package for unknown input recipe or of wrong size ({len(payload)} bytes)", level=2)
                 return
             self.counts["data_in"] += 1
-            srv.controller.apply_input(recipe.unpack(payload))
+            srv.controller.apply_input(recipe.unpack(payload), time.monotonic_ns())
         elif cmd == D.TEXT_MESSAGE:
             return
         else:
@@ -518,9 +537,25 @@ class UREmulator(Emulator):
         self.controller = Controller(self.version, self.side, device.name, str(p.get("serial", "20205500001")),
                                      str(p.get("robot_model", "UR5")),
                                      resume_after_s=None if resume is None else float(resume))
+        self.controller.control_loop = ControlLoopProgram(
+            n=self.n, period_s=1.0 / version_max, send_goal=self._send_goal, joint_state=self._joint_state,
+            pause=self.controller.watchdog_pause, max_speed=scene.robot.max_speed,
+            max_acceleration=scene.robot.max_acceleration,
+            registers=ControlLoopRegisters(watchdog_hz=float(self.options.get("watchdog_hz", 1.0))))
         self.thermal = ThermalModel(self.n, ambient_c=25.0, gain_c_per_a2=0.5, tau_s=900.0)
         self.rtde_port = int(self.options.get("rtde_port", D.RTDE_PORT))
         self.dashboard_port = int(self.options.get("dashboard_port", D.DASHBOARD_PORT))
+
+    def stats(self) -> dict[str, Any]:
+        return {**super().stats(), "program": dict(self.controller.control_loop.counts)}
+
+    def _send_goal(self, q: np.ndarray, qd: np.ndarray, horizon_s: float, t_rx_ns: int) -> None:
+        self.side.send(Command(self.device.name, "goal", q=tuple(float(x) for x in q),
+                               extra={"qd": [float(x) for x in qd], "horizon_s": horizon_s, "t_rx_ns": t_rx_ns}))
+
+    def _joint_state(self) -> tuple[np.ndarray, np.ndarray] | None:
+        rec = self.side.joint_state()
+        return None if rec is None else (rec.q.copy(), rec.qd.copy())
 
     def bind(self) -> dict[str, Any]:
         self.rtde = RtdeServer(self.controller, self.address, self.rtde_port, self.rate)
@@ -530,6 +565,8 @@ class UREmulator(Emulator):
                 "controller_version": ".".join(map(str, self.version))}
 
     def loop(self) -> None:
+        program = self.controller.control_loop
+        threading.Thread(target=program.run, args=(threading.Event(),), name="ur-program", daemon=True).start()
         reader = self.side.joint_reader()
         ft = FlangeSamples(self.side.ft_reader(), self.scene.sensor.rate_hz) if self.flange_ft else None
         if ft is not None:

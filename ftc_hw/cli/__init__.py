@@ -47,6 +47,7 @@ class Level(StrEnum):
 
 class Reflex(StrEnum):
     stop = "stop"
+    retreat = "retreat"
 
 
 class RecordFormat(StrEnum):
@@ -287,7 +288,14 @@ def monitor(
                                       "contact pose and wrench, markers, events, /diagnostics; docs/ros.md); "
                                       "needs the ros extra.")] = False,
     ros_namespace: Annotated[str, typer.Option(help="With --ros: the outputs' namespace.")] = "/ftc",
-    reflex: Annotated[Optional[Reflex], typer.Option(help="stop: a contact onset commands the arm to stop.")] = None,  # noqa: UP045
+    reflex: Annotated[Optional[Reflex], typer.Option(help="stop: a contact onset commands the arm to stop; retreat: it "  # noqa: UP045
+                                                     "moves the touched point back along the contact's force, through "
+                                                     "the arm's protocol (a guided contact is left alone).")] = None,
+    retreat_distance: Annotated[float, typer.Option(min=0.001, max=0.5, metavar="M", help="With --reflex retreat: "
+                                                    "how far the touched point moves back (m).")] = 0.03,
+    retreat_time: Annotated[float, typer.Option(min=0.01, max=10.0, metavar="S", help="With --reflex retreat: the "
+                                                "time the motion must end within (s); said when the joints' limits "
+                                                "need longer.")] = 0.5,
     resume_after: Annotated[Optional[float], typer.Option(  # noqa: UP045
         min=0.0, metavar="S", help="With --sim and a UR arm: the emulated controller's operator presses play S s "
         "after each stop, and the arm goes on with the scenario where it stopped (with --reflex stop, every "
@@ -328,6 +336,7 @@ def monitor(
     """Live collision monitor: the scene's devices, compensation, detection, localization, events."""
     typer.echo(LOADING, err=True)
     from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, SimOptions  # lazy: CLI start-up
+    from ftc_hw.app.monitor.config import RetreatSettings as Retreat  # lazy: CLI start-up
     from ftc_hw.app.monitor.session import run_monitor  # lazy: CLI start-up
     from ftc_hw.app.monitor.view import make_console  # lazy: CLI start-up
     from ftc_hw.cli.monitor import check_monitor, outcome_or_exit, view_options  # lazy: CLI start-up
@@ -343,6 +352,7 @@ def monitor(
                              level=None if level is Level.scene else level.value, refine=refine, record=record,
                              record_format=record_format.value, ros_namespace=ros_namespace if ros else None,
                              events=events, reflex=reflex.value if reflex else None, limits=limits,
+                             retreat=Retreat(distance_m=retreat_distance, time_limit_s=retreat_time),
                              view=view_options((View.none if no_view else view).value, host, port, view_hz),
                              devices=devices)
     check_monitor(options)

@@ -152,7 +152,7 @@ class _Parser:
                positive: bool = False, default: Any = ...) -> Any:
         full = f"{prefix}{key}"
         if key not in data and default is not ...:
-            return _frozen(default)
+            return None if default is None else _frozen(default)
         value = self.get(data, key, prefix, list)
         if len(value) != n:
             raise self.fail(full, f"expected a list of {n} numbers, got {len(value)}")
@@ -232,7 +232,7 @@ class _Parser:
         p = "robot."
         self.unknown_keys(t, {"model", "joints", "home", "flange", "torque_constant", "friction_viscous",
                               "friction_coulomb", "kp", "kd", "current_noise_std", "couplings",
-                              "surface_tolerance_m", "vendor_shell"}, p)
+                              "surface_tolerance_m", "vendor_shell", "max_speed", "max_acceleration"}, p)
         model_path = self.model_file(t, p)
         joints = self.get(t, "joints", p, list)
         if not joints or not all(isinstance(j, str) and j for j in joints):
@@ -254,6 +254,8 @@ class _Parser:
             couplings=self.couplings(t.get("couplings", []), tuple(joints)),
             surface_tolerance=self.tolerance(t, p),
             vendor_shell=self.vendor_shell(t, p),
+            max_speed=self.vector(t, "max_speed", p, n, positive=True, default=None),
+            max_acceleration=self.vector(t, "max_acceleration", p, n, positive=True, default=None),
         )
 
     def vendor_shell(self, t: dict, p: str) -> str | None:

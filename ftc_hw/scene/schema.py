@@ -56,6 +56,8 @@ class RobotSpec:
     couplings: tuple[Coupling, ...] = ()  # scene joints that drive several model joints
     surface_tolerance: float = 0.0  # m, 1 sigma: how far the real shell may lie from the model's surfaces
     vendor_shell: str | None = None  # the vendor's meshes of this arm (ftc_hw.scene.vendor), if any
+    max_speed: np.ndarray | None = None  # rad/s per joint: what a motion the bridge commands may reach (None: unknown)
+    max_acceleration: np.ndarray | None = None  # rad/s^2 per joint (None: unknown)
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,23 @@ class Hold(Trajectory):
 
 
 @dataclass(frozen=True)
+class Glide(Trajectory):
+    """A streamed setpoint with its velocity: q + qd t up to ``horizon_s``, then held there. The next
+    setpoint of the stream replaces it (a servo's velocity feed-forward); a stream that ends stops
+    within the horizon."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    horizon_s: float
+
+    def reference(self, t: float):
+        if t >= self.horizon_s:
+            z = np.zeros(self.q.shape)
+            return self.q + self.qd * self.horizon_s, z, z.copy()
+        return self.q + self.qd * t, self.qd.copy(), np.zeros(self.q.shape)
+
+
+@dataclass(frozen=True)
 class Sinusoid(Trajectory):
     """q(t) = centre + amplitude sin(2 pi f t + phase), per joint (amplitude 0 holds the joint).
 

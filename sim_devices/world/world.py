@@ -32,7 +32,7 @@ from ftc_hw.scene import Scene
 
 from .joint_sensing import JointFriction, JointThermal, JointTorqueSensors, MotorModel, friction_torques
 from .sensor_model import FTSensorModel, SensorReading
-from .trajectory import Hold, Trajectory
+from .trajectory import Glide, Hold, Trajectory
 from .true_shell import mesh_point, shell_meshes
 
 _MESH_REACH_M = 0.1  # how far past the hull's contact the line may meet the mesh (the hull's hollows)
@@ -299,8 +299,14 @@ class World:
         """Scenario time 0 is now: scripted events happen at their scenario times from here."""
         self._script_t0 = self.data.time
 
-    def set_goal(self, q_goal) -> None:
-        self.set_reference(Hold(np.asarray(q_goal, dtype=float).copy()))
+    def set_goal(self, q_goal, qd=None, horizon_s: float = 0.0) -> None:
+        """Hold at ``q_goal`` (rad); with ``qd`` (rad/s) glide on from it for up to ``horizon_s`` (a servo's
+        stream of setpoints with their velocity)."""
+        q = np.asarray(q_goal, dtype=float).copy()
+        if qd is None or horizon_s <= 0.0:
+            self.set_reference(Hold(q))
+        else:
+            self.set_reference(Glide(q, np.asarray(qd, dtype=float).copy(), float(horizon_s)))
 
     def set_torque(self, on: bool) -> None:
         """Motor torque on (the joint controller runs) or off (the joints are free: gravity acts)."""

@@ -59,6 +59,31 @@ class SimOptions:
 
 
 @dataclass(frozen=True)
+class RetreatSettings:
+    """``distance_m``: how far the touched point moves back (ESTIMATE: 3 cm clears a contact detected
+    within tens of ms at the collaborative speeds of ISO/TS 15066, 0.25-1 m/s, less the detector's lag);
+    ``time_limit_s``: the time the motion must end within (said when the joints' limits need longer)."""
+
+    distance_m: float = 0.03
+    time_limit_s: float = 0.5
+    # a contact whose guidance probability exceeds this is not retreated from (the classifier's, if any)
+    guided_above: float = 0.5
+    # a touched point faster than this (m/s) ran into what it touched and goes back the way it came
+    # (ESTIMATE: ten times what the joints' holding error moves a point)
+    moving_above_m_s: float = 0.05
+    damping_m: float = 0.03  # the damped least squares' lambda (m)
+    waypoints: int = 10  # steps of the Cartesian line
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.distance_m <= 0.5:
+            raise ValueError(f"retreat distance {self.distance_m!r} m: expected (0, 0.5]")
+        if not 0.0 < self.time_limit_s <= 10.0:
+            raise ValueError(f"retreat time limit {self.time_limit_s!r} s: expected (0, 10]")
+        if not 0.0 <= self.guided_above <= 1.0:
+            raise ValueError(f"guided_above {self.guided_above!r}: expected a probability")
+
+
+@dataclass(frozen=True)
 class DeviceOptions:
     """Where the scene's devices are and where their readers run."""
 
@@ -86,7 +111,8 @@ class MonitorOptions:
     record_format: str = "ftc"  # what --record writes: "ftc" (MCAP, the bus's JSON), "ros2" (a ROS 2 bag), "both"
     ros_namespace: str | None = None  # --ros: publish the outputs on ROS 2 under this namespace (None: not)
     events: Path | None = None
-    reflex: str | None = None  # "stop"
+    reflex: str | None = None  # "stop" or "retreat"
+    retreat: RetreatSettings = RetreatSettings()  # with reflex "retreat": how far, how fast
     limits: Path | None = None  # the cell's body limits (docs/limits.md); None: the built-in ISO/TS 15066 regions
     view: ViewOptions = ViewOptions()
     devices: DeviceOptions = DeviceOptions()

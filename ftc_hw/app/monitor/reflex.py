@@ -1,4 +1,5 @@
-"""The monitor's stop reflex: every contact onset stops the arm (``ftc monitor --reflex stop``)."""
+"""The monitor's reflexes: every contact onset stops the arm (``ftc monitor --reflex stop``), or moves the
+touched point back along the contact's force (``--reflex retreat``), unless the contact is guided."""
 from __future__ import annotations
 
 import threading
@@ -6,7 +7,13 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent
+import numpy as np
+
+from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, StaleDataError
+from ftc_hw.model import ArmModel
+
+from .config import RetreatSettings
+from .retreat import RetreatError, RetreatPath, plan_retreat, retreat_direction
 
 
 class StopReflex:
@@ -56,5 +63,145 @@ class StopReflex:
     def close(self) -> None:
         self._sub.close()
         self._quit = True
+        self._wake.set()
+        self._thread.join(5.0)
+
+
+GUIDANCE_FIELD = "guidance"  # a ContactEvent's probability (0-1) that the contact is intended guidance, if it has one
+
+
+def guidance_of(ev: Any) -> float | None:
+    """The event's guidance probability, or None when nothing classified the contact (an optional field)."""
+    value = getattr(ev, GUIDANCE_FIELD, None)
+    return None if value is None else float(value)
+
+
+def is_onset(ev: Any) -> bool:
+    """The retreat's default trigger: a contact's onset."""
+    return isinstance(ev, ContactEvent) and ev.kind == "onset"
+
+
+class RetreatReflex:
+    """``--reflex retreat``: on a trigger (by default every contact onset; ``trigger(event)`` is the hook for
+    any other, such as a limit's exceedance), unless :meth:`should_retreat` says the contact is guided, the
+    touched point is moved back along the contact's force by ``settings.distance_m``: a joint path planned
+    from the arm's newest joint state (:func:`~ftc_hw.app.monitor.retreat.plan_retreat`), streamed to the
+    arm's adapter (``servo``: DYNAMIXEL Goal Position, a UR's RTDE registers) one setpoint every
+    ``arm.servo_period_s``, from a thread of its own (never the pipeline's). One retreat at a time: a trigger
+    during one is counted (``ignored``), not queued. ``retreats`` holds each one's figures."""
+
+    def __init__(self, bus: Bus, arm: Any, model: ArmModel, settings: RetreatSettings, *, joints_topic: str,
+                 triggers: Callable[[Any], bool] = is_onset,
+                 guidance: Callable[[Any], float | None] = guidance_of,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self.bus, self.arm, self.model, self.settings, self._sleep = bus, arm, model, settings, sleep
+        self.joints_topic, self.triggers, self.guidance = joints_topic, triggers, guidance
+        self.retreats: list[dict[str, Any]] = []
+        self.not_fought: list[dict[str, Any]] = []  # guided contacts left alone
+        self.errors: list[str] = []
+        self.ignored = 0
+        self._pending: ContactEvent | None = None
+        self._force_sum: dict[int, np.ndarray] = {}  # per contact id: its estimates' forces added (N)
+        self._planned: set[int] = set()  # contact ids whose retreat is planned (their later estimates unused)
+        self._busy = False
+        self._wake = threading.Event()
+        self._quit = threading.Event()
+        arm.prepare_servo()
+        self._sub = bus.subscribe(EVENTS_CONTACT, callback=self._on_event, first=True)
+        self._thread = threading.Thread(target=self._run, name="retreat-reflex", daemon=True)
+        self._thread.start()
+
+    def _on_event(self, ev: Any) -> None:
+        if isinstance(ev, ContactEvent) and ev.kind != "offset" and ev.contact_id not in self._planned:
+            # the contact's force estimates until the retreat begins (an update's may be better than the
+            # onset's first frame; during the retreat the arm's own acceleration disturbs them)
+            total = self._force_sum.get(ev.contact_id) if ev.kind != "onset" else None
+            self._force_sum[ev.contact_id] = ev.force if total is None else total + ev.force
+        if self.triggers(ev):
+            self.trigger(ev)
+
+    def should_retreat(self, ev: Any) -> bool:
+        """False for a contact classified as guidance (its probability above ``settings.guided_above``)."""
+        g = self.guidance(ev)
+        return g is None or g <= self.settings.guided_above
+
+    def trigger(self, ev: ContactEvent) -> None:
+        """Retreat from the contact ``ev`` (its link, point and force) now, unless it is guided or a retreat
+        is under way. Returns at once; the motion runs on the reflex's thread."""
+        if not self.should_retreat(ev):
+            self.not_fought.append({"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id,
+                                    "guidance": self.guidance(ev)})
+            return
+        if self._busy or self._pending is not None:
+            self.ignored += 1
+            return
+        self._pending = ev
+        self._wake.set()
+
+    def _run(self) -> None:
+        while not self._quit.is_set():
+            self._wake.wait(0.5)
+            self._wake.clear()
+            ev = self._pending
+            if ev is None:
+                continue
+            self._busy = True  # before the pending one is taken: idle() never sees neither
+            self._pending = None
+            try:
+                self.retreats.append(self._retreat(ev))
+            except Exception as exc:  # noqa: BLE001 - reported, the monitor goes on
+                self.errors.append(f"{type(exc).__name__}: {exc}")
+            finally:
+                self._busy = False
+
+    def _retreat(self, ev: ContactEvent) -> dict[str, Any]:
+        t0 = time.monotonic_ns()
+        frame = self.bus.latest(self.joints_topic)
+        if frame is None:
+            raise RetreatError(f"no joint state on {self.joints_topic}")
+        # first a setpoint where the arm is: it brakes while the retreat is planned (milliseconds, more on a
+        # loaded host), as the stop reflex would
+        self.arm.servo(frame.q)
+        t_first = time.monotonic_ns()
+        try:  # where the arm was at the onset: the point moves back from there
+            touch = self.bus.sample_at(self.joints_topic, ev.t_host_ns)
+        except StaleDataError:
+            touch = frame
+        force = self._force_sum.get(ev.contact_id, ev.force)  # the estimates so far: their sum's direction
+        self._planned.add(ev.contact_id)
+        direction, why = retreat_direction(self.model, touch.q, touch.qd, link=ev.link, point=ev.point, force=force,
+                                           settings=self.settings)
+        path = plan_retreat(self.model, frame.q, link=ev.link, point=ev.point, direction=direction,
+                            settings=self.settings, period_s=self.arm.servo_period_s, q_touch=touch.q)
+        t_planned = time.monotonic_ns()
+        sent = 1 + self._stream(path)
+        return {"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id, "link": ev.link,
+                "plan_ms": (t_planned - t0) / 1e6, "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
+                "setpoints": sent, "duration_s": path.duration_s, "moved_m": path.moved_m,
+                "direction": path.direction.tolist(), "direction_from": why, "clipped": path.clipped,
+                "within_time_limit": path.within(self.settings.time_limit_s)}
+
+    def _stream(self, path: RetreatPath) -> int:
+        """Every setpoint after the first (the arm's own position) at its time; how many were sent."""
+        start = time.monotonic()
+        sent = 0
+        for t, q in zip(path.t[1:], path.q[1:], strict=True):
+            if self._quit.is_set():
+                break
+            delay = start + t - path.t[1] - time.monotonic()
+            if delay > 0:
+                self._sleep(delay)
+            self.arm.servo(q)
+            sent += 1
+        self.arm.end_servo()
+        return sent
+
+    def idle(self) -> bool:
+        """No retreat pending or under way."""
+        return self._pending is None and not self._busy
+
+    def close(self) -> None:
+        self._sub.close()
+        self._quit.set()
         self._wake.set()
         self._thread.join(5.0)

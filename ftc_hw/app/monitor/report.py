@@ -3,6 +3,7 @@ code ``DEGRADED_EXIT``) and the summary printed (``print_summary``)."""
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from rich.console import Console
 
@@ -71,7 +72,9 @@ def print_summary(console: Console, cfg: MonitorOptions, served: bool, bus: Bus,
         console.print("faults played: " + ", ".join(f"{f} (done at t = {t:.2f} s)" for f, t in out.faults))
     for line, n in out.vendor_lines.items():
         console.print(f"{line} ({n}x)")
-    if out.reflex:
+    if out.reflex and "retreats" in out.reflex:
+        _print_retreats(console, out.reflex)
+    elif out.reflex:
         stops = out.reflex["stops"]
         sent = [s["sent_after_onset_ms"] for s in stops]
         console.print(f"reflex stop: {len(stops)} sent" + (f", {min(sent):.2f}-{max(sent):.2f} ms after the onset "
@@ -115,3 +118,22 @@ def web_line(web: dict) -> str:
                if 0 < len(onsets) <= 8 else "")
             + (f"; {len(onsets)} onsets sent to the browsers {sorted(onsets)[len(onsets) // 2]:.0f} ms (median), "
                f"{max(onsets):.0f} (max) after their sample" if len(onsets) > 8 else ""))
+
+
+def _print_retreats(console: Console, reflex: dict[str, Any]) -> None:
+    """One line per retreat (the figures ``ftc monitor --reflex retreat`` measured), then what was left alone."""
+    at = reflex.get("at_interface") or [None] * len(reflex["retreats"])
+    for r, rx in zip(reflex["retreats"], at, strict=True):
+        first = r["first_setpoint_after_onset_ms"]
+        console.print(f"reflex retreat: contact {r['contact_id']} on {r['link']}: first setpoint "
+                      f"{first:.1f} ms after the onset sample (planned {r['plan_ms']:.1f} ms after taking it)"
+                      + (f", at the arm's interface {rx:.1f} ms" if rx is not None else "")
+                      + f"; {r['setpoints']} setpoints over {r['duration_s']:.3f} s, the point moved back "
+                      f"{r['moved_m'] * 1e3:.1f} mm (model) along ({', '.join(f'{x:.3f}' for x in r['direction'])})"
+                      + ("" if r["within_time_limit"] else ", OVER the time limit")
+                      + (", a joint range clipped it" if r["clipped"] else ""), highlight=False)
+    if reflex["not_fought"]:
+        console.print(f"reflex retreat: {len(reflex['not_fought'])} guided contact(s) not retreated from")
+    if reflex["ignored"] or reflex["errors"]:
+        console.print(f"reflex retreat: {reflex['ignored']} trigger(s) during a retreat ignored; "
+                      f"errors: {reflex['errors']}")

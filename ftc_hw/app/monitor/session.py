@@ -35,8 +35,9 @@ from ftc_hw.bus import (
 )
 from ftc_hw.bus.remote import free_loopback_endpoint
 from ftc_hw.calibration.file import CalibrationError, load_calibration
-from ftc_hw.devices.base import frozen_heap, responsive_readers
+from ftc_hw.devices.base import DeviceError, frozen_heap, responsive_readers
 from ftc_hw.devices.registry import role_of
+from ftc_hw.model import ArmModel
 from ftc_hw.monitor import MONITOR_INPUT, LiveMonitor
 from ftc_hw.pipeline import Corrections, PipelineSettings
 from ftc_hw.record.events import EventWriter, event_record, read_truth
@@ -48,7 +49,7 @@ from ftc_hw.sim_devices.host import WorldHost
 from .config import MonitorOptions, MonitorOutcome, MonitorSetupError
 from .evaluate import crlb_of_truth, evaluate, solver_rms_of_truth
 from .faults import Fault, FaultError, FaultPlan
-from .reflex import StopReflex
+from .reflex import RetreatReflex, StopReflex
 from .report import judge_degraded, print_summary
 from .sim_joints import SimJointSource
 from .view import LiveView
@@ -302,7 +303,7 @@ class _Live:
     recorder: RecorderProcess | None
     view: LiveView
     pump: _EventPump
-    reflex: StopReflex | None = None
+    reflex: StopReflex | RetreatReflex | None = None
     ros: object | None = None  # the RosPublisher with --ros
 
 
@@ -425,6 +426,8 @@ def _go(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, stack:
     if cfg.reflex == "stop":
         live.reflex = (StopReflex(live.bus, rig.stop_arm, inline=True) if isinstance(rig, RemoteRig) else
                        StopReflex(live.bus, lambda _ev: rig.arm.stop()))
+    elif cfg.reflex == "retreat":
+        live.reflex = _retreat_reflex(cfg, scene, live)
     if world is not None:
         console.print("waiting for the first frames (the sensor is tared at rest) ...")
         _tare_then_go(cfg, monitor, world)
@@ -436,6 +439,19 @@ def _go(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, stack:
     stack.enter_context(frozen_heap())  # set up: no collector pause may stall the readers now
     live.view.status = (f"scene {scene.name}, {monitor.pipeline.level} compensation"
                         + (f", scenario {cfg.world.scenario} (emulated devices)" if cfg.sim else ""))
+
+
+def _retreat_reflex(cfg: MonitorOptions, scene: Scene, live: _Live) -> RetreatReflex:
+    """The retreat, armed: its setpoints go to the arm's adapter in this process (a stream, not one command)."""
+    rig = live.rig
+    arm = None if isinstance(rig, RemoteRig) else rig.arm
+    if arm is None or not arm.servo_period_s:
+        where = "in this process (--readers thread)" if isinstance(rig, RemoteRig) else "that takes joint setpoints"
+        raise MonitorSetupError(f"--reflex retreat streams joint setpoints to an arm adapter {where}")
+    try:
+        return RetreatReflex(live.bus, arm, ArmModel(scene), cfg.retreat, joints_topic=live.topics[1])
+    except DeviceError as exc:
+        raise MonitorSetupError(f"--reflex retreat: {exc}") from None
 
 
 def _stop(live: _Live, out: MonitorOutcome) -> None:
@@ -485,6 +501,17 @@ def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, 
                       + f"); failed {sum(out.ros['failed'].values())}, frames dropped {out.ros['dropped']}",
                       highlight=False)
     print_summary(console, cfg, _served(cfg), live.bus, live.topics, out, rig.adapters, live.recorder)
+
+
+def _setpoints_at_interface(retreats: list[dict], applied: list) -> list[float | None]:
+    """Per retreat: ms from its onset to when the emulated arm read its first setpoint (the first goal the
+    world applied after the onset whose request time the emulator recorded, else its sending time)."""
+    out: list[float | None] = []
+    for r in retreats:
+        onset = r["onset_t_host_ns"]
+        rx = [a.t_rx_ns or a.t_sent_ns for a in applied if a.kind == "goal" and (a.t_rx_ns or a.t_sent_ns) > onset]
+        out.append((min(rx) - onset) / 1e6 if rx else None)
+    return out
 
 
 def _serve_page(cfg: MonitorOptions, console: Console, scene: Scene, stack: contextlib.ExitStack) -> WebFeed:
@@ -545,7 +572,12 @@ def _finish(cfg: MonitorOptions, scene: Scene, live: _Live, out: MonitorOutcome)
     """Counters, the evaluation against the world's truth, the recording's final metadata, problems."""
     monitor, reflex, world, recorder = live.monitor, live.reflex, live.world, live.recorder
     out.counters = dict(monitor.counters)
-    if reflex is not None:
+    if isinstance(reflex, RetreatReflex):
+        out.reflex = {"retreats": reflex.retreats, "not_fought": reflex.not_fought, "ignored": reflex.ignored,
+                      "errors": reflex.errors}
+        if world is not None:  # when the arm's interface took the first setpoint of each retreat
+            out.reflex["at_interface"] = _setpoints_at_interface(reflex.retreats, world.applied())
+    elif reflex is not None:
         out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
         if _served(cfg):  # the arm's reader process says when it stopped the arm
             out.reflex["stopped_by_reader"] = [dict(e.counters) for e in monitor.bus.history(EVENTS_DEVICE)

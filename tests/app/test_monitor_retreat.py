@@ -1,0 +1,99 @@
+"""``ftc monitor --sim --reflex retreat`` end to end, per arm through its own protocol: ur5e over its
+emulated UR controller (ur_rtde's IO interface writing the control-loop program's RTDE registers,
+sim_devices/ur_program.py) and dxl-arm over DYNAMIXEL (Sync Writes of Goal Position), each emulator in its
+own process, the world in another. Ideal world (the pipeline's own model): the reflex is the subject.
+
+``sweep-with-collision``: the sweep meets its obstacle at about 1.74-1.80 s; 2.6 simulated seconds leave
+the retreat and 0.6 s after it. Judged by the world's truth: the contact force below 5 N within 150 ms of
+the onset sample, the estimated touched point moved back the configured distance (the model's figure) and
+the true one (the truth's, on its link) most of it, and no contact after the retreated one ended (the
+retreat caused none).
+"""
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ftc_hw.model import ArmModel
+from ftc_hw.record.events import read_events, read_truth
+from ftc_hw.scene import load_scene
+
+pytestmark = [pytest.mark.realtime, pytest.mark.timeout(240)]
+
+DISTANCE_M = 0.03
+FORCE_N, WITHIN_MS = 5.0, 150.0
+
+
+def _run(tmp_path, scene: str) -> tuple[subprocess.CompletedProcess, list[dict], list[dict]]:
+    events, truth = tmp_path / "events.jsonl", tmp_path / "truth.jsonl"
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", scene, "--sim", "--scenario",
+                           "sweep-with-collision", "--duration", "2.6", "--events", str(events), "--truth",
+                           str(truth), "--no-view", "--reflex", "retreat", "--retreat-distance", str(DISTANCE_M)],
+                          capture_output=True, text=True, timeout=200)
+    return proc, read_events(events), read_truth(truth)
+
+
+def _force(rec: dict) -> float:
+    return max((float(np.linalg.norm(c["force"])) for c in rec["contacts"]), default=0.0)
+
+
+def _point_motion(scene: str, truth: list[dict], i_on: int, first: int, direction: np.ndarray) -> float:
+    """How far the truth's touched point (its first contact sample's, fixed on its link) moved along
+    ``direction`` from the onset to the end of the run (m)."""
+    model = ArmModel(load_scene(scene))
+    c = truth[first]["contacts"][0]
+    b_T_l = model.kinematics(np.array(truth[first]["q"]))[c["link"]]
+    point_link = b_T_l[:3, :3].T @ (np.array(c["point"]) - b_T_l[:3, 3])
+
+    def at(q) -> np.ndarray:
+        b_T_l = model.kinematics(np.array(q))[c["link"]]
+        return b_T_l[:3, :3] @ point_link + b_T_l[:3, 3]
+
+    return float((at(truth[-1]["q"]) - at(truth[i_on]["q"])) @ direction)
+
+
+@pytest.mark.parametrize("scene", ["ur5e", "dxl-arm"])
+def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, clean_or_loaded):
+    proc, events, truth = _run(tmp_path, scene)
+    clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
+    flat = " ".join(proc.stdout.split())
+    m = re.search(r"reflex retreat: contact \d+ on \S+: first setpoint ([0-9.]+) ms after the onset sample \(planned "
+                  r"[0-9.]+ ms after taking it\), at the "
+                  r"arm's interface ([0-9.]+) ms; (\d+) setpoints over ([0-9.]+) s, the point moved back ([0-9.]+) mm "
+                  r"\(model\) along \(([-0-9.]+), ([-0-9.]+), ([-0-9.]+)\)",
+                  flat)
+    assert m, flat[-3000:]
+    onset = next(e for e in events if e["kind"] == "onset")
+    th = np.array([r["t_host_ns"] for r in truth])
+    # the world's state when the onset's F/T sample left it: the last truth line published before the onset
+    # sample reached the monitor (truth lines carry the world's publication times)
+    i_on = int(np.searchsorted(th, onset["t_host_ns"])) - 1
+    first = next(i for i, r in enumerate(truth) if r["contacts"])
+    last = max(i for i, r in enumerate(truth) if r["contacts"])
+    # from when on the force stays below FORCE_N (the sample after the last one at or above it)
+    pressed = [i for i in range(i_on, len(truth)) if _force(truth[i]) >= FORCE_N]
+    freed_ms = (th[pressed[-1] + 1] - onset["t_host_ns"]) / 1e6 if pressed else 0.0
+    retreat = np.array([float(m.group(k)) for k in (6, 7, 8)])  # the reflex's direction: the estimated force's
+    true_force = np.array(truth[max(first, i_on)]["contacts"][0]["force"])  # on the arm: away from the obstacle
+    moved = _point_motion(scene, truth, i_on, first, retreat)
+    moved_true = _point_motion(scene, truth, i_on, first, true_force / np.linalg.norm(true_force))
+    report = (f"{scene}: onset -> first setpoint sent {m.group(1)} ms, at the arm's interface {m.group(2)} ms, "
+              f"force < {FORCE_N} N after {freed_ms:.0f} ms; the true point moved {moved * 1e3:.1f} mm along the "
+              f"retreat, {moved_true * 1e3:.1f} mm along the true force at the onset; contact samples "
+              f"{first}-{last} of {len(truth)}")
+    print(report)
+    assert freed_ms <= WITHIN_MS, report
+    # the reflex moves its estimated point DISTANCE_M (the model's figure, printed); the true point is
+    # elsewhere (the onset's localization error: dxl-arm's estimate is at times on the other finger, 7 cm
+    # off), so it moves along another arc: measured 22-53 mm (dxl-arm) and 28-40 mm (ur5e) over runs here
+    assert float(m.group(5)) >= DISTANCE_M * 1e3 - 0.1, report
+    assert moved >= 0.7 * DISTANCE_M and moved_true >= 0.7 * DISTANCE_M, report
+    # one contact, ended well before the run's end, and none after it (the retreat caused none)
+    assert all(truth[i]["contacts"] for i in range(first, last + 1)), report
+    assert {c["link"] for r in truth for c in r["contacts"]} == {truth[first]["contacts"][0]["link"]}, report
+    assert truth[last]["t"] < truth[-1]["t"] - 0.4, report
+    assert not proc.stderr.count("Traceback"), proc.stderr[-2000:]
