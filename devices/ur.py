@@ -30,6 +30,11 @@ connects, a plain socket with a timeout checks that the controller answers the R
 a hung interface is retired to a background thread (its ``disconnect()`` runs there) and replaced by
 a new one; and the dashboard, the stop path, is a plain socket with timeouts, not ur_rtde's client.
 
+``prepare_servo()``, ``servo(q)``, ``end_servo()``: a stream of joint setpoints (the retreat reflex) written
+with ur_rtde's ``RTDEIOInterface`` to the input registers of the control-loop program
+(``ftc_hw.codecs.ur_control_loop``; docs/arms.md, "Streamed setpoints"), Nagle's algorithm turned off on
+its socket (``no_delay_to``).
+
 ``stop()``, the monitor's reflex: dashboard ``stop`` (the program stops, the arm brakes to a halt
 on its path); ``pause()``: dashboard ``pause``. A reply "Failed to execute: stop" is accepted when
 the program is already stopped. Replies are read as UR documents them for the e-Series dashboard

@@ -30,8 +30,13 @@ packet's time: the oldest held one was sent) and ``ft_late`` (the one sent is mo
 periods old).
 Not modelled: momentum, tool I/O, euromap (0).
 
+Program: besides the scenario, the controller runs the control-loop program of UR's RTDE example with
+joint targets (``ur_program.py``, docs/arms.md "Streamed setpoints"): a write of the flag input register
+hands it the joint input registers as a servo target (the scenario stops there), within the scene's joint
+limits, with ``rtde_set_watchdog(..., "PAUSE")`` semantics (option ``watchdog_hz``, default 1 Hz).
+
 Options: ``address``, ``rtde_port``, ``dashboard_port``, ``controller_version`` and ``frequency``
-(override the device's), ``resume_after_s`` (below).
+(override the device's), ``resume_after_s`` (below), ``watchdog_hz`` (the program's watchdog).
 
 Dashboard (``ur_dashboard.py``: every command of the e-Series dashboard server that UR's client
 library and ur_rtde's DashboardClient wrap, as a table of commands, replies and sources; an unknown

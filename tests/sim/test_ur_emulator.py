@@ -105,12 +105,13 @@ def test_io_interface_writes_show_in_the_outputs(world):
     try:
         assert io.setStandardDigitalOut(3, True) and io.setConfigurableDigitalOut(1, True)
         assert io.setSpeedSlider(0.25) and io.setAnalogOutputVoltage(1, 0.5)
-        assert io.setInputIntRegister(18, -7) and io.setInputDoubleRegister(19, 2.5)
+        # (int register 18 is the emulated control-loop program's flag: a write would start it moving the arm)
+        assert io.setInputIntRegister(20, -7) and io.setInputDoubleRegister(19, 2.5)
         time.sleep(0.05)
         assert r.getActualDigitalOutputBits() == (1 << 3) | (1 << 9)
         assert r.getTargetSpeedFraction() == 0.25 and r.getStandardAnalogOutput1() == 0.5
         raw.ask("V", struct.pack(">H", 2))  # input registers, as an output recipe reports them
-        raw.ask("O", struct.pack(">d", 10.0) + b"input_int_register_18,input_double_register_19")
+        raw.ask("O", struct.pack(">d", 10.0) + b"input_int_register_20,input_double_register_19")
         raw.ask("S")
         cmd, data = raw.recv()
         assert cmd == "U" and struct.unpack(">Bid", data) == (1, -7, 2.5)
