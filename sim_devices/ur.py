@@ -193,9 +193,12 @@ class Controller:
                 elif name == "external_force_torque":
                     self.external_wrench = list(v)
             program = self.control_loop
-            if program is not None and program.registers.flag_name in values and self.runtime == D.RUNTIME_PLAYING:
-                program.on_flag(int(values[program.registers.flag_name]), self.input_double, self.input_int,
-                                t_rx_ns)
+            if program is not None and program.registers.flag_name in values:
+                if self.runtime != D.RUNTIME_PLAYING:  # a stopped or paused program reads no registers
+                    program.counts["not_playing"] += 1
+                else:
+                    program.on_flag(int(values[program.registers.flag_name]), self.input_double, self.input_int,
+                                    t_rx_ns)
 
     # -- dashboard ------------------------------------------------------------------------------------------
     @property

@@ -57,7 +57,7 @@ class ControlLoopProgram:
         self.v_cmd = np.zeros(n)
         self.last_flag_s = 0.0
         self.t_rx_ns = 0
-        self.counts = {"setpoints": 0, "bad_setpoints": 0, "watchdog_pauses": 0, "goals": 0}
+        self.counts = {"setpoints": 0, "bad_setpoints": 0, "watchdog_pauses": 0, "goals": 0, "not_playing": 0}
         self.wake = threading.Event()
         self._lock = threading.Lock()  # register writes (RTDE sessions' threads) against the cycle's thread
 

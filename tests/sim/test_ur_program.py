@@ -159,7 +159,7 @@ def test_the_watchdog_pauses_the_program_when_the_setpoints_stop(cell):
     assert len(goals) == n
     _write(ctl, Q0, 500)  # a paused program takes no setpoints until it plays again
     _run(ctl, clock, 5)
-    assert len(goals) == n
+    assert len(goals) == n and ctl.control_loop.counts["not_playing"] == 1
     assert ctl.dashboard("play") == "Starting program"
     _write(ctl, Q0, 501)
     _run(ctl, clock, 5)
