@@ -289,8 +289,10 @@ def monitor(
                                       "needs the ros extra.")] = False,
     ros_namespace: Annotated[str, typer.Option(help="With --ros: the outputs' namespace.")] = "/ftc",
     reflex: Annotated[Optional[Reflex], typer.Option(help="stop: a contact onset commands the arm to stop; retreat: it "  # noqa: UP045
-                                                     "moves the touched point back along the contact's force, through "
-                                                     "the arm's protocol (a guided contact is left alone).")] = None,
+                                                     "moves the touched point back along the contact normal (the "
+                                                     "reverse of its motion; on a still arm, the force's direction) "
+                                                     "through the arm's protocol; a guided contact is left alone.")
+                 ] = None,
     retreat_distance: Annotated[float, typer.Option(min=0.001, max=0.5, metavar="M", help="With --reflex retreat: "
                                                     "how far the touched point moves back (m).")] = 0.03,
     retreat_time: Annotated[float, typer.Option(min=0.01, max=10.0, metavar="S", help="With --reflex retreat: the "
