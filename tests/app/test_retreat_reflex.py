@@ -150,6 +150,7 @@ def test_a_failed_retreat_is_reported_and_the_next_one_runs(rig):
     bus.publish(EVENTS_CONTACT, _onset(6, force=(0.0, 0.0, 0.0)))  # a still arm and no force: no direction
     _settle(reflex)
     assert reflex.errors and "no direction" in reflex.errors[0]
+    assert len(arm.setpoints) == 1 and arm.ended == 1  # the first setpoint held it there: a stop
     bus.publish(EVENTS_CONTACT, _onset(7))
     _settle(reflex)
     assert len(reflex.retreats) == 1

@@ -84,10 +84,12 @@ def is_onset(ev: Any) -> bool:
 class RetreatReflex:
     """``--reflex retreat``: on a trigger (by default every contact onset; ``trigger(event)`` is the hook for
     any other, such as a limit's exceedance), unless :meth:`should_retreat` says the contact is guided, the
-    touched point is moved back along the contact's force by ``settings.distance_m``: a joint path planned
-    from the arm's newest joint state (:func:`~ftc_hw.app.monitor.retreat.plan_retreat`), streamed to the
-    arm's adapter (``servo``: DYNAMIXEL Goal Position, a UR's RTDE registers) one setpoint every
-    ``arm.servo_period_s``, from a thread of its own (never the pipeline's). One retreat at a time: a trigger
+    touched point is moved back along the contact normal by ``settings.distance_m``: first a setpoint where
+    the arm is (it brakes meanwhile), then a joint path planned from the arm's newest joint state
+    (:func:`~ftc_hw.app.monitor.retreat.retreat_direction`, :func:`~ftc_hw.app.monitor.retreat.plan_retreat`;
+    a plan that fails ends the stream there: a stop), streamed to the arm's adapter (``servo``: DYNAMIXEL
+    Goal Position, a UR's RTDE registers) one setpoint every ``arm.servo_period_s``, from a thread of its own
+    (never the pipeline's). One retreat at a time: a trigger
     during one is counted (``ignored``), not queued. ``retreats`` holds each one's figures."""
 
     def __init__(self, bus: Bus, arm: Any, model: ArmModel, settings: RetreatSettings, *, joints_topic: str,
@@ -163,6 +165,21 @@ class RetreatReflex:
         # loaded host), as the stop reflex would
         self.arm.servo(frame.q)
         t_first = time.monotonic_ns()
+        try:
+            direction, why, path = self._plan(ev, frame)
+        except Exception:
+            self.arm.end_servo()  # no retreat: the arm stays where the first setpoint held it (a stop)
+            raise
+        t_planned = time.monotonic_ns()
+        sent = 1 + self._stream(path)
+        return {"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id, "link": ev.link,
+                "plan_ms": (t_planned - t0) / 1e6, "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
+                "setpoints": sent, "duration_s": path.duration_s, "moved_m": path.moved_m,
+                "direction": path.direction.tolist(), "direction_from": why, "clipped": path.clipped,
+                "within_time_limit": path.within(self.settings.time_limit_s)}
+
+    def _plan(self, ev: ContactEvent, frame: Any) -> tuple[np.ndarray, str, RetreatPath]:
+        """The direction, why that one, and the path, from the arm's joints now (``frame``) and at the onset."""
         try:  # where the arm was at the onset: the point moves back from there
             touch = self.bus.sample_at(self.joints_topic, ev.t_host_ns)
         except StaleDataError:
@@ -173,13 +190,7 @@ class RetreatReflex:
                                            settings=self.settings)
         path = plan_retreat(self.model, frame.q, link=ev.link, point=ev.point, direction=direction,
                             settings=self.settings, period_s=self.arm.servo_period_s, q_touch=touch.q)
-        t_planned = time.monotonic_ns()
-        sent = 1 + self._stream(path)
-        return {"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id, "link": ev.link,
-                "plan_ms": (t_planned - t0) / 1e6, "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
-                "setpoints": sent, "duration_s": path.duration_s, "moved_m": path.moved_m,
-                "direction": path.direction.tolist(), "direction_from": why, "clipped": path.clipped,
-                "within_time_limit": path.within(self.settings.time_limit_s)}
+        return direction, why, path
 
     def _stream(self, path: RetreatPath) -> int:
         """Every setpoint after the first (the arm's own position) at its time; how many were sent."""
