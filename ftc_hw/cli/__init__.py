@@ -56,6 +56,13 @@ class RecordFormat(StrEnum):
     both = "both"
 
 
+class RetreatOn(StrEnum):
+    """What starts a retreat: a contact's onset, or its force past its body region's limit (docs/limits.md)."""
+
+    onset = "onset"
+    exceedance = "exceedance"
+
+
 class Readers(StrEnum):
     """Where the devices' readers run: each in its own process (as ftc serve runs them), in threads here,
     or auto (processes, except with --sim on a host of fewer than 4 cores)."""
@@ -298,6 +305,8 @@ def monitor(
     retreat_time: Annotated[float, typer.Option(min=0.01, max=10.0, metavar="S", help="With --reflex retreat: the "
                                                 "time the motion must end within (s); said when the joints' limits "
                                                 "need longer.")] = 0.5,
+    retreat_on: Annotated[RetreatOn, typer.Option(help="With --reflex retreat: what starts one, a contact's onset or "
+                                                  "its exceedance of the body limits (--limits).")] = RetreatOn.onset,
     resume_after: Annotated[Optional[float], typer.Option(  # noqa: UP045
         min=0.0, metavar="S", help="With --sim and a UR arm: the emulated controller's operator presses play S s "
         "after each stop, and the arm goes on with the scenario where it stopped (with --reflex stop, every "
@@ -354,7 +363,8 @@ def monitor(
                              level=None if level is Level.scene else level.value, refine=refine, record=record,
                              record_format=record_format.value, ros_namespace=ros_namespace if ros else None,
                              events=events, reflex=reflex.value if reflex else None, limits=limits,
-                             retreat=Retreat(distance_m=retreat_distance, time_limit_s=retreat_time),
+                             retreat=Retreat(distance_m=retreat_distance, time_limit_s=retreat_time,
+                                             trigger=retreat_on.value),
                              view=view_options((View.none if no_view else view).value, host, port, view_hz),
                              devices=devices)
     check_monitor(options)

@@ -122,6 +122,27 @@ def test_other_triggers_come_in_through_trigger(rig):
     assert len(reflex.retreats) == 1 and reflex.retreats[0]["contact_id"] == 4
 
 
+def test_retreat_on_exceedance_waits_for_the_limit():
+    """``trigger="exceedance"``: an onset moves nothing; the contact's exceedance of its body limit does."""
+    bus, arm = Bus(), RecordingArm()
+    bus.publish(TOPIC, JointFrame.make(time.monotonic_ns() - 2_000_000, Q0, np.zeros(6), np.zeros(6), None,
+                                       source="arm", seq=0))
+    reflex = RetreatReflex(bus, arm, MODEL, RetreatSettings(trigger="exceedance"), joints_topic=TOPIC,
+                           sleep=lambda s: None)
+    try:
+        ev = _onset(8)
+        bus.publish(EVENTS_CONTACT, ev)
+        _settle(reflex)
+        assert not arm.setpoints
+        bus.publish(EVENTS_CONTACT, dataclasses.replace(ev, kind="exceedance"))
+        _settle(reflex)
+        assert len(reflex.retreats) == 1 and arm.setpoints and arm.ended == 1
+    finally:
+        reflex.close()
+    with pytest.raises(ValueError, match="trigger"):
+        RetreatSettings(trigger="offset")
+
+
 def test_the_direction_is_the_contacts_estimates_until_the_retreat():
     """The onset's force (up), then an update's (sideways) before the retreat is planned: the retreat goes
     along their sum. (Triggered by hand here, so that the update is in before the plan.)"""

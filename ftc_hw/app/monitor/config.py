@@ -58,6 +58,9 @@ class SimOptions:
     resume_after_s: float | None = None  # with a UR arm: its emulated operator plays again after a stop
 
 
+RETREAT_TRIGGERS = ("onset", "exceedance")  # the contact events a retreat starts on
+
+
 @dataclass(frozen=True)
 class RetreatSettings:
     """``distance_m``: how far the touched point moves back (ESTIMATE: 3 cm clears a contact detected
@@ -66,6 +69,7 @@ class RetreatSettings:
 
     distance_m: float = 0.03
     time_limit_s: float = 0.5
+    trigger: str = "onset"  # or "exceedance": a contact's force past its body region's limit (docs/limits.md)
     # a contact whose guidance probability exceeds this is not retreated from (the classifier's, if any)
     guided_above: float = 0.5
     # a touched point faster than this (m/s) ran into what it touched and goes back the way it came
@@ -79,6 +83,8 @@ class RetreatSettings:
             raise ValueError(f"retreat distance {self.distance_m!r} m: expected (0, 0.5]")
         if not 0.0 < self.time_limit_s <= 10.0:
             raise ValueError(f"retreat time limit {self.time_limit_s!r} s: expected (0, 10]")
+        if self.trigger not in RETREAT_TRIGGERS:
+            raise ValueError(f"retreat trigger {self.trigger!r}: expected one of {', '.join(RETREAT_TRIGGERS)}")
         if not 0.0 <= self.guided_above <= 1.0:
             raise ValueError(f"guided_above {self.guided_above!r}: expected a probability")
 

@@ -76,28 +76,29 @@ def guidance_of(ev: Any) -> float | None:
     return None if value is None else float(value)
 
 
-def is_onset(ev: Any) -> bool:
-    """The retreat's default trigger: a contact's onset."""
-    return isinstance(ev, ContactEvent) and ev.kind == "onset"
+def kind_trigger(kind: str) -> Callable[[Any], bool]:
+    """A trigger on contact events of one kind (``onset``, the default; ``exceedance``: a limit crossed)."""
+    return lambda ev: isinstance(ev, ContactEvent) and ev.kind == kind
 
 
 class RetreatReflex:
-    """``--reflex retreat``: on a trigger (by default every contact onset; ``trigger(event)`` is the hook for
-    any other, such as a limit's exceedance), unless :meth:`should_retreat` says the contact is guided, the
-    touched point is moved back along the contact normal by ``settings.distance_m``: first a setpoint where
-    the arm is (it brakes meanwhile), then a joint path planned from the arm's newest joint state
-    (:func:`~ftc_hw.app.monitor.retreat.retreat_direction`, :func:`~ftc_hw.app.monitor.retreat.plan_retreat`;
-    a plan that fails ends the stream there: a stop), streamed to the arm's adapter (``servo``: DYNAMIXEL
-    Goal Position, a UR's RTDE registers) one setpoint every ``arm.servo_period_s``, from a thread of its own
-    (never the pipeline's). One retreat at a time: a trigger
+    """``--reflex retreat``: on a trigger (every contact event of ``settings.trigger``'s kind: an onset, or an
+    exceedance of the body limits; ``triggers`` any other predicate; ``trigger(event)`` retreats at once), unless
+    :meth:`should_retreat` says the contact is guided, the touched point is moved back along the contact normal
+    by ``settings.distance_m``: first a setpoint where the arm is (it brakes meanwhile), then a joint path
+    planned from the arm's newest joint state (:func:`~ftc_hw.app.monitor.retreat.retreat_direction`,
+    :func:`~ftc_hw.app.monitor.retreat.plan_retreat`; a plan that fails ends the stream there: a stop), streamed
+    to the arm's adapter (``servo``: DYNAMIXEL Goal Position, a UR's RTDE registers) one setpoint every
+    ``arm.servo_period_s``, from a thread of its own (never the pipeline's). One retreat at a time: a trigger
     during one is counted (``ignored``), not queued. ``retreats`` holds each one's figures."""
 
     def __init__(self, bus: Bus, arm: Any, model: ArmModel, settings: RetreatSettings, *, joints_topic: str,
-                 triggers: Callable[[Any], bool] = is_onset,
+                 triggers: Callable[[Any], bool] | None = None,
                  guidance: Callable[[Any], float | None] = guidance_of,
                  sleep: Callable[[float], None] = time.sleep) -> None:
         self.bus, self.arm, self.model, self.settings, self._sleep = bus, arm, model, settings, sleep
-        self.joints_topic, self.triggers, self.guidance = joints_topic, triggers, guidance
+        self.joints_topic, self.guidance = joints_topic, guidance
+        self.triggers = triggers or kind_trigger(settings.trigger)
         self.retreats: list[dict[str, Any]] = []
         self.not_fought: list[dict[str, Any]] = []  # guided contacts left alone
         self.errors: list[str] = []
