@@ -218,8 +218,8 @@ class LimitCheck:
     (``limit_kind``: ``transient`` or ``quasi_static``; ``class_assumed``: the contact had no class, so the
     stricter quasi-static limit), that limit ``limit_n`` (N) and the ``margin_n`` to it (N, the limit less
     the event's force: < 0 exceeded); the arm's ``effective_mass_kg`` at the point along the contact's
-    normal (the force's line), the arm's ``speed_mps`` there along it at the onset (m/s, > 0 into the
-    contact) and the region's ``permissible_speed_mps`` for a transient contact with that mass."""
+    normal (the touched surface's), the arm's ``speed_mps`` there along the force's line at the onset (m/s,
+    > 0 into the contact) and the region's ``permissible_speed_mps`` for a transient contact with that mass."""
 
     region: str
     region_from: str

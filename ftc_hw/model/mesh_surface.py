@@ -1,4 +1,5 @@
-"""Localizing on a link's meshes: where a contact's line of action enters the link's shell.
+"""Localizing on a link's meshes: where a contact's line of action enters the link's shell, and the
+shell's normal there.
 
 The solver works on primitives; given its estimate (a point on the line of action and the force), the
 contact on a mesh shell is where that line, followed along the force from outside, first meets the
@@ -37,10 +38,38 @@ class MeshShell:
                 self.meshes.setdefault(model.body(int(model.geom_bodyid[g])).name, []).append(g)
         given = tolerance or {}
         self.tolerance = {link: given.get(link, scene.robot.surface_tolerance) for link in self.meshes}
+        self._facet = np.zeros(3)  # mj_rayMesh's normal out
 
     def entry(self, link: str, q: np.ndarray, point: np.ndarray, force: np.ndarray) -> np.ndarray | None:
         """Where the line ``point + s force`` (base frame), coming along the force, enters ``link``'s
         meshes at joint positions ``q``; None when the link has no mesh or the line misses it."""
+        line = self._line(link, q, point, force)
+        if line is None:
+            return None
+        geoms, start, u = line
+        hits = [h for h in (mujoco.mj_rayMesh(self.model, self.data, g, start, u) for g in geoms) if h >= 0.0]
+        return start + min(hits) * u if hits else None
+
+    def normal(self, link: str, q: np.ndarray, point: np.ndarray, force: np.ndarray) -> np.ndarray | None:
+        """The outward unit normal (base frame) of the first of ``link``'s mesh triangles that the line
+        :meth:`entry` follows meets: the surface's normal where the contact is; None when the link has no
+        mesh or the line misses it."""
+        line = self._line(link, q, point, force)
+        if line is None:
+            return None
+        geoms, start, u = line
+        best, normal, facet = -1.0, None, self._facet
+        for g in geoms:
+            h = mujoco.mj_rayMesh(self.model, self.data, g, start, u, facet)
+            if h >= 0.0 and (best < 0.0 or h < best):
+                best, normal = h, facet.copy()
+        if normal is None:
+            return None
+        return normal if normal @ u <= 0.0 else -normal  # the side the line came from: outward
+
+    def _line(self, link: str, q: np.ndarray, point: np.ndarray,
+              force: np.ndarray) -> tuple[list[int], np.ndarray, np.ndarray] | None:
+        """The link's meshes posed at q, and the line's start outside them and its unit direction."""
         geoms = self.meshes.get(link)
         f = np.linalg.norm(force)
         if not geoms or not f > 0.0:
@@ -48,9 +77,7 @@ class MeshShell:
         self.joints.set_qpos(np.asarray(q, dtype=float), self.data.qpos)
         mujoco.mj_kinematics(self.model, self.data)
         u = np.asarray(force, dtype=float) / f
-        start = np.asarray(point, dtype=float) - _REACH_M * u
-        hits = [h for h in (mujoco.mj_rayMesh(self.model, self.data, g, start, u) for g in geoms) if h >= 0.0]
-        return start + min(hits) * u if hits else None
+        return geoms, np.asarray(point, dtype=float) - _REACH_M * u, u
 
 
 def pipeline_mesh_shell(scene: Scene) -> MeshShell | None:

@@ -4,16 +4,21 @@ Each event gets a :class:`~ftc_hw.bus.LimitCheck`: its body region (a zone holdi
 else the default), the limit that applies by the contact's class (transient or quasi-static; a contact
 without a class is taken as quasi-static, the stricter, and says so), the margin to it, the arm's effective
 mass at the point along the contact's normal (the pipeline's model: identified where a calibration says so),
-the arm's speed there along it at the onset, and the region's permissible speed (ISO/TS 15066 A.3.3, the
+the arm's speed there at the onset, and the region's permissible speed (ISO/TS 15066 A.3.3, the
 two-body model):
 
     mu = (1/m_H + 1/m_R)^-1,   v_max = F_transient / sqrt(mu k)
 
 (``m_H`` and ``k`` the region's effective mass and spring constant, ``m_R`` the arm's effective mass).
-The contact's normal is the line of its force: ``n = -f/|f|`` (``f`` applied to the arm, so ``n`` points
-from the arm into what it touches). Each event's own point and force: a few millimetres and degrees off,
-and the effective mass turns with them (measured, docs/limits.md). A contact whose force goes past its
-limit gets an ``exceedance`` event as well, once per contact and limit kind.
+The mass is taken along the contact's normal ``n``, the touched surface's, pointing from the arm into
+what it touches (the direction the body is compressed in; :func:`~ftc_hw.model.contact_normal.contact_normal`:
+on the surface the pipeline answers on, within the force's friction cone); the force's line leans off it
+by friction. The onset speed is taken along the force's line, ``-f/|f|`` (``f`` applied to the arm): at
+an onset the point, and any surface normal at it, is at its least certain while the force's line is
+measured (docs/limits.md says why this is the standard's closing speed or above it). Each event's own
+point: a few millimetres off, and the normal and the effective mass turn with it (measured, docs/limits.md).
+A contact whose force goes past its limit gets an ``exceedance`` event as well, once per contact and limit
+kind.
 """
 from __future__ import annotations
 
@@ -26,7 +31,9 @@ import numpy as np
 
 from ftc_hw.bus import ContactEvent, LimitCheck
 from ftc_hw.model import ArmModel
+from ftc_hw.model.contact_normal import contact_normal
 from ftc_hw.model.effective_mass import effective_mass, point_speed, pose_for_inertia
+from ftc_hw.model.mesh_surface import pipeline_mesh_shell
 from ftc_hw.scene import Scene
 from ftc_hw.scene.limits import BodyRegion, CellLimits
 
@@ -64,6 +71,9 @@ class LimitAssessor:
         self.arm = ArmModel(corrected_scene(scene, settings), c.payload, c.inertials)
         limits.check_links(self.arm.link_names)
         self.limits = limits
+        # the surface the events' points are on: the meshes where the pipeline answers on them
+        self.shell = pipeline_mesh_shell(scene) if settings.localization.surface == "meshes" else None
+        self.mu = settings.joint.friction_mu
         self._data = mujoco.MjData(self.arm.model)
         self._recent: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=RECENT_FRAMES)
         self._onset_speed: dict[int, float] = {}
@@ -104,14 +114,14 @@ class LimitAssessor:
         magnitude = float(np.linalg.norm(force))
         if magnitude == 0.0 or "no_estimate" in ev.flags or ev.link not in self.arm.link_names or not self._recent:
             return None
-        normal = -force / magnitude
         body = self.arm.model.body(ev.link).id
         m, d, joints = self.arm.model, self._data, self.arm.joints
         if ev.contact_id not in self._onset_speed:  # the contact's first judged event: at the onset's state
             q, qd = self._onset_state.get(ev.contact_id) or self._state_at(ev.t_host_ns)
             pose_for_inertia(m, d, joints, q)
-            self._onset_speed[ev.contact_id] = point_speed(m, d, joints, body, ev.point, normal, qd)
+            self._onset_speed[ev.contact_id] = point_speed(m, d, joints, body, ev.point, -force, qd)
         q = self._state_at(ev.t_host_ns if ev.kind == "onset" else None)[0]
+        normal = self._normal(ev, q)
         pose_for_inertia(m, d, joints, q)
         mass = min(effective_mass(m, d, joints, body, ev.point, normal), IMMOVABLE_KG)
         region, origin = self.limits.region_at(ev.link, ev.point)
@@ -120,6 +130,12 @@ class LimitAssessor:
         limit = region.limit_n(limit_kind)
         return LimitCheck(region.name, origin, limit_kind, kind is None, limit, limit - magnitude, mass,
                           self._onset_speed[ev.contact_id], permissible_speed(region, mass))
+
+    def _normal(self, ev: ContactEvent, q: np.ndarray) -> np.ndarray:
+        """The contact's normal at joint positions q (unit, base frame): the arm's outward surface normal, from
+        the arm into what it touches."""
+        return contact_normal(arm=self.arm, shell=self.shell, link=ev.link, q=q, point=ev.point,
+                               force=np.asarray(ev.force, dtype=float), mu=self.mu)
 
     def _state_at(self, t_ns: int | None) -> tuple[np.ndarray, np.ndarray]:
         """The newest joint state at or before t_ns (None: the newest; the oldest kept if all are after)."""

@@ -1,5 +1,6 @@
 """Where a probe meets a true arm's mesh shell: the point the model's surface point would be pressed
-at, found along the model's outward normal (MuJoCo's ray-mesh test, the mesh's own triangles)."""
+at, found along the model's outward normal (MuJoCo's ray-mesh test, the mesh's own triangles), and
+the shell's normal there (the contact's true normal)."""
 from __future__ import annotations
 
 import mujoco
@@ -20,11 +21,23 @@ def mesh_point(m: mujoco.MjModel, d: mujoco.MjData, body: int, point_link: np.nd
                outward_link: np.ndarray) -> np.ndarray | None:
     """The first shell point a ray meets coming in along ``-outward_link`` from outside ``point_link``
     (body frame in and out; ``d`` posed by a forward pass); None when it misses every mesh."""
+    hit = mesh_hit(m, d, body, point_link, outward_link)
+    return None if hit is None else hit[0]
+
+
+def mesh_hit(m: mujoco.MjModel, d: mujoco.MjData, body: int, point_link: np.ndarray,
+             outward_link: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`mesh_point` and the shell's outward unit normal there (its triangle's), both in the body
+    frame; None when the ray misses every mesh."""
     rot, pos = d.xmat[body].reshape(3, 3), d.xpos[body]
     n = rot @ (outward_link / np.linalg.norm(outward_link))
     start = rot @ point_link + pos + _REACH_M * n
-    hits = [mujoco.mj_rayMesh(m, d, g, start, -n) for g in shell_meshes(m, body)]
-    hits = [h for h in hits if h >= 0.0]
-    if not hits:
+    best, normal, facet = -1.0, np.zeros(3), np.zeros(3)
+    for g in shell_meshes(m, body):
+        h = mujoco.mj_rayMesh(m, d, g, start, -n, facet)
+        if h >= 0.0 and (best < 0.0 or h < best):
+            best, normal = h, facet.copy()
+    if best < 0.0:
         return None
-    return rot.T @ (start - min(hits) * n - pos)
+    normal = normal if normal @ n >= 0.0 else -normal  # the triangle's side the ray came from: outward
+    return rot.T @ (start - best * n - pos), rot.T @ normal
