@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ftc_hw.bus import Bus, ContactEvent, DeviceEvent, JointFrame, WrenchFlag, WrenchFrame
-from ftc_hw.monitor import MONITOR_INPUT, JudgedFrame, PipelineInput
+from ftc_hw.monitor import MONITOR_INPUT, MONITOR_JUDGED, JudgedFrame, PipelineInput
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.writer_process import RecorderProcess, pack, unpack
 
@@ -71,8 +71,8 @@ def test_odd_shapes_go_as_json_and_unknown_kinds_come_back_as_none():
 
 
 def _topic(f) -> str:
-    return {WrenchFrame: "wrench/ft", PipelineInput: MONITOR_INPUT, JointFrame: "joints/arm",
-            DeviceEvent: "events/device", ContactEvent: "events/contact"}[type(f)]
+    return {WrenchFrame: "wrench/ft", PipelineInput: MONITOR_INPUT, JudgedFrame: MONITOR_JUDGED,
+            JointFrame: "joints/arm", DeviceEvent: "events/device", ContactEvent: "events/contact"}[type(f)]
 
 
 def test_what_the_bus_carried_is_in_the_file(tmp_path):
