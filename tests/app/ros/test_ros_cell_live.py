@@ -97,7 +97,7 @@ def _run_cell(tmp_path: Path) -> tuple[str, int, dict[str, list[dict]]]:
         pub.kill()
         mon.send_signal(signal.SIGTERM)
         out = mon.communicate(timeout=60)[0]
-        sub.terminate()
+        sub.kill()  # its lines are flushed as they come
         sub.wait(10)
     return out, t_kill_ns, _received(tmp_path / "received.jsonl")
 
