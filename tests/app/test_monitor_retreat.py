@@ -62,7 +62,7 @@ def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, cl
     clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
     flat = " ".join(proc.stdout.split())
     m = re.search(r"reflex retreat: contact \d+ on \S+: first setpoint ([0-9.]+) ms after the onset sample \(planned "
-                  r"[0-9.]+ ms after taking it\), at the "
+                  r"[0-9.]+ ms after taking it, [0-9.]+ of them planning\), at the "
                   r"arm's interface ([0-9.]+) ms; (\d+) setpoints over ([0-9.]+) s, the point moved back ([0-9.]+) mm "
                   r"\(model\), every point it may be at \(\d+\) at least ([0-9.]+) mm, along "
                   r"\(([-0-9.]+), ([-0-9.]+), ([-0-9.]+)\)",

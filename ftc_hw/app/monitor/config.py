@@ -77,7 +77,7 @@ class RetreatSettings:
     # (ESTIMATE: ten times what the joints' holding error moves a point)
     moving_above_m_s: float = 0.05
     damping_m: float = 0.03  # the damped least squares' lambda (m)
-    waypoints: int = 10  # steps of the Cartesian line
+    waypoints: int = 5  # steps of the Cartesian line (each two Gauss-Newton steps: the planning time)
     # the path is at most this many times the one fitted to move the region's points the distance (the
     # estimated point then goes back at most about max_scale x distance_m; ESTIMATE: on dxl-arm, whose four
     # joints cannot translate the hand, the region's least point needs up to ~1.8x, docs/monitor.md)

@@ -179,7 +179,8 @@ class RetreatReflex:
         short = self._say_short(ev, path)
         sent = 1 + self._stream(path)
         return {"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id, "link": ev.link,
-                "plan_ms": (t_planned - t0) / 1e6, "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
+                "plan_ms": (t_planned - t0) / 1e6, "planning_ms": (t_planned - t_first) / 1e6,
+                "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
                 "setpoints": sent, "duration_s": path.duration_s, "moved_m": path.moved_m, "least_m": path.least_m,
                 "region_points": path.points, "needed_s": path.needed_s, "time_cut": path.time_cut,
                 "direction": path.direction.tolist(), "direction_from": why, "clipped": path.clipped,

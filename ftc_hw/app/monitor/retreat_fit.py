@@ -23,14 +23,12 @@ from .retreat_region import Region
 
 def stacked_jacobian(model: ArmModel, q: np.ndarray, link: str, points: np.ndarray) -> np.ndarray:
     """The positional Jacobians (k, 3, n) of ``link``'s points at ``points`` (k, 3, base) at q: the body's
-    twist from three point Jacobians (a point's velocity is ``v_0 + w x r``), then each point's."""
-    p0 = points[0]
-    j0 = model.jacobian(q, link, p0)
-    jx = model.jacobian(q, link, p0 + np.array([1.0, 0.0, 0.0])) - j0  # -[e_x]x J_w
-    jy = model.jacobian(q, link, p0 + np.array([0.0, 1.0, 0.0])) - j0  # -[e_y]x J_w
-    wx, wy, wz = jy[2], -jx[2], jx[1]  # the body's angular Jacobian, row by row
-    rx, ry, rz = (points - p0).T[:, :, None]
-    return j0[None] + np.stack([wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx], axis=1)
+    twist at the first, then each point's (a point ``r`` away moves at ``v_0 + w x r``)."""
+    j0, (wx, wy, wz) = model.twist_jacobian(q, link, points[0])
+    rx, ry, rz = (points - points[0]).T[:, :, None]
+    out = np.empty((len(points), 3, len(wx)))
+    out[:, 0], out[:, 1], out[:, 2] = wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx
+    return out + j0
 
 
 def region_jacobian(model: ArmModel, q: np.ndarray, region: Region, points: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ from the wrist it touched) is not covered.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -53,11 +54,14 @@ class Region:
         """The points in the base frame at q (k, 3): one kinematics pass, the region's bodies' poses only."""
         xpos, xquat = model.body_poses(q)
         out = np.empty_like(self.points)
-        for i, link in enumerate(self.links):
-            mine = self.link_of == i
+        for link, mine in self._by_link:
             bid = model.model.body(link).id
             out[mine] = self.points[mine] @ _rotation(xquat[bid]).T + xpos[bid]
         return out
+
+    @cached_property
+    def _by_link(self) -> list[tuple[str, np.ndarray]]:
+        return [(link, np.flatnonzero(self.link_of == i)) for i, link in enumerate(self.links)]
 
 
 def _rotation(quat: np.ndarray) -> np.ndarray:
