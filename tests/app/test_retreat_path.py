@@ -234,3 +234,27 @@ def test_a_path_over_the_time_limit_is_cut_to_it(arm):
     free = plan_retreat(model, q0, link=link, point=point, direction=force,
                         settings=RetreatSettings(distance_m=0.1, time_limit_s=10.0), period_s=PERIOD_S)
     assert not free.time_cut and free.needed_s == pytest.approx(path.needed_s)
+
+
+def test_the_line_of_actions_other_crossing_is_in_the_region():
+    """dxl-arm: the onset's estimate on the right finger with a 1 cm point_std, the contact on the left one on
+    the same line of action (the localization picked the wrong crossing): the region takes in the left finger
+    through its tube around the line (not through the ellipsoid), and that point goes back the distance."""
+    scene = load_scene("dxl-arm")
+    model = ArmModel(scene)
+    q0 = np.array(scene.robot.home)
+    links = model.kinematics(q0)
+    right, left = (links[f"gripper_{side}_link"][:3, 3] for side in ("right", "left"))
+    force = 5.0 * (left - right) / np.linalg.norm(left - right)
+    settings = RetreatSettings()
+    samples = SurfaceSamples(model)
+    kw = {"point": right, "point_std": np.full(3, 0.01), "floor_m": settings.region_floor_m,
+          "reach_m": settings.region_reach_m, "force": force}
+    assert "gripper_left_link" not in samples.region(q0, link="gripper_right_link", **kw).links
+    region = samples.region(q0, link="gripper_right_link", tube_m=settings.region_tube_m, **kw)
+    assert "gripper_left_link" in region.links
+    direction = np.cross(force, [0.0, 0.0, 1.0])  # sideways to the line, as a sweep's motion would be
+    path = plan_retreat(model, q0, link="gripper_right_link", point=right, direction=direction, settings=settings,
+                        period_s=PERIOD_S, region=region)
+    moved = (point_at(model, q0, path.q[-1], link="gripper_left_link", point=left) - left) @ path.direction
+    assert moved >= 0.03 - 1e-3 and path.least_m >= 0.03 - 1e-4

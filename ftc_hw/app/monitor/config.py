@@ -83,11 +83,15 @@ class RetreatSettings:
     # joints cannot translate the hand, the region's least point needs up to ~1.8x, docs/monitor.md)
     max_scale: float = 2.0
     # the region the contact may be at (retreat_region.py): the event's 95 % ellipsoid, each sigma at least
-    # region_floor_m (ESTIMATE: a few mm, the steady-state localization error), within region_reach_m of the
-    # estimate (ESTIMATE: the largest onset error measured, 71 mm on dxl-arm's other finger, 26 mm on ur5e;
-    # the onset's point_std, 0.1-0.3 m along the force's line, would take in the whole hand)
+    # region_floor_m (ESTIMATE: a few mm, the steady-state localization error), and the surface within
+    # region_tube_m of the event's line of action (ESTIMATE: 2 cm, about a finger's half-size: the line's other
+    # crossings, on dxl-arm the other finger, where the onset's estimate at times is while its point_std says
+    # 1 cm), within region_reach_m of the estimate (ESTIMATE: the largest onset errors measured near the touched
+    # link, 91 mm on dxl-arm's other finger, 74 mm on ur5e's next link; the onset's point_std, 0.1-3 m along the
+    # force's line, would take in the whole arm)
     region_floor_m: float = 0.005
-    region_reach_m: float = 0.08
+    region_tube_m: float = 0.02
+    region_reach_m: float = 0.1
 
     def __post_init__(self) -> None:
         if not 0.0 < self.distance_m <= 0.5:
@@ -100,9 +104,9 @@ class RetreatSettings:
             raise ValueError(f"guided_above {self.guided_above!r}: expected a probability")
         if not 1.0 <= self.max_scale <= 10.0:
             raise ValueError(f"max_scale {self.max_scale!r}: expected [1, 10]")
-        if not 0.0 <= self.region_floor_m <= self.region_reach_m <= 1.0:
-            raise ValueError(f"region_floor_m {self.region_floor_m!r}, region_reach_m {self.region_reach_m!r} m: "
-                             "expected 0 <= floor <= reach <= 1")
+        if not 0.0 <= max(self.region_floor_m, self.region_tube_m) <= self.region_reach_m <= 1.0:
+            raise ValueError(f"region_floor_m {self.region_floor_m!r}, region_tube_m {self.region_tube_m!r}, "
+                             f"region_reach_m {self.region_reach_m!r} m: expected 0 <= floor, tube <= reach <= 1")
 
 
 @dataclass(frozen=True)

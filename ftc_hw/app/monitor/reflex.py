@@ -217,7 +217,8 @@ class RetreatReflex:
                                            settings=self.settings)
         s = self.settings
         region = self._samples.region(touch.q, link=ev.link, point=ev.point, point_std=ev.point_std,
-                                      floor_m=s.region_floor_m, reach_m=s.region_reach_m)
+                                      floor_m=s.region_floor_m, reach_m=s.region_reach_m, force=ev.force,
+                                      tube_m=s.region_tube_m)
         path = plan_retreat(self.model, frame.q, link=ev.link, point=ev.point, direction=direction, settings=s,
                             period_s=self.arm.servo_period_s, q_touch=touch.q, region=region)
         return direction, why, path

@@ -3,10 +3,11 @@
 on the next link), so the retreat moves back every point of the arm's surface the contact may be at, not the
 estimate alone.
 
-That region is the event's 95 % ellipsoid (``point_std`` per base axis, each at least ``floor_m``), within
-``reach_m`` of the estimate, on the touchable surfaces of every link a retreat can move, sampled uniformly by
-area once per model. An estimate further off than ``reach_m`` (ur5e, one onset in six: on the forearm, 27 cm
-from the wrist it touched) is not covered.
+That region is the event's 95 % ellipsoid (``point_std`` per base axis, each at least ``floor_m``) and a tube
+around the event's line of action (its other crossings of the surface), within ``reach_m`` of the estimate, on
+the touchable surfaces of every link a retreat can move, sampled uniformly by area once per model. An
+estimate further off than ``reach_m`` (ur5e, some onsets: on the forearm, 20-27 cm from the wrist it touched)
+is not covered.
 """
 from __future__ import annotations
 
@@ -89,20 +90,28 @@ class SurfaceSamples:
             per_link.setdefault(s.link, []).append(local @ s.link_T_geom[:3, :3].T + s.link_T_geom[:3, 3])
         self.points = {link: np.concatenate(chunks) for link, chunks in per_link.items()}
 
-    def region(self, q: np.ndarray, *, link: str, point: np.ndarray, point_std: np.ndarray,
-               floor_m: float, reach_m: float = np.inf) -> Region:
+    def region(self, q: np.ndarray, *, link: str, point: np.ndarray, point_std: np.ndarray, floor_m: float,
+               reach_m: float = np.inf, force=None, tube_m: float = 0.0) -> Region:
         """Where the contact estimated at ``point`` (base, m) on ``link`` with ``point_std`` (3, m, 1 sigma per
-        base axis) may be, at q (rad): the estimate first, then the samples inside the 95 % ellipsoid with
-        each sigma at least ``floor_m`` and within ``reach_m`` of the estimate."""
+        base axis) may be, at q (rad): the estimate first, then the samples within ``reach_m`` of the
+        estimate that are inside the 95 % ellipsoid with each sigma at least ``floor_m``, or within ``tube_m``
+        of the line through the estimate along ``force`` (3, N: its line of action, where the other
+        crossings of the surface lie, one of which the localization picked)."""
         poses = self.model.kinematics(q)
         point = np.asarray(point, dtype=float)
         sigma = np.maximum(np.nan_to_num(np.asarray(point_std, dtype=float), nan=np.inf), floor_m)
+        f = np.zeros(3) if force is None else np.nan_to_num(np.asarray(force, dtype=float))
+        line = f / np.linalg.norm(f) if np.linalg.norm(f) > 0.0 else None
         t = poses[link]
         links, link_of, pts = [link], [np.zeros(1, dtype=int)], [(t[:3, :3].T @ (point - t[:3, 3]))[None]]
         for other, local in self.points.items():
             t = poses[other]
             off = local @ t[:3, :3].T + t[:3, 3] - point
-            inside = (np.sum((off / sigma) ** 2, axis=1) <= CHI2_3DOF_95) & (np.sum(off * off, axis=1) <= reach_m**2)
+            inside = np.sum((off / sigma) ** 2, axis=1) <= CHI2_3DOF_95
+            if line is not None and tube_m > 0.0:
+                across = off - np.outer(off @ line, line)
+                inside |= np.sum(across * across, axis=1) <= tube_m**2
+            inside &= np.sum(off * off, axis=1) <= reach_m**2
             if not inside.any():
                 continue
             if other not in links:
