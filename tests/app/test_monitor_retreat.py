@@ -77,6 +77,7 @@ def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, cl
     last = max(i for i, r in enumerate(truth) if r["contacts"])
     # from when on the force stays below FORCE_N (the sample after the last one at or above it)
     pressed = [i for i in range(i_on, len(truth)) if _force(truth[i]) >= FORCE_N]
+    th = np.append(th, np.inf)  # a contact that lasts to the run's end: never freed
     freed_ms = (th[pressed[-1] + 1] - onset["t_host_ns"]) / 1e6 if pressed else 0.0
     retreat = np.array([float(m.group(k)) for k in (7, 8, 9)])  # the reflex's direction: the estimated force's
     true_force = np.array(truth[max(first, i_on)]["contacts"][0]["force"])  # on the arm: away from the obstacle

@@ -80,7 +80,7 @@ class RetreatSettings:
     waypoints: int = 5  # steps of the Cartesian line (each two Gauss-Newton steps: the planning time)
     # the path is at most this many times the one fitted to move the region's points the distance (the
     # estimated point then goes back at most about max_scale x distance_m; ESTIMATE: on dxl-arm, whose four
-    # joints cannot translate the hand, the region's least point needs up to ~1.8x, docs/monitor.md)
+    # joints cannot translate the hand, the region's least point needs 1.4-1.7x, docs/monitor.md)
     max_scale: float = 2.0
     # the region the contact may be at (retreat_region.py): the event's 95 % ellipsoid, each sigma at least
     # region_floor_m (ESTIMATE: a few mm, the steady-state localization error), and the surface within
