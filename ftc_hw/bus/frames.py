@@ -77,8 +77,11 @@ ContactKind = Literal["onset", "update", "offset", "exceedance"]
 # judged; an open contact is closed by an offset flagged "lost"); sensor_back / arm_back: it returned
 # stopped: an arm's reader stopped it on a remote monitor's command (ftc serve), its latency in the counters
 # counters: a reader process's adapter counters (ftc serve: every second, and a final one flagged "final")
+# retreat_short: a retreat (--reflex retreat) that moves some point the contact may be at less than its
+# distance (cut to its time limit, its length cap or a joint range): what it does instead, in the message
 DeviceEventKind = Literal["connect", "disconnect", "error", "stale", "recovered", "reconnecting",
-                          "sensor_lost", "sensor_back", "arm_lost", "arm_back", "stopped", "counters"]
+                          "sensor_lost", "sensor_back", "arm_lost", "arm_back", "stopped", "counters",
+                          "retreat_short"]
 CONTACT_KINDS: frozenset[str] = frozenset(get_args(ContactKind))
 DEVICE_EVENT_KINDS: frozenset[str] = frozenset(get_args(DeviceEventKind))
 STREAM_EVENT_KINDS: frozenset[str] = frozenset({"sensor_lost", "sensor_back", "arm_lost", "arm_back"})

@@ -301,10 +301,12 @@ def monitor(
                                                      "through the arm's protocol; a guided contact is left alone.")
                  ] = None,
     retreat_distance: Annotated[float, typer.Option(min=0.001, max=0.5, metavar="M", help="With --reflex retreat: "
-                                                    "how far the touched point moves back (m).")] = 0.03,
+                                                    "how far the touched point -- every point the contact may be at "
+                                                    "-- moves back (m).")] = 0.03,
     retreat_time: Annotated[float, typer.Option(min=0.01, max=10.0, metavar="S", help="With --reflex retreat: the "
-                                                "time the motion must end within (s); said when the joints' limits "
-                                                "need longer.")] = 0.5,
+                                                "time the motion must end within (s); a motion the joints' limits "
+                                                "make longer is cut to end in time, and said (a retreat_short "
+                                                "event).")] = 0.5,
     retreat_on: Annotated[RetreatOn, typer.Option(help="With --reflex retreat: what starts one, a contact's onset or "
                                                   "its exceedance of the body limits (--limits).")] = RetreatOn.onset,
     resume_after: Annotated[Optional[float], typer.Option(  # noqa: UP045

@@ -271,6 +271,16 @@ class ArmModel:
         mujoco.mj_jac(self.model, self.data, jac, None, np.asarray(point, dtype=float), self.model.body(link).id)
         return self.joints.jacobian(jac)
 
+    def twist_jacobian(self, q, link: str, point) -> tuple[np.ndarray, np.ndarray]:
+        """The positional (3 x n, m/rad) and rotational (3 x n, rad/rad) Jacobians of ``link`` at ``point``
+        (base frame) at q, from one posing (a point ``r`` away moves at ``J_p + J_r x r``)."""
+        self._set(q)
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+        jacp, jacr = np.zeros((3, self.model.nv)), np.zeros((3, self.model.nv))
+        mujoco.mj_jac(self.model, self.data, jacp, jacr, np.asarray(point, dtype=float), self.model.body(link).id)
+        return self.joints.jacobian(jacp), self.joints.jacobian(jacr)
+
     def contact_acceleration(self, q, link: str, point, force) -> np.ndarray:
         """The joint accelerations (rad/s^2) a force (N, base frame) on ``link`` at ``point`` adds at
         once, before any joint controller reacts to the motion it causes: M(q)^-1 J^T f."""

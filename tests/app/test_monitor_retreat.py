@@ -5,9 +5,9 @@ own process, the world in another. Ideal world (the pipeline's own model): the r
 
 ``sweep-with-collision``: the sweep meets its obstacle at about 1.74-1.80 s; 2.6 simulated seconds leave
 the retreat and 0.6 s after it. Judged by the world's truth: the contact force below 5 N within 150 ms of
-the onset sample, the estimated touched point moved back the configured distance (the model's figure) and
-the true one (the truth's, on its link) most of it, and no contact after the retreated one ended (the
-retreat caused none).
+the onset sample, the true touched point (the truth's, on its link; the onset's estimate is centimetres off)
+moved back at least the configured distance along the retreat, and no contact after the retreated one ended
+(the retreat caused none).
 """
 from __future__ import annotations
 
@@ -62,9 +62,10 @@ def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, cl
     clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
     flat = " ".join(proc.stdout.split())
     m = re.search(r"reflex retreat: contact \d+ on \S+: first setpoint ([0-9.]+) ms after the onset sample \(planned "
-                  r"[0-9.]+ ms after taking it\), at the "
+                  r"[0-9.]+ ms after taking it, [0-9.]+ of them planning\), at the "
                   r"arm's interface ([0-9.]+) ms; (\d+) setpoints over ([0-9.]+) s, the point moved back ([0-9.]+) mm "
-                  r"\(model\) along \(([-0-9.]+), ([-0-9.]+), ([-0-9.]+)\)",
+                  r"\(model\), every point it may be at \(\d+\) at least ([0-9.]+) mm, along "
+                  r"\(([-0-9.]+), ([-0-9.]+), ([-0-9.]+)\)",
                   flat)
     assert m, flat[-3000:]
     onset = next(e for e in events if e["kind"] == "onset")
@@ -76,25 +77,27 @@ def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, cl
     last = max(i for i, r in enumerate(truth) if r["contacts"])
     # from when on the force stays below FORCE_N (the sample after the last one at or above it)
     pressed = [i for i in range(i_on, len(truth)) if _force(truth[i]) >= FORCE_N]
+    th = np.append(th, np.inf)  # a contact that lasts to the run's end: never freed
     freed_ms = (th[pressed[-1] + 1] - onset["t_host_ns"]) / 1e6 if pressed else 0.0
-    retreat = np.array([float(m.group(k)) for k in (6, 7, 8)])  # the reflex's direction: the estimated force's
+    retreat = np.array([float(m.group(k)) for k in (7, 8, 9)])  # the reflex's direction: the estimated force's
     true_force = np.array(truth[max(first, i_on)]["contacts"][0]["force"])  # on the arm: away from the obstacle
     moved = _point_motion(scene, truth, i_on, first, retreat)
     moved_true = _point_motion(scene, truth, i_on, first, true_force / np.linalg.norm(true_force))
     peak = max(_force(r) for r in truth[i_on:])
     ended_ms = (th[last + 1] - onset["t_host_ns"]) / 1e6
     report = (f"{scene}: onset -> first setpoint sent {m.group(1)} ms, at the arm's interface {m.group(2)} ms, "
+              f"the estimate moved {m.group(5)} mm, the region's least {m.group(6)} mm (model), "
               f"force < {FORCE_N} N after {freed_ms:.0f} ms (peak after the onset {peak:.1f} N), no contact after "
               f"{ended_ms:.0f} ms; the true point moved {moved * 1e3:.1f} mm along the "
               f"retreat, {moved_true * 1e3:.1f} mm along the true force at the onset; contact samples "
               f"{first}-{last} of {len(truth)}")
     print(report)
     assert freed_ms <= WITHIN_MS and ended_ms <= 1e3 * TIME_LIMIT_S, report
-    # the reflex moves its estimated point DISTANCE_M (the model's figure, printed); the true point is
-    # elsewhere (the onset's localization error: dxl-arm's estimate is at times on the other finger, 7 cm
-    # off), so it moves along another arc: measured 22-53 mm (dxl-arm) and 28-40 mm (ur5e) over runs here
-    assert float(m.group(5)) >= DISTANCE_M * 1e3 - 0.1, report
-    assert moved >= 0.7 * DISTANCE_M and moved_true >= 0.7 * DISTANCE_M, report
+    # every point the contact may be at goes back DISTANCE_M (the model's figure), so the true one does, within
+    # the emulated arm's tracking of the last setpoint (ESTIMATE: 0.5 mm)
+    assert float(m.group(6)) >= DISTANCE_M * 1e3 - 0.5, report
+    assert moved >= DISTANCE_M - 5e-4, report
+    assert moved_true >= 0.7 * DISTANCE_M, report  # along the true force: the retreat's direction is an estimate
     # one contact, ended well before the run's end, and none after it (the retreat caused none)
     assert all(truth[i]["contacts"] for i in range(first, last + 1)), report
     assert {c["link"] for r in truth for c in r["contacts"]} == {truth[first]["contacts"][0]["link"]}, report

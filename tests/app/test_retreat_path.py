@@ -1,7 +1,7 @@
 """The retreat's joint path (``ftc_hw.app.monitor.retreat``), on the models alone: the touched point goes back
-along the contact's force by the configured distance on a straight line, every setpoint keeps the joints
-within the scene's speed and acceleration limits and the model's joint ranges, and a retreat that cannot
-be planned says why."""
+along the contact's force by the configured distance on a straight line, and so does every point the contact
+may be at; every setpoint keeps the joints within the scene's speed and acceleration limits and the model's
+joint ranges, the path ends within the time limit, and a retreat that cannot be planned says why."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +9,9 @@ import pytest
 
 from ftc_hw.app.monitor.config import RetreatSettings
 from ftc_hw.app.monitor.retreat import RetreatError, plan_retreat, point_at, retreat_direction
+from ftc_hw.app.monitor.retreat_region import CHI2_3DOF_95, SurfaceSamples
 from ftc_hw.model import ArmModel
+from ftc_hw.model.sampling import sample_surface_points
 from ftc_hw.scene import load_scene
 
 pytestmark = pytest.mark.compute
@@ -85,8 +87,8 @@ def test_a_far_retreat_is_slower_and_within_the_limits(arm):
     link, point, force = _contacts(model, q0, np.random.default_rng(5), 1)[0]
     short = plan_retreat(model, q0, link=link, point=point, direction=force, settings=RetreatSettings(distance_m=0.02),
                          period_s=PERIOD_S)
-    far = plan_retreat(model, q0, link=link, point=point, direction=force, settings=RetreatSettings(distance_m=0.1),
-                       period_s=PERIOD_S)
+    far = plan_retreat(model, q0, link=link, point=point, direction=force,
+                       settings=RetreatSettings(distance_m=0.1, time_limit_s=10.0), period_s=PERIOD_S)
     assert far.duration_s > short.duration_s
     _check_limits(scene, model, far)
     assert short.within(0.5) and not far.within(short.duration_s)
@@ -183,3 +185,76 @@ def test_the_direction_reverses_a_moving_arm_and_follows_the_force_on_a_still_on
     slow = qd * 0.05 / np.linalg.norm(v) * 0.9  # just under the threshold
     u, why = retreat_direction(model, q, slow, link="wrist_3", point=point, force=force, settings=RetreatSettings())
     assert why == "force" and np.allclose(u, [0.0, 0.0, 1.0])
+
+
+def test_every_point_the_contact_may_be_at_goes_back(arm):
+    """The onset's estimate is centimetres off: the region (the event's ellipsoid on the arm's surface, within
+    its reach) goes back the distance, every sample of it and so a true point elsewhere in it (one not among
+    the samples) within the samples' spacing; the estimate goes back further, by less than ``max_scale``. On
+    dxl-arm the region takes in both fingers and the hand, on ur5e the wrist's three links."""
+    scene, model = arm
+    q0 = np.array(scene.robot.home)
+    settings = RetreatSettings(distance_m=0.03)
+    samples = SurfaceSamples(model)
+    link = "wrist_3" if scene.name == "ur5e" else "gripper_left_link"
+    truths = sample_surface_points(model, q0, 400, np.random.default_rng(1))
+    rng = np.random.default_rng(2)
+    for k in range(4):
+        point = model.kinematics(q0)[link][:3, 3] + rng.normal(0.0, 0.01, 3)
+        force = model.jacobian(q0, link, point) @ rng.normal(0.0, 1.0, model.n_joints)
+        std = np.full(3, 0.03)
+        region = samples.region(q0, link=link, point=point, point_std=std, floor_m=settings.region_floor_m,
+                                reach_m=settings.region_reach_m)
+        path = plan_retreat(model, q0, link=link, point=point, direction=force, settings=settings,
+                            period_s=PERIOD_S, region=region)
+        u = path.direction
+        assert path.points == len(region) > 20 and not path.time_cut
+        assert path.least_m >= 0.03 - 1e-4, (k, path.least_m)
+        assert 0.03 - 1e-4 <= path.moved_m <= settings.max_scale * 0.03, (k, path.moved_m)
+        inside = [t for t in truths if t.link in samples.points
+                  and np.sum(((t.point - point) / std) ** 2) <= CHI2_3DOF_95
+                  and np.linalg.norm(t.point - point) <= settings.region_reach_m]
+        for t in inside:
+            moved = (point_at(model, q0, path.q[-1], link=t.link, point=t.point) - t.point) @ u
+            assert moved >= 0.03 - 1e-3, (k, t.link, moved)
+        _check_limits(scene, model, path)
+
+
+def test_a_path_over_the_time_limit_is_cut_to_it(arm):
+    """10 cm in 0.1 s is beyond the joints' limits: the path ends at the limit, within the joints' speed and
+    acceleration, the point short of the distance, and it says so."""
+    scene, model = arm
+    q0 = np.array(scene.robot.home)
+    link, point, force = _contacts(model, q0, np.random.default_rng(5), 1)[0]
+    settings = RetreatSettings(distance_m=0.1, time_limit_s=0.1)
+    path = plan_retreat(model, q0, link=link, point=point, direction=force, settings=settings, period_s=PERIOD_S)
+    assert path.time_cut and path.needed_s > 0.1 and path.duration_s == pytest.approx(0.1)
+    assert path.within(0.1) and 0.0 < path.moved_m < 0.1
+    _check_limits(scene, model, path)
+    free = plan_retreat(model, q0, link=link, point=point, direction=force,
+                        settings=RetreatSettings(distance_m=0.1, time_limit_s=10.0), period_s=PERIOD_S)
+    assert not free.time_cut and free.needed_s == pytest.approx(path.needed_s)
+
+
+def test_the_line_of_actions_other_crossing_is_in_the_region():
+    """dxl-arm: the onset's estimate on the right finger with a 1 cm point_std, the contact on the left one on
+    the same line of action (the localization picked the wrong crossing): the region takes in the left finger
+    through its tube around the line (not through the ellipsoid), and that point goes back the distance."""
+    scene = load_scene("dxl-arm")
+    model = ArmModel(scene)
+    q0 = np.array(scene.robot.home)
+    links = model.kinematics(q0)
+    right, left = (links[f"gripper_{side}_link"][:3, 3] for side in ("right", "left"))
+    force = 5.0 * (left - right) / np.linalg.norm(left - right)
+    settings = RetreatSettings()
+    samples = SurfaceSamples(model)
+    kw = {"point": right, "point_std": np.full(3, 0.01), "floor_m": settings.region_floor_m,
+          "reach_m": settings.region_reach_m, "force": force}
+    assert "gripper_left_link" not in samples.region(q0, link="gripper_right_link", **kw).links
+    region = samples.region(q0, link="gripper_right_link", tube_m=settings.region_tube_m, **kw)
+    assert "gripper_left_link" in region.links
+    direction = np.cross(force, [0.0, 0.0, 1.0])  # sideways to the line, as a sweep's motion would be
+    path = plan_retreat(model, q0, link="gripper_right_link", point=right, direction=direction, settings=settings,
+                        period_s=PERIOD_S, region=region)
+    moved = (point_at(model, q0, path.q[-1], link="gripper_left_link", point=left) - left) @ path.direction
+    assert moved >= 0.03 - 1e-3 and path.least_m >= 0.03 - 1e-4

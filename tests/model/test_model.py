@@ -129,6 +129,16 @@ def test_jacobian_matches_finite_differences(leng):
     np.testing.assert_allclose(jac, num, atol=1e-8)
 
 
+def test_twist_jacobian_moves_every_point_of_the_link(leng):
+    """Its positional part is ``jacobian``'s; a point ``r`` away moves at ``J_p + J_r x r`` (``jacobian`` there)."""
+    q = np.random.default_rng(3).uniform(-1, 1, 3)
+    point = (leng.kinematics(q)["link3"] @ np.array([0.15, 0.02, 0.04, 1.0]))[:3]
+    jp, jr = leng.twist_jacobian(q, "link3", point)
+    np.testing.assert_allclose(jp, leng.jacobian(q, "link3", point), atol=1e-12)
+    r = np.array([-0.05, 0.03, 0.02])
+    np.testing.assert_allclose(jp + np.cross(jr.T, r).T, leng.jacobian(q, "link3", point + r), atol=1e-12)
+
+
 def test_static_joint_torques_match_hand(leng):
     """Gravity torque at each joint = -axis . sum over distal links (c - joint) x m g."""
     q = np.array([0.4, -0.3, 0.8])

@@ -65,7 +65,8 @@ RETREAT_TRIGGERS = ("onset", "exceedance")  # the contact events a retreat start
 class RetreatSettings:
     """``distance_m``: how far the touched point moves back (ESTIMATE: 3 cm clears a contact detected
     within tens of ms at the collaborative speeds of ISO/TS 15066, 0.25-1 m/s, less the detector's lag);
-    ``time_limit_s``: the time the motion must end within (said when the joints' limits need longer)."""
+    ``time_limit_s``: the time the motion must end within (a path the joints' limits make longer is cut
+    to end in time, and said)."""
 
     distance_m: float = 0.03
     time_limit_s: float = 0.5
@@ -76,7 +77,21 @@ class RetreatSettings:
     # (ESTIMATE: ten times what the joints' holding error moves a point)
     moving_above_m_s: float = 0.05
     damping_m: float = 0.03  # the damped least squares' lambda (m)
-    waypoints: int = 10  # steps of the Cartesian line
+    waypoints: int = 5  # steps of the Cartesian line (each two Gauss-Newton steps: the planning time)
+    # the path is at most this many times the one fitted to move the region's points the distance (the
+    # estimated point then goes back at most about max_scale x distance_m; ESTIMATE: on dxl-arm, whose four
+    # joints cannot translate the hand, the region's least point needs 1.4-1.7x, docs/monitor.md)
+    max_scale: float = 2.0
+    # the region the contact may be at (retreat_region.py): the event's 95 % ellipsoid, each sigma at least
+    # region_floor_m (ESTIMATE: a few mm, the steady-state localization error), and the surface within
+    # region_tube_m of the event's line of action (ESTIMATE: 2 cm, about a finger's half-size: the line's other
+    # crossings, on dxl-arm the other finger, where the onset's estimate at times is while its point_std says
+    # 1 cm), within region_reach_m of the estimate (ESTIMATE: the largest onset errors measured near the touched
+    # link, 91 mm on dxl-arm's other finger, 74 mm on ur5e's next link; the onset's point_std, 0.1-3 m along the
+    # force's line, would take in the whole arm)
+    region_floor_m: float = 0.005
+    region_tube_m: float = 0.02
+    region_reach_m: float = 0.1
 
     def __post_init__(self) -> None:
         if not 0.0 < self.distance_m <= 0.5:
@@ -87,6 +102,11 @@ class RetreatSettings:
             raise ValueError(f"retreat trigger {self.trigger!r}: expected one of {', '.join(RETREAT_TRIGGERS)}")
         if not 0.0 <= self.guided_above <= 1.0:
             raise ValueError(f"guided_above {self.guided_above!r}: expected a probability")
+        if not 1.0 <= self.max_scale <= 10.0:
+            raise ValueError(f"max_scale {self.max_scale!r}: expected [1, 10]")
+        if not 0.0 <= max(self.region_floor_m, self.region_tube_m) <= self.region_reach_m <= 1.0:
+            raise ValueError(f"region_floor_m {self.region_floor_m!r}, region_tube_m {self.region_tube_m!r}, "
+                             f"region_reach_m {self.region_reach_m!r} m: expected 0 <= floor, tube <= reach <= 1")
 
 
 @dataclass(frozen=True)

@@ -9,11 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.bus import EVENTS_CONTACT, Bus, ContactEvent, StaleDataError
+from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, DeviceEvent, StaleDataError
 from ftc_hw.model import ArmModel
 
 from .config import RetreatSettings
 from .retreat import RetreatError, RetreatPath, plan_retreat, retreat_direction
+from .retreat_region import SurfaceSamples
 
 
 class StopReflex:
@@ -84,10 +85,12 @@ def kind_trigger(kind: str) -> Callable[[Any], bool]:
 class RetreatReflex:
     """``--reflex retreat``: on a trigger (every contact event of ``settings.trigger``'s kind: an onset, or an
     exceedance of the body limits; ``triggers`` any other predicate; ``trigger(event)`` retreats at once), unless
-    :meth:`should_retreat` says the contact is guided, the touched point is moved back along the contact normal
-    by ``settings.distance_m``: first a setpoint where the arm is (it brakes meanwhile), then a joint path
-    planned from the arm's newest joint state (:func:`~ftc_hw.app.monitor.retreat.retreat_direction`,
-    :func:`~ftc_hw.app.monitor.retreat.plan_retreat`; a plan that fails ends the stream there: a stop), streamed
+    :meth:`should_retreat` says the contact is guided, the touched point -- every point of the arm it may be at
+    (:class:`~ftc_hw.app.monitor.retreat_region.SurfaceSamples`) -- is moved back along the contact normal by
+    ``settings.distance_m`` within ``settings.time_limit_s``: first a setpoint where the arm is (it brakes
+    meanwhile), then a joint path planned from the arm's newest joint state
+    (:func:`~ftc_hw.app.monitor.retreat.retreat_direction`, :func:`~ftc_hw.app.monitor.retreat.plan_retreat`;
+    a plan that fails ends the stream there: a stop; one that falls short, a ``retreat_short`` event), streamed
     to the arm's adapter (``servo``: DYNAMIXEL Goal Position, a UR's RTDE registers) one setpoint every
     ``arm.servo_period_s``, from a thread of its own (never the pipeline's). One retreat at a time: a trigger
     during one is counted (``ignored``), not queued. ``retreats`` holds each one's figures."""
@@ -109,6 +112,7 @@ class RetreatReflex:
         self._busy = False
         self._wake = threading.Event()
         self._quit = threading.Event()
+        self._samples = SurfaceSamples(model)  # where on the arm a contact may be (a few 0.1 s, once)
         arm.prepare_servo()
         self._sub = bus.subscribe(EVENTS_CONTACT, callback=self._on_event, first=True)
         self._thread = threading.Thread(target=self._run, name="retreat-reflex", daemon=True)
@@ -172,12 +176,34 @@ class RetreatReflex:
             self.arm.end_servo()  # no retreat: the arm stays where the first setpoint held it (a stop)
             raise
         t_planned = time.monotonic_ns()
+        short = self._say_short(ev, path)
         sent = 1 + self._stream(path)
         return {"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id, "link": ev.link,
-                "plan_ms": (t_planned - t0) / 1e6, "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
-                "setpoints": sent, "duration_s": path.duration_s, "moved_m": path.moved_m,
+                "plan_ms": (t_planned - t0) / 1e6, "planning_ms": (t_planned - t_first) / 1e6,
+                "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
+                "setpoints": sent, "duration_s": path.duration_s, "moved_m": path.moved_m, "least_m": path.least_m,
+                "region_points": path.points, "needed_s": path.needed_s, "time_cut": path.time_cut,
                 "direction": path.direction.tolist(), "direction_from": why, "clipped": path.clipped,
-                "within_time_limit": path.within(self.settings.time_limit_s)}
+                "within_time_limit": path.within(self.settings.time_limit_s), "short": short}
+
+    def _say_short(self, ev: ContactEvent, path: RetreatPath) -> str:
+        """A retreat that moves some point the contact may be at less than the distance (cut to the time
+        limit, the path's length cap, a joint range) is said on the bus (a ``retreat_short`` device event)
+        before it starts; the message, or "" when every point goes back the distance."""
+        distance = self.settings.distance_m
+        if path.least_m >= distance - 5e-4 and not path.time_cut:
+            return ""
+        why = (f"it would take {path.needed_s:.3f} s, cut to the {self.settings.time_limit_s:g} s limit"
+               if path.time_cut else "a joint range" if path.clipped else
+               f"the path's length cap (max_scale {self.settings.max_scale:g})")
+        msg = (f"retreat from contact {ev.contact_id} on {ev.link}: {why}; the estimated point goes back "
+               f"{path.moved_m * 1e3:.1f} mm, every point it may be at ({path.points}) at least "
+               f"{path.least_m * 1e3:.1f} mm of {distance * 1e3:.1f}")
+        self.bus.publish(EVENTS_DEVICE, DeviceEvent.make(
+            time.monotonic_ns(), "retreat", "retreat_short", msg,
+            {"contact_id": ev.contact_id, "distance_m": distance, "moved_m": path.moved_m, "least_m": path.least_m,
+             "duration_s": path.duration_s, "needed_s": path.needed_s, "time_cut": float(path.time_cut)}))
+        return msg
 
     def _plan(self, ev: ContactEvent, frame: Any) -> tuple[np.ndarray, str, RetreatPath]:
         """The direction, why that one, and the path, from the arm's joints now (``frame``) and at the onset."""
@@ -189,8 +215,12 @@ class RetreatReflex:
         self._planned.add(ev.contact_id)
         direction, why = retreat_direction(self.model, touch.q, touch.qd, link=ev.link, point=ev.point, force=force,
                                            settings=self.settings)
-        path = plan_retreat(self.model, frame.q, link=ev.link, point=ev.point, direction=direction,
-                            settings=self.settings, period_s=self.arm.servo_period_s, q_touch=touch.q)
+        s = self.settings
+        region = self._samples.region(touch.q, link=ev.link, point=ev.point, point_std=ev.point_std,
+                                      floor_m=s.region_floor_m, reach_m=s.region_reach_m, force=ev.force,
+                                      tube_m=s.region_tube_m)
+        path = plan_retreat(self.model, frame.q, link=ev.link, point=ev.point, direction=direction, settings=s,
+                            period_s=self.arm.servo_period_s, q_touch=touch.q, region=region)
         return direction, why, path
 
     def _stream(self, path: RetreatPath) -> int:

@@ -126,12 +126,15 @@ def _print_retreats(console: Console, reflex: dict[str, Any]) -> None:
     for r, rx in zip(reflex["retreats"], at, strict=True):
         first = r["first_setpoint_after_onset_ms"]
         console.print(f"reflex retreat: contact {r['contact_id']} on {r['link']}: first setpoint "
-                      f"{first:.1f} ms after the onset sample (planned {r['plan_ms']:.1f} ms after taking it)"
+                      f"{first:.1f} ms after the onset sample (planned {r['plan_ms']:.1f} ms after taking it, "
+                      f"{r['planning_ms']:.1f} of them planning)"
                       + (f", at the arm's interface {rx:.1f} ms" if rx is not None else "")
                       + f"; {r['setpoints']} setpoints over {r['duration_s']:.3f} s, the point moved back "
-                      f"{r['moved_m'] * 1e3:.1f} mm (model) along ({', '.join(f'{x:.3f}' for x in r['direction'])})"
+                      f"{r['moved_m'] * 1e3:.1f} mm (model), every point it may be at ({r['region_points']}) at least "
+                      f"{r['least_m'] * 1e3:.1f} mm, along ({', '.join(f'{x:.3f}' for x in r['direction'])})"
                       + ("" if r["within_time_limit"] else ", OVER the time limit")
-                      + (", a joint range clipped it" if r["clipped"] else ""), highlight=False)
+                      + (", a joint range clipped it" if r["clipped"] else "")
+                      + (f" (SHORT: {r['short']})" if r["short"] else ""), highlight=False)
     if reflex["not_fought"]:
         console.print(f"reflex retreat: {len(reflex['not_fought'])} guided contact(s) not retreated from")
     if reflex["ignored"] or reflex["errors"]:

@@ -321,8 +321,8 @@ class _EventPump:
             stream = isinstance(ev, DeviceEvent) and ev.kind in STREAM_EVENT_KINDS
             if isinstance(ev, ContactEvent) or stream:
                 (self._out.stream_events if stream else self._out.events).append(event_record(ev))
-                if self._writer is not None:
-                    self._writer.write(ev)
+            if (isinstance(ev, ContactEvent) or stream or ev.kind == "retreat_short") and self._writer is not None:
+                self._writer.write(ev)
 
 
 def _run(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSpec | None, arm_dev: DeviceSpec | None,
