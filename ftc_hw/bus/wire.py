@@ -11,7 +11,9 @@ little-endian, fields in the order below. Times are int64 ns, ``t_device_ns`` ab
   ``q, qd, current`` (n floats each), ``tau`` (n floats if ``has_tau``);
 - contact event: ``t_host_ns``, ``kind`` (u8: onset, update, offset), ``contact_id`` (u32),
   ``probability, duration_s, peak_force, impulse`` (f64), ``link``, ``point, force, point_std`` (3
-  floats each), the flags (u8 count, then each a string);
+  floats each), the flags (u8 count, then each a string); from minor version 1 its class: ``contact_class``,
+  ``intent`` (strings), ``p_quasi_static, p_guidance`` (f64), the class's features (u8 count, then each a
+  name and an f64);
 - device event: ``t_host_ns``, ``source``, ``kind``, ``message`` (u16 length), the counters (u8
   count, then each a name and an f64);
 - batch (kind 5): ``count`` (u16), then each message (u32 length, then the message, header and all):
@@ -44,7 +46,7 @@ from .frames import (
 )
 
 MAGIC = b"FT"
-MAJOR, MINOR = 1, 0
+MAJOR, MINOR = 1, 1
 KIND_WRENCH, KIND_JOINTS, KIND_CONTACT, KIND_DEVICE, KIND_BATCH = 1, 2, 3, 4, 5
 CONTACT_KIND_CODES = {"onset": 0, "update": 1, "offset": 2}
 _CONTACT_KINDS = {v: k for k, v in CONTACT_KIND_CODES.items()}
@@ -60,6 +62,7 @@ _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 MAX_BATCH = 0xFFFF
 _F64 = struct.Struct("<d")
+_P2 = struct.Struct("<dd")
 _I64 = struct.Struct("<q")
 
 
@@ -90,7 +93,10 @@ def encode(frame: Any) -> bytes:
                              frame.duration_s, frame.peak_force, frame.impulse)
         vectors = np.concatenate([frame.point, frame.force, frame.point_std]).astype("<f8").tobytes()
         flags = bytes([len(frame.flags)]) + b"".join(_str(f) for f in frame.flags)
-        return _HEADER.pack(MAGIC, MAJOR, MINOR, KIND_CONTACT) + head + _str(frame.link) + vectors + flags
+        features = frame.class_features
+        cls = (_str(frame.contact_class) + _str(frame.intent) + _P2.pack(frame.p_quasi_static, frame.p_guidance)
+               + bytes([len(features)]) + b"".join(_str(k) + _F64.pack(float(v)) for k, v in features.items()))
+        return _HEADER.pack(MAGIC, MAJOR, MINOR, KIND_CONTACT) + head + _str(frame.link) + vectors + flags + cls
     if isinstance(frame, DeviceEvent):
         counters = bytes([len(frame.counters)]) + b"".join(_str(k) + _F64.pack(float(v))
                                                            for k, v in frame.counters.items())
@@ -259,9 +265,14 @@ def _contact(r: _Reader) -> ContactEvent:
     link = r.string()
     point, force, std = r.floats(3), r.floats(3), r.floats(3)
     flags = tuple(r.string() for _ in range(r.byte()))
+    cls: dict[str, Any] = {}
+    if r.pos < len(r.buf):  # minor version 1 on: the contact's class
+        cls["contact_class"], cls["intent"] = r.string(), r.string()
+        cls["p_quasi_static"], cls["p_guidance"] = r.unpack(_P2)
+        cls["class_features"] = {r.string(): r.unpack(_F64)[0] for _ in range(r.byte())}
     return ContactEvent.make(t_host, _CONTACT_KINDS[kind], link, point, force, std, flags=flags,
                              probability=probability, contact_id=cid, duration_s=duration, peak_force=peak,
-                             impulse=impulse)
+                             impulse=impulse, **cls)
 
 
 def _device(r: _Reader) -> DeviceEvent:

@@ -91,10 +91,21 @@ def event_text(ev, t0_ns: int) -> str:
     if isinstance(ev, ContactEvent):
         return (f"{t:8.3f} s  {ev.kind:6s} {ev.link or '-':14s} point {np.round(np.asarray(ev.point) * 1e3, 1)} mm  "
                 f"|F| {np.linalg.norm(ev.force):5.1f} N  +-{np.linalg.norm(ev.point_std) * 1e3:.1f} mm  "
-                f"{','.join(ev.flags)}")
+                f"{class_text(ev)}{','.join(ev.flags)}")
     if isinstance(ev, DeviceEvent):
         return f"{t:8.3f} s  device {ev.source}: {ev.kind} {ev.message}"
     return f"{t:8.3f} s  {ev!r}"
+
+
+def class_text(ev: ContactEvent) -> str:
+    """The contact's class so far: ``transient 0.97 / impact 0.99  `` (each value with its probability;
+    ``final`` at the offset), empty for an event with none."""
+    if not ev.contact_class:
+        return ""
+    p_cls = ev.p_quasi_static if ev.contact_class != "transient" else 1.0 - ev.p_quasi_static
+    p_int = ev.p_guidance if ev.intent != "impact" else 1.0 - ev.p_guidance
+    final = " final" if ev.kind == "offset" else ""
+    return f"{ev.contact_class} {p_cls:.2f} / {ev.intent} {p_int:.2f}{final}  "
 
 
 class LiveView:
