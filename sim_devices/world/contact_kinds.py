@@ -185,16 +185,16 @@ def _force_range(scene: Scene) -> tuple[float, float]:
 
 
 def plan_contacts(scene: Scene, model: ArmModel, rng: np.random.Generator, kinds: tuple[str, ...],
-                  count: int) -> tuple[ScenarioSetup, tuple[PlannedContact, ...]]:
+                  count: int, clearance: _Clearance | None = None) -> tuple[ScenarioSetup, tuple[PlannedContact, ...]]:
     """``count`` contacts of each of ``kinds`` (interleaved: one of each in turn), one after another from
-    home; the setup and the plan."""
+    home; the setup and the plan. ``clearance``: where a body part may stand (built here if not given)."""
     home = np.asarray(scene.robot.home, dtype=float)
     kp = np.asarray(scene.robot.kp, dtype=float)
     links = frozenset(t.link for t in scene.touchable[-3:])
     dqs, t0s, paths, probes, obstacles, plan = [], [], [], [], [], []
     t = REST_S
     order = [k for _ in range(count) for k in kinds]
-    clearance = _Clearance(scene, model, home)
+    clearance = clearance or _Clearance(scene, model, home)
     for i, kind in enumerate(order):
         for _ in range(50):  # a site whose move is small enough and whose body is clear of the arm
             site = _Site(model, home, rng, links)
@@ -307,8 +307,9 @@ def plan_within(scene: Scene, model: ArmModel, rng: np.random.Generator, kinds: 
     """As many contacts of each of ``kinds`` as end within ``duration`` (at least one of each)."""
     seed = int(rng.integers(2**31))
     best = None
+    clearance = _Clearance(scene, model, np.asarray(scene.robot.home, dtype=float))
     for count in range(1, 1000):
-        setup, plan = plan_contacts(scene, model, np.random.default_rng(seed), kinds, count)
+        setup, plan = plan_contacts(scene, model, np.random.default_rng(seed), kinds, count, clearance)
         if best is not None and run_length(plan) > duration:
             break
         best = setup
