@@ -94,7 +94,10 @@ def judge(plan: tuple[PlannedContact, ...], events: list) -> list[dict[str, Any]
 def run_job(job: Job) -> dict[str, Any]:
     scene = load_scene(job.scene)
     world_scene = with_reality(scene, "typical", seed=job.draw)
-    plan, events = run_world(scene, world_scene, 100 + job.draw, job.count)
+    try:
+        plan, events = run_world(scene, world_scene, 100 + job.draw, job.count)
+    except RuntimeError as exc:  # no scripted contact could be planned: said in the results, the others go on
+        return {"scene": job.scene, "draw": job.draw, "contacts": [], "error": str(exc)}
     return {"scene": job.scene, "draw": job.draw, "contacts": judge(plan, events)}
 
 
@@ -123,7 +126,8 @@ def run(json_path: Path | None = None, *, scenes: tuple[str, ...] = SCENES, draw
     results = {}
     for s in scenes:
         rows = [c for d in done if d["scene"] == s for c in d["contacts"]]
-        results[s] = {"kinds": summarize(rows), "contacts": rows}
+        errors = [d["error"] for d in done if d["scene"] == s and "error" in d]
+        results[s] = {"kinds": summarize(rows), "contacts": rows} | ({"errors": errors} if errors else {})
     _table(results)
     if json_path is not None:
         json_path.write_text(json.dumps({"world": "typical", "draws": draws, "count": count, "scenes": results},

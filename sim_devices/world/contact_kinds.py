@@ -53,6 +53,7 @@ MAX_JOINT_MOVE = 0.6  # rad: a contact's move larger than this at any joint is n
 CLAMPED_N_PER_M = 5000.0  # ESTIMATE: a clamped hand or forearm with the fixture's padding (ISO/TS 15066's body
 # regions are stiffer, 10-75 N/mm: a softer spring keeps the force near the plan when the true shell is off the model's)
 GUIDE_DAMPING = (150.0, 400.0)  # N s/m, ESTIMATE: an admittance's damping for hand guiding: 20 N moves 0.05-0.13 m/s
+GUIDE_MIN_MPS = 0.04  # the slowest guided speed planned (a small arm's, whose joints a longer path takes too far)
 
 
 @dataclass(frozen=True)
@@ -196,7 +197,7 @@ def plan_contacts(scene: Scene, model: ArmModel, rng: np.random.Generator, kinds
     order = [k for _ in range(count) for k in kinds]
     clearance = clearance or _Clearance(scene, model, home)
     for i, kind in enumerate(order):
-        for _ in range(50):  # a site whose move is small enough and whose body is clear of the arm
+        for _ in range(200):  # a site whose move is small enough and whose body is clear of the arm
             site = _Site(model, home, rng, links)
             made = _BUILDERS[kind](site, scene, kp, rng, t, i, clearance)
             if made is not None:
@@ -274,9 +275,15 @@ def _clamping(site: _Site, scene: Scene, kp, rng, t0: float, i: int, clearance: 
 def _guidance(site: _Site, scene: Scene, kp, rng, t0: float, i: int, clearance: _Clearance):
     lo, hi = _force_range(scene)
     force = float(rng.uniform(lo, hi))
-    ramp, hold = float(rng.uniform(0.4, 0.8)), float(rng.uniform(1.0, 2.0))
+    ramp, hold = float(rng.uniform(0.4, 0.8)), float(rng.uniform(0.8, 1.6))
     damping = float(rng.uniform(*GUIDE_DAMPING)) * force / 20.0  # the same speeds whatever the force
     direction = site.push
+    dq = site.joint_move(direction)
+    travel = force * (ramp + hold) / damping  # the point's path along the force: the integral of |F| / D
+    # a small arm is led more slowly (a longer path would take its joints far): down to GUIDE_MIN_MPS
+    damping *= max(1.0, float(np.abs(dq).max()) * travel / MAX_JOINT_MOVE)
+    if force / damping < GUIDE_MIN_MPS:
+        return None
     probe = Probe(site.link, site.point_link, direction, force, t0, ramp_s=ramp, hold_s=hold,
                   normal_link=site.normal_link, geom=site.geom, smooth=True, label="guidance")
     ts = _times(2 * ramp + hold)
@@ -285,9 +292,6 @@ def _guidance(site: _Site, scene: Scene, kp, rng, t0: float, i: int, clearance: 
     s = np.concatenate([[0.0], np.cumsum(0.5 * (sd[1:] + sd[:-1]) * np.diff(ts))])
     sdd = np.gradient(sd, ts)
     travel = float(s[-1])
-    dq = site.joint_move(direction)
-    if np.abs(dq * travel).max() > MAX_JOINT_MOVE:
-        return None
     back_s = 1.2
     tb = _times(2 * ramp + hold + 0.3 + back_s)
     led = np.zeros((len(tb), 3))
