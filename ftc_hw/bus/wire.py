@@ -162,7 +162,7 @@ def decode(data: bytes | bytearray | memoryview) -> Any:
         raise WireVersionError(f"format version {major}.{minor}: this reader decodes {MAJOR}.x")
     if kind == KIND_BATCH:
         raise WireError("a batch of messages: decode_all takes it apart")
-    reader = _Reader(buf, _HEADER.size)
+    reader = _Reader(buf, _HEADER.size, minor)
     try:
         frame = _DECODERS[kind](reader) if kind in _DECODERS else None
     except (struct.error, UnicodeDecodeError, IndexError) as exc:
@@ -177,10 +177,10 @@ def decode(data: bytes | bytearray | memoryview) -> Any:
 
 
 class _Reader:
-    __slots__ = ("buf", "pos")
+    __slots__ = ("buf", "minor", "pos")
 
-    def __init__(self, buf, pos: int) -> None:
-        self.buf, self.pos = buf, pos
+    def __init__(self, buf, pos: int, minor: int = MINOR) -> None:
+        self.buf, self.pos, self.minor = buf, pos, minor
 
     def unpack(self, s: struct.Struct) -> tuple:
         if self.pos + s.size > len(self.buf):
@@ -266,7 +266,7 @@ def _contact(r: _Reader) -> ContactEvent:
     point, force, std = r.floats(3), r.floats(3), r.floats(3)
     flags = tuple(r.string() for _ in range(r.byte()))
     cls: dict[str, Any] = {}
-    if r.pos < len(r.buf):  # minor version 1 on: the contact's class
+    if r.minor >= 1:  # the contact's class, from minor version 1 on
         cls["contact_class"], cls["intent"] = r.string(), r.string()
         cls["p_quasi_static"], cls["p_guidance"] = r.unpack(_P2)
         cls["class_features"] = {r.string(): r.unpack(_F64)[0] for _ in range(r.byte())}
