@@ -34,12 +34,17 @@ from ftc_hw.model import ArmModel
 from ftc_hw.pipeline import PipelineSettings, pipeline_for
 from ftc_hw.scene import Scene, load_scene
 from ftc_hw.sim_devices.world import World, with_reality
-from ftc_hw.sim_devices.world.contact_kinds import CONTACT_KINDS, PlannedContact, plan_contacts, run_length
+from ftc_hw.sim_devices.world.contact_kinds import (
+    CONTACT_KINDS,
+    EXPECTED_CLASS,
+    PlannedContact,
+    plan_contacts,
+    run_length,
+)
 
 # every arm scene (`ftc scenes`), by what it senses: base F/T, motor currents (+ a flange F/T), joint torques
 SCENES = ("leng2016", "ur5e", "ur5e-netft", "dxl-arm", "ur10e-base-ft", "ur10e", "ur16e", "ur3e", "panda", "fr3")
-RIGHT = {"clamping": ("quasi_static", "impact"), "impact": ("transient", "impact"),
-         "guidance": ("transient", "guidance")}
+RIGHT = EXPECTED_CLASS
 WINDOW_AFTER_S = 0.3  # an onset up to this long after the planned window still belongs to it
 
 

@@ -42,6 +42,9 @@ from .trajectory import Trajectory
 from .world import Obstacle, Probe, ScenarioSetup
 
 CONTACT_KINDS = ("clamping", "guidance", "impact")
+# what a contact of each kind is classified as, when right: (ContactEvent.contact_class, ContactEvent.intent)
+EXPECTED_CLASS = {"clamping": ("quasi_static", "impact"), "impact": ("transient", "impact"),
+                  "guidance": ("transient", "guidance")}
 REST_S = 0.5  # at rest first: the tare
 GAP_S = 0.5  # at rest between two contacts' moves
 # ESTIMATE: a slow, a usual and a fast collaborative speed (m/s); ISO/TS 15066's transient limits are met at

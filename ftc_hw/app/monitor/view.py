@@ -145,6 +145,15 @@ class LiveView:
                      Text("\n".join(self.log) or "(no events yet)"), Text(f"monitor: {counters}\n", style="dim"))
 
 
+def _class_caption(ev: Evaluation) -> str:
+    """The scripted contacts' kinds against their final classes (docs/contacts.md), where the truth says kinds."""
+    scored = [c for c in ev.contacts if c.true_class]
+    if not scored:
+        return ""
+    rows = ", ".join(f"#{c.index} {c.true_class}: {c.classified or 'not reported'}" for c in scored)
+    return f" Classified right: {sum(bool(c.class_right) for c in scored)} of {len(scored)} ({rows})."
+
+
 def evaluation_table(ev: Evaluation, title: str = "contacts: detected against ground truth") -> Group:
     """Two tables, each whole at 100 columns and in a file (no cell cut): when and on which link each
     contact was detected, then how far its estimates were from the truth; the legend under them."""
@@ -179,7 +188,8 @@ def evaluation_table(ev: Evaluation, title: str = "contacts: detected against gr
                     f"(late: after that), false alarms {len(ev.false_alarms)}"
                     + (f" at {ev.false_alarms} s" if ev.false_alarms else "") + f", split detections {ev.splits}. "
                     "Delay: from the first contact sample's publication (from due: from when it was due). "
-                    "Link ok: the estimates on the true link. Cut: the run ended during the contact.")
+                    "Link ok: the estimates on the true link. Cut: the run ended during the contact."
+                    + _class_caption(ev))
     where.caption = ("Over the estimates without a solver flag (rms all: with the flagged ones); "
                      "CRLB rms: the Cramer-Rao bound of the same samples (what the sensor noise allows); "
                      "err/CRLB: RMS of each estimate's error over its own bound (about 1 at the limit); "
