@@ -116,12 +116,34 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
     the first ``TARE_S`` (at rest) tare the F/T sensor and the joint torque sensors where not identified."""
     world = World(world_scene, setup, seed=seed)
     pipe = pipeline_for(scene, settings)
+    onsets, events, truth_t, costs, active = [], [], [], [], []
+    for s, res, cost in drive(scene, world, pipe, duration, tare_torques=not _has_offsets(settings)):
+        main = max(s.contacts, key=lambda c: float(np.linalg.norm(c.force)), default=None)
+        if main is not None:
+            truth_t.append(s.t)
+        costs.append(cost)
+        active.append(res.detection.active)
+        judge_events(res.events, s.t, main, onsets, events)
+    every = world.steps_per_sample if isinstance(pipe, ContactPipeline) else sample_every(scene, world)
+    return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
+            "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt)}
+
+
+def sample_every(scene: Scene, world: World) -> int:
+    """Physics steps per joint sample (the arm device's rate)."""
+    return max(1, round(1.0 / (arm_rate(scene) * world.dt)))
+
+
+def drive(scene: Scene, world: World, pipe, duration: float, *, tare_torques: bool = True):
+    """Yield (world state, the pipeline's FrameResult, its CPU time s) for ``duration`` s of the world, at the
+    samples the scene's devices would deliver: the F/T pipeline each sensor sample, the joint pipeline each
+    joint sample; the first ``TARE_S`` (at rest) tare the F/T sensor and (``tare_torques``) the joint torque
+    sensors, and yield nothing."""
     ft_driven = isinstance(pipe, ContactPipeline)
-    every = world.steps_per_sample if ft_driven else max(1, round(1.0 / (arm_rate(scene) * world.dt)))
+    every = world.steps_per_sample if ft_driven else sample_every(scene, world)
     sensing = scene.sensing
     tare: list[tuple] = []
-    tare_left = (sensing.ft is not None or (sensing.joint_torques and not _has_offsets(settings)))
-    onsets, events, truth_t, costs, active = [], [], [], [], []
+    tare_left = sensing.ft is not None or (sensing.joint_torques and tare_torques)
     for _ in range(int(round(duration / world.dt))):
         s = world.step()
         if world.steps % every:
@@ -135,9 +157,6 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
                 _tare(pipe, tare, s.t)
                 tare_left = False
             continue
-        main = max(s.contacts, key=lambda c: float(np.linalg.norm(c.force)), default=None)
-        if main is not None:
-            truth_t.append(s.t)
         t_ns = int(round(s.t * 1e9))
         c0 = time.thread_time()  # CPU time: this host's other load does not count
         if ft_driven:
@@ -146,11 +165,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         else:
             res = pipe.process_joints(t_ns, s.q, s.qd, current=current if sensing.currents else None,
                                       tau_j=s.tau_j if sensing.joint_torques else None, wrench=wrench)
-        costs.append(time.thread_time() - c0)
-        active.append(res.detection.active)
-        judge_events(res.events, s.t, main, onsets, events)
-    return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
-            "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt)}
+        yield s, res, time.thread_time() - c0
 
 
 def _has_offsets(settings: PipelineSettings) -> bool:

@@ -7,8 +7,10 @@ Topics: ``wrench/<source>``, ``joints/<source>``, ``events/contact``, ``events/d
 from .bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, StaleDataError, frame_topic, joints_topic, wrench_topic
 from .clock import ClockAligner, ClockNotReadyError
 from .frames import (
+    CONTACT_CLASSES,
     CONTACT_KINDS,
     DEVICE_EVENT_KINDS,
+    INTENTS,
     STREAM_EVENT_KINDS,
     ContactEvent,
     ContactKind,
@@ -28,7 +30,9 @@ from .subscription import Empty, Subscription, SubscriptionClosed
 from .watchdog import Watchdog
 
 __all__ = [
+    "CONTACT_CLASSES",
     "CONTACT_KINDS",
+    "INTENTS",
     "DEVICE_EVENT_KINDS",
     "STREAM_EVENT_KINDS",
     "EVENTS_CONTACT",

@@ -73,6 +73,10 @@ class JointFlag(enum.IntFlag):
 
 # exceedance: the contact's force went past its body region's limit (its ``limits`` say which and by how much)
 ContactKind = Literal["onset", "update", "offset", "exceedance"]
+# a contact's class (issue 39; ftc_hw/pipeline/classify.py): "" not classified (an older recording), "unknown"
+# when neither value is probable enough
+CONTACT_CLASSES: frozenset[str] = frozenset({"", "transient", "quasi_static", "unknown"})
+INTENTS: frozenset[str] = frozenset({"", "impact", "guidance", "unknown"})
 # sensor_lost / arm_lost: the monitor lost the F/T or the joint stream (it is blind: no contact is
 # judged; an open contact is closed by an offset flagged "lost"); sensor_back / arm_back: it returned
 # stopped: an arm's reader stopped it on a remote monitor's command (ftc serve), its latency in the counters
@@ -241,7 +245,12 @@ class ContactEvent:
     ``contact_id`` (from 1 in a run; 0: none) pairs a contact's onset, updates and offset; the
     contact's figures so far: ``duration_s`` (s since its onset), ``peak_force`` (N, the largest
     external force) and ``impulse`` (N s, the external force's magnitude integrated over time).
-    ``limits``: the event against its body region's limits (None: not judged)."""
+    ``limits``: the event against its body region's limits (None: not judged).
+    Its class so far (provisional at the onset and updates, final at the offset; docs/contacts.md):
+    ``contact_class`` ``transient`` | ``quasi_static`` (ISO/TS 15066: clamped, the arm cannot move away)
+    | ``unknown`` (neither probable enough) | ``""`` (not classified), with ``p_quasi_static``;
+    ``intent`` ``impact`` (accidental) | ``guidance`` (a person leading the arm) | ``unknown`` | ``""``, with
+    ``p_guidance``; ``class_features``: the features the class was drawn from (name -> value, SI)."""
 
     t_host_ns: int
     kind: ContactKind
@@ -256,6 +265,11 @@ class ContactEvent:
     peak_force: float = 0.0
     impulse: float = 0.0
     limits: LimitCheck | None = None
+    contact_class: str = ""
+    p_quasi_static: float = 0.5
+    intent: str = ""
+    p_guidance: float = 0.5
+    class_features: Mapping[str, float] = field(default_factory=lambda: _NO_COUNTERS)
 
     @classmethod
     def make(
@@ -274,9 +288,14 @@ class ContactEvent:
         peak_force: float = 0.0,
         impulse: float = 0.0,
         limits: LimitCheck | None = None,
+        contact_class: str = "",
+        p_quasi_static: float = 0.5,
+        intent: str = "",
+        p_guidance: float = 0.5,
+        class_features: Mapping[str, float] | None = None,
     ) -> ContactEvent:
-        """Validate and build; ``point_std`` (m) must be >= 0, ``probability`` in [0, 1], the contact's
-        id and figures >= 0."""
+        """Validate and build; ``point_std`` (m) must be >= 0, ``probability`` and the class's
+        probabilities in [0, 1], the contact's id and figures >= 0, its class one of the known."""
         if kind not in CONTACT_KINDS:
             raise FrameError(f"kind: expected one of {sorted(CONTACT_KINDS)}, got {kind!r}")
         if not isinstance(link, str) or not link:
@@ -287,6 +306,15 @@ class ContactEvent:
         p = float(probability)
         if not 0.0 <= p <= 1.0:  # also rejects NaN
             raise FrameError(f"probability: must be in [0, 1], got {probability!r}")
+        if contact_class not in CONTACT_CLASSES or intent not in INTENTS:
+            raise FrameError(f"class: expected one of {sorted(CONTACT_CLASSES)} and {sorted(INTENTS)}, "
+                             f"got {contact_class!r}, {intent!r}")
+        for name, v in (("p_quasi_static", p_quasi_static), ("p_guidance", p_guidance)):
+            if not 0.0 <= float(v) <= 1.0:
+                raise FrameError(f"{name}: must be in [0, 1], got {v!r}")
+        features = MappingProxyType({str(k): float(v) for k, v in (class_features or {}).items()})
+        if not all(map(math.isfinite, features.values())):
+            raise FrameError("class_features: a non-finite value")
         return cls(
             _int("t_host_ns", t_host_ns),
             kind,
@@ -300,6 +328,7 @@ class ContactEvent:
             *(_non_negative(k, v) for k, v in (("duration_s", duration_s), ("peak_force", peak_force),
                                                ("impulse", impulse))),
             limits,
+            contact_class, float(p_quasi_static), intent, float(p_guidance), features,
         )
 
 

@@ -11,9 +11,11 @@ little-endian, fields in the order below. Times are int64 ns, ``t_device_ns`` ab
   ``q, qd, current`` (n floats each), ``tau`` (n floats if ``has_tau``);
 - contact event: ``t_host_ns``, ``kind`` (u8: onset, update, offset, exceedance), ``contact_id`` (u32),
   ``probability, duration_s, peak_force, impulse`` (f64), ``link``, ``point, force, point_std`` (3
-  floats each), the flags (u8 count, then each a string); since 1.1 whether it carries its limits (u8),
-  then, if it does, ``region``, ``region_from``, ``limit_kind`` (strings), ``class_assumed`` (u8),
-  ``limit_n, margin_n, effective_mass_kg, speed_mps, permissible_speed_mps`` (f64);
+  floats each), the flags (u8 count, then each a string); from minor version 1 whether it carries its limits
+  (u8), then, if it does, ``region``, ``region_from``, ``limit_kind`` (strings), ``class_assumed`` (u8),
+  ``limit_n, margin_n, effective_mass_kg, speed_mps, permissible_speed_mps`` (f64); from minor version 2
+  its class: ``contact_class``, ``intent`` (strings), ``p_quasi_static, p_guidance`` (f64), the class's
+  features (u8 count, then each a name and an f64);
 - device event: ``t_host_ns``, ``source``, ``kind``, ``message`` (u16 length), the counters (u8
   count, then each a name and an f64);
 - batch (kind 5): ``count`` (u16), then each message (u32 length, then the message, header and all):
@@ -47,7 +49,7 @@ from .frames import (
 )
 
 MAGIC = b"FT"
-MAJOR, MINOR = 1, 1
+MAJOR, MINOR = 1, 2
 KIND_WRENCH, KIND_JOINTS, KIND_CONTACT, KIND_DEVICE, KIND_BATCH = 1, 2, 3, 4, 5
 CONTACT_KIND_CODES = {"onset": 0, "update": 1, "offset": 2, "exceedance": 3}
 _CONTACT_KINDS = {v: k for k, v in CONTACT_KIND_CODES.items()}
@@ -64,6 +66,7 @@ _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 MAX_BATCH = 0xFFFF
 _F64 = struct.Struct("<d")
+_P2 = struct.Struct("<dd")
 _I64 = struct.Struct("<q")
 
 
@@ -94,8 +97,11 @@ def encode(frame: Any) -> bytes:
                              frame.duration_s, frame.peak_force, frame.impulse)
         vectors = np.concatenate([frame.point, frame.force, frame.point_std]).astype("<f8").tobytes()
         flags = bytes([len(frame.flags)]) + b"".join(_str(f) for f in frame.flags)
+        features = frame.class_features
+        cls = (_str(frame.contact_class) + _str(frame.intent) + _P2.pack(frame.p_quasi_static, frame.p_guidance)
+               + bytes([len(features)]) + b"".join(_str(k) + _F64.pack(float(v)) for k, v in features.items()))
         return (_HEADER.pack(MAGIC, MAJOR, MINOR, KIND_CONTACT) + head + _str(frame.link) + vectors + flags
-                + _limits(frame.limits))
+                + _limits(frame.limits) + cls)
     if isinstance(frame, DeviceEvent):
         counters = bytes([len(frame.counters)]) + b"".join(_str(k) + _F64.pack(float(v))
                                                            for k, v in frame.counters.items())
@@ -161,7 +167,7 @@ def decode(data: bytes | bytearray | memoryview) -> Any:
         raise WireVersionError(f"format version {major}.{minor}: this reader decodes {MAJOR}.x")
     if kind == KIND_BATCH:
         raise WireError("a batch of messages: decode_all takes it apart")
-    reader = _Reader(buf, _HEADER.size)
+    reader = _Reader(buf, _HEADER.size, minor)
     try:
         frame = _DECODERS[kind](reader) if kind in _DECODERS else None
     except (struct.error, UnicodeDecodeError, IndexError) as exc:
@@ -176,10 +182,10 @@ def decode(data: bytes | bytearray | memoryview) -> Any:
 
 
 class _Reader:
-    __slots__ = ("buf", "pos")
+    __slots__ = ("buf", "minor", "pos")
 
-    def __init__(self, buf, pos: int) -> None:
-        self.buf, self.pos = buf, pos
+    def __init__(self, buf, pos: int, minor: int = MINOR) -> None:
+        self.buf, self.pos, self.minor = buf, pos, minor
 
     def unpack(self, s: struct.Struct) -> tuple:
         if self.pos + s.size > len(self.buf):
@@ -265,13 +271,18 @@ def _contact(r: _Reader) -> ContactEvent:
     point, force, std = r.floats(3), r.floats(3), r.floats(3)
     flags = tuple(r.string() for _ in range(r.byte()))
     limits = None
-    if r.pos < len(r.buf) and r.byte():  # a 1.0 message ends after its flags
+    if r.minor >= 1 and r.byte():  # its limits, from minor version 1 on
         region, origin, limit_kind = r.string(), r.string(), r.string()
         assumed, *values = r.unpack(_LIMIT_VALUES)
         limits = LimitCheck(region, origin, limit_kind, bool(assumed), *values)
+    cls: dict[str, Any] = {}
+    if r.minor >= 2:  # the contact's class, from minor version 2 on
+        cls["contact_class"], cls["intent"] = r.string(), r.string()
+        cls["p_quasi_static"], cls["p_guidance"] = r.unpack(_P2)
+        cls["class_features"] = {r.string(): r.unpack(_F64)[0] for _ in range(r.byte())}
     return ContactEvent.make(t_host, _CONTACT_KINDS[kind], link, point, force, std, flags=flags,
                              probability=probability, contact_id=cid, duration_s=duration, peak_force=peak,
-                             impulse=impulse, limits=limits)
+                             impulse=impulse, limits=limits, **cls)
 
 
 def _limits(c: LimitCheck | None) -> bytes:

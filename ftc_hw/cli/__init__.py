@@ -547,6 +547,20 @@ def bench_proprio(
         identify_s=identify_minutes * 60.0, workers=workers)
 
 
+@bench_app.command("classify")
+def bench_classify(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    draws: Annotated[int, typer.Option(min=1, help="Seeded draws of the typical world per scene.")] = 2,
+    count: Annotated[int, typer.Option(min=1, help="Scripted contacts of each kind per draw.")] = 10,
+    scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every arm scene).")] = None,  # noqa: UP045
+    workers: Annotated[Optional[int], typer.Option(min=1, help="Processes (default: one per CPU).")] = None,  # noqa: UP045
+) -> None:
+    """Contact classification (clamping, guidance, impacts) on every arm scene, typical world."""
+    from ftc_hw.bench.classify import SCENES, run  # lazy: CLI start-up
+
+    run(json_path, scenes=tuple(scene) if scene else SCENES, draws=draws, count=count, workers=workers)
+
+
 @bench_app.command("isolation")
 def bench_isolation(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045

@@ -55,6 +55,28 @@ def corrected_scene(scene: Scene, settings: PipelineSettings) -> Scene:
     return out
 
 
+POWER_PERIOD_NS = 5_000_000  # the contact point's velocity is recomputed every 5 ms (a Jacobian: ~20 us)
+
+
+class ContactPower:
+    """The power ``F . v`` (W) a contact puts into the arm: its estimate's force (base frame) on the velocity
+    of its point (``J(q) qd``, recomputed every ``POWER_PERIOD_NS``, the last one between); None without a
+    sound estimate or joint velocities (the contact's class then goes on without its motion)."""
+
+    def __init__(self, model: ArmModel) -> None:
+        self.model = model
+        self._t_ns = -(2**62)
+        self._v = np.zeros(3)
+
+    def __call__(self, t_ns: int, e: ContactEstimate | None, q: np.ndarray, qd) -> float | None:
+        if e is None or not e.contact or not e.link or qd is None or not np.isfinite(e.force).all():
+            return None
+        if t_ns - self._t_ns >= POWER_PERIOD_NS or t_ns < self._t_ns:
+            self._v = self.model.jacobian(q, e.link, e.point) @ np.asarray(qd, dtype=float)
+            self._t_ns = t_ns
+        return float(e.force @ self._v)
+
+
 class ContactPipeline(PipelineView):
     """One scene's compensation, detection, localization and events. Not thread-safe: one per reader
     thread. ``clock``: told each stage's end in every frame (``ftc bench pipeline`` times the stages
@@ -73,6 +95,7 @@ class ContactPipeline(PipelineView):
         localization = LocalizationStage(scene, model_scene, model, settings)
         self.localization: Localization = localization
         self.events: Events = ContactEvents(scene, model, localization.solver.body_poses, settings)
+        self._power = ContactPower(model)
         self.clock = clock
         self.warm_up()
 
@@ -122,7 +145,8 @@ class ContactPipeline(PipelineView):
         else:
             self.localization.clear_frame()
         ended = det.change == "offset"
-        events = self.events.frame_events(t_ns, det, estimate, m.external, q) if det.active or ended else []
+        power = self._power(t_ns, estimate, q, qd) if det.active else None
+        events = self.events.frame_events(t_ns, det, estimate, m.external, q, power) if det.active or ended else []
         if self.events.track is not None:
             self.events.previous = PreviousFrame(t_ns, m.external, q.copy(), m.model_error, saturated)
         clock.lap("events")

@@ -20,6 +20,7 @@ from ftc_hw.scene import Scene
 from ftc_hw.solver import ContactEstimate
 from ftc_hw.tracking import FUSED_FLAGS, ContactTrack, fuse_point, link_pose, report
 
+from .classify import ContactClassifier
 from .settings import PipelineSettings
 
 # frames a second of a scene without an F/T sensor (its frames are joint samples): the recent wrench's ring
@@ -55,7 +56,7 @@ class _ContactRun:
         self.peak = max(self.peak, f)
         self.last_ns = t_ns
 
-    def stamp(self, ev: ContactEvent, final: bool = False, **changes: np.ndarray) -> ContactEvent:
+    def stamp(self, ev: ContactEvent, final: bool = False, **changes: object) -> ContactEvent:
         """``ev`` with the contact's id and figures (and ``changes`` to its fields)."""
         out = replace(ev, contact_id=self.contact_id, duration_s=max(ev.t_host_ns - self.onset_ns, 0) * 1e-9,
                       peak_force=self.peak, impulse=self.impulse, **changes)
@@ -97,6 +98,7 @@ class ContactEvents:
         self._gain_var = gain_std_of(scene) ** 2
         self._k_work = np.empty((3, 6))  # _systematic's point-from-wrench map
         self._sensor_pose = model.base_T_sensor
+        self.classifier = ContactClassifier()
 
     @staticmethod
     def warm_up() -> None:
@@ -120,12 +122,16 @@ class ContactEvents:
             self.track.set_bias(ratio, t_ns)
 
     def frame_events(self, t_ns: int, det: Detection, estimate: ContactEstimate | None,
-                     external: np.ndarray, q: np.ndarray) -> list[ContactEvent]:
-        """This frame's onset, update or offset, stamped with the contact's id and figures."""
+                     external: np.ndarray, q: np.ndarray, power: float | None = None) -> list[ContactEvent]:
+        """This frame's onset, update or offset, stamped with the contact's id, figures and class so far.
+        ``power`` (W): the power ``F . v`` the contact puts into the arm this frame (None: not known)."""
         track = self.track if self.track is not None and self.track.active else None
+        force = math.sqrt(float(external[0] ** 2 + external[1] ** 2 + external[2] ** 2))
         if det.change == "onset":
             onset = det.onset_t_ns or t_ns
             self._contact = _ContactRun(self._contact.contact_id + 1, onset, onset)
+            self.classifier.begin(onset)
+            self.classifier.add(t_ns, force, power)
             self._contact.add(t_ns, external)
             self._recent_count = 0
             self._recent_sum[:] = 0.0
@@ -136,13 +142,14 @@ class ContactEvents:
         elif det.change == "offset":
             return [self.close_contact(t_ns, det.probability)]
         else:
+            self.classifier.add(t_ns, force, power)
             self._contact.add(t_ns, external)
             self._add_recent(external)
             if t_ns - self._last_update_ns < self.update_period_ns:
                 return []
             ev = contact_event(t_ns, "update", estimate, det.probability, track, self._link_reach)
             self._last_update_ns = t_ns
-        return [self._contact.stamp(ev, **self._shipping(ev, external, q))]
+        return [self._contact.stamp(ev, **self._shipping(ev, external, q), **self.classifier.result().event_fields())]
 
     def close_contact(self, t_ns: int, probability: float | None = None, *, lost: bool = False) -> ContactEvent:
         """The open contact's offset at host time t_ns: its last estimate (as its last onset or update
@@ -159,7 +166,8 @@ class ContactEvents:
         flags = (*last.flags, *(("relinked",) if last.link != run.onset_link else ()), *(("lost",) if lost else ()))
         p = last.probability if probability is None else probability
         ev = run.stamp(ContactEvent.make(t_ns, "offset", last.link, last.point, last.force, last.point_std,
-                                         flags=flags, probability=p), final=True)
+                                         flags=flags, probability=p), final=True,
+                       **self.classifier.result(released=not lost).event_fields())
         self.last_estimate = None
         if self.track is not None:
             self.track.reset()

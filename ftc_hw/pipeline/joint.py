@@ -141,7 +141,8 @@ class JointContactPipeline(PipelineView):
         if det.active or det.change == "offset":
             det_out = det if estimate is None else Detection(det.active, det.d2, det.blind, _link_probability(estimate),
                                                              det.change, det.onset_t_ns)
-            events = self.events.frame_events(t_ns, det_out, estimate, external, q)
+            # the power the contact puts into the arm: the external joint torques on the joint velocities
+            events = self.events.frame_events(t_ns, det_out, estimate, external, q, float(r @ qd))
         if det.change == "offset":
             self._last = None
         clock.lap("events")

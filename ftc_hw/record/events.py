@@ -1,10 +1,13 @@
 """Contact events as JSON Lines: ``{"t", "kind", "contact_id", "link", "point", "force", "point_std",
-"flags", "probability", "duration_s", "peak_force", "impulse", "t_host_ns"}``.
+"flags", "probability", "duration_s", "peak_force", "impulse", "contact_class", "p_quasi_static", "intent",
+"p_guidance", "class_features", "t_host_ns"}``.
 
 ``contact_id`` pairs a contact's onset, updates and offset. The offset carries the contact's last
 estimate (link, point, force, point_std, as its last onset or update with an estimate said) and its
 ``duration_s`` (s), ``peak_force`` (N) and ``impulse`` (N s); a contact closed because a stream was
-lost has an offset flagged ``lost``.
+lost has an offset flagged ``lost``. Its class so far (final at the offset; docs/contacts.md):
+``contact_class`` (``transient``, ``quasi_static``, ``unknown``) with ``p_quasi_static``, ``intent``
+(``impact``, ``guidance``, ``unknown``) with ``p_guidance``, and the ``class_features`` it was drawn from.
 
 The monitor's stream events go in the same file, in order: ``{"t", "kind", "source", "message",
 "t_host_ns"}`` with ``kind`` one of ``sensor_lost``, ``sensor_back``, ``arm_lost``, ``arm_back``
@@ -55,7 +58,9 @@ def event_record(ev: ContactEvent | DeviceEvent) -> dict[str, Any]:
            "point": [float(x) for x in ev.point], "force": [float(x) for x in ev.force],
            "point_std": [float(x) for x in ev.point_std], "flags": list(ev.flags),
            "probability": float(ev.probability), "duration_s": ev.duration_s, "peak_force": ev.peak_force,
-           "impulse": ev.impulse, "t_host_ns": int(ev.t_host_ns)}
+           "impulse": ev.impulse, "contact_class": ev.contact_class, "p_quasi_static": ev.p_quasi_static,
+           "intent": ev.intent, "p_guidance": ev.p_guidance, "class_features": dict(ev.class_features),
+           "t_host_ns": int(ev.t_host_ns)}
     if ev.limits is not None:
         out["limits"] = limit_record(ev.limits)
     return out

@@ -62,8 +62,16 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "duration_s": {"type": "number", "description": "s since the contact's onset"},
         "peak_force": {"type": "number", "description": "N, the contact's largest external force so far"},
         "impulse": {"type": "number", "description": "N s, the external force's magnitude integrated"},
+        "contact_class": {"enum": ["", "transient", "quasi_static", "unknown"],
+                          "description": "the contact's class so far (final at the offset; docs/contacts.md)"},
+        "p_quasi_static": {"type": "number", "description": "probability that the contact is quasi-static (clamped)"},
+        "intent": {"enum": ["", "impact", "guidance", "unknown"], "description": "accidental or guided"},
+        "p_guidance": {"type": "number", "description": "probability that a person is guiding the arm"},
+        "class_features": {"type": "object", "additionalProperties": _NUM,
+                           "description": "the features the class was drawn from (SI)"},
         "limits": LIMITS_JSON_SCHEMA},
-        optional=("contact_id", "duration_s", "peak_force", "impulse", "limits")),
+        optional=("contact_id", "duration_s", "peak_force", "impulse", "contact_class", "p_quasi_static", "intent",
+                  "p_guidance", "class_features", "limits")),
     "ftc_hw.DeviceEvent": _schema("ftc_hw.DeviceEvent", "device or stream event", {
         "t_host_ns": _HOST, "source": _STR, "kind": _STR, "message": _STR,
         "counters": {"type": "object", "additionalProperties": _NUM}}),
@@ -119,7 +127,10 @@ def encode(frame: Any) -> tuple[str, bytes]:
                                           "point_std": _list(frame.point_std), "flags": list(frame.flags),
                                           "probability": float(frame.probability), "contact_id": frame.contact_id,
                                           "duration_s": frame.duration_s, "peak_force": frame.peak_force,
-                                          "impulse": frame.impulse}
+                                          "impulse": frame.impulse, "contact_class": frame.contact_class,
+                                          "p_quasi_static": frame.p_quasi_static, "intent": frame.intent,
+                                          "p_guidance": frame.p_guidance,
+                                          "class_features": {k: float(v) for k, v in frame.class_features.items()}}
         if frame.limits is not None:
             d["limits"] = limit_record(frame.limits)
     elif isinstance(frame, DeviceEvent):
@@ -179,7 +190,10 @@ def decode(schema: str, data: bytes) -> Any:
         return ContactEvent.make(d["t_host_ns"], d["kind"], d["link"], d["point"], d["force"], d["point_std"],
                                  flags=d["flags"], probability=d["probability"], contact_id=d.get("contact_id", 0),
                                  duration_s=d.get("duration_s", 0.0), peak_force=d.get("peak_force", 0.0),
-                                 impulse=d.get("impulse", 0.0), limits=limit_check_of(d.get("limits")))
+                                 impulse=d.get("impulse", 0.0), contact_class=d.get("contact_class", ""),
+                                 p_quasi_static=d.get("p_quasi_static", 0.5), intent=d.get("intent", ""),
+                                 p_guidance=d.get("p_guidance", 0.5), class_features=d.get("class_features"),
+                                 limits=limit_check_of(d.get("limits")))
     if schema == "ftc_hw.DeviceEvent":
         return DeviceEvent.make(d["t_host_ns"], d["source"], d["kind"], d["message"], d["counters"])
     if schema == "ftc_hw.PipelineInput":

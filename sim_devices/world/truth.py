@@ -12,7 +12,8 @@ from .world import ContactTruth, WorldState
 def truth_record(state: WorldState) -> dict:
     """``contact``, and for the strongest contact its ``link``, ``point`` (m) and ``force`` (N, on the arm).
 
-    Every simultaneous contact is also listed under ``contacts``.
+    Every simultaneous contact is also listed under ``contacts``; a scripted contact of a said kind carries it
+    as ``class`` (``clamping``, ``guidance``, ``impact``: ``sim_devices/world/contact_kinds.py``).
     """
     contacts = sorted(state.contacts, key=lambda c: -float(np.linalg.norm(c.force)))
     rec: dict = {"t": round(state.t, 9), "contact": bool(contacts)}
@@ -22,7 +23,7 @@ def truth_record(state: WorldState) -> dict:
     else:
         rec.update(link=None, point=None, force=None)
     rec["contacts"] = [{"link": c.link, "point": _list(c.point), "force": _list(c.force), "source": c.source}
-                       for c in contacts]
+                       | ({"class": c.label} if c.label else {}) for c in contacts]
     rec["q"] = _list(state.q)
     return rec
 
@@ -64,8 +65,9 @@ def _value(x: object) -> str:
 
 
 def _contact(c: ContactTruth) -> str:
+    label = f',"class":{_name(c.label)}' if c.label else ""
     return (f'{{"link":{_name(c.link)},"point":{_floats(c.point)},"force":{_floats(c.force)},'
-            f'"source":{_name(c.source)}}}')
+            f'"source":{_name(c.source)}{label}}}')
 
 
 def truth_line(state: WorldState, fields: dict[str, object]) -> str:

@@ -58,6 +58,8 @@ class Probe:
     normal_link: np.ndarray | None = None  # outward surface normal at the point, link frame (None: -direction)
     geom: str | None = None  # the surface geom the point is on (its shell offset applies)
     on_true_shell: bool = False  # point_link was moved onto the true arm's mesh shell (no offset applies)
+    smooth: bool = False  # ramps as raised cosines (a hand's force: no jump in its rate), else linear
+    label: str = ""  # the scripted contact's kind in the truth ("guidance", ...; "": none said)
 
     @property
     def t_end(self) -> float:
@@ -68,10 +70,13 @@ class Probe:
         if u <= 0 or t >= self.t_end:
             return 0.0
         if u < self.ramp_s:
-            return self.magnitude * u / self.ramp_s
+            return self.magnitude * self._ramp(u / self.ramp_s)
         if u <= self.ramp_s + self.hold_s:
             return self.magnitude
-        return self.magnitude * (self.t_end - t) / self.ramp_s
+        return self.magnitude * self._ramp((self.t_end - t) / self.ramp_s)
+
+    def _ramp(self, x: float) -> float:
+        return 0.5 - 0.5 * math.cos(math.pi * x) if self.smooth else x
 
 
 @dataclass(frozen=True)
@@ -85,6 +90,8 @@ class Obstacle:
     damping: float = 60.0  # N s/m
     mass: float = 0.3
     until_s: float = math.inf  # s, scenario time: withdrawn (no longer touchable) from then on, once nothing touches it
+    from_s: float = 0.0  # s, scenario time: touchable from then on (before: not there)
+    label: str = ""  # the scripted contact's kind in the truth ("clamping", "impact", ...; "": none said)
 
 
 @dataclass(frozen=True)
@@ -101,6 +108,7 @@ class ContactTruth:
     point: np.ndarray  # m, base frame
     force: np.ndarray  # N, base frame, applied to the arm
     source: str  # "probe" or "obstacle"
+    label: str = ""  # the scripted contact's kind ("clamping", "guidance", "impact"; "": none said)
 
 
 @dataclass(frozen=True)
@@ -140,6 +148,15 @@ class World:
         # (geom id, spec) of the obstacles still to be withdrawn
         self._to_withdraw = [(m.geom(f"{b}_geom").id, o) for b, o in zip(self._obstacle_bodies, setup.obstacles,
                                                                             strict=True) if math.isfinite(o.until_s)]
+        # (geom id, spec, contype, conaffinity) of the obstacles still to come: not touchable until then
+        self._to_appear = [(g, o, int(m.geom_contype[g]), int(m.geom_conaffinity[g]))
+                           for g, o in ((m.geom(f"{b}_geom").id, o) for b, o in zip(self._obstacle_bodies,
+                                                                                     setup.obstacles, strict=True))
+                           if o.from_s > 0.0]
+        for g, _, _, _ in self._to_appear:
+            m.geom_contype[g] = m.geom_conaffinity[g] = 0
+        self._geom_label = {m.geom(f"{b}_geom").id: o.label for b, o in zip(self._obstacle_bodies, setup.obstacles,
+                                                                             strict=True) if o.label}
         self._script_t0: float | None = 0.0  # world time of scenario time 0; None: the script is held
         self.data = mujoco.MjData(m)
         r, w = scene.robot, scene.world
@@ -349,6 +366,8 @@ class World:
         self.steps += 1
         if self._to_withdraw and ts is not None and any(ts >= o.until_s for _, o in self._to_withdraw):
             self._withdraw_obstacles(ts)
+        if self._to_appear and ts is not None and any(ts >= o.from_s for _, o, _, _ in self._to_appear):
+            self._place_obstacles(ts)
         wrench = self._wrench()
         current = self.motors.current(tau, q)
         tau_j = None if self.joint_torque_sensors is None else self._transmitted(tau, stribeck)
@@ -395,7 +414,7 @@ class World:
             force = mag * p.direction
             d.xfrc_applied[bid, :3] += force
             d.xfrc_applied[bid, 3:] += np.cross(point - d.xipos[bid], force)
-            probes.append(ContactTruth(p.link, point, force, "probe"))
+            probes.append(ContactTruth(p.link, point, force, "probe", p.label))
         return tuple(probes)
 
     def _withdraw_obstacles(self, ts: float) -> None:
@@ -408,6 +427,20 @@ class World:
             else:
                 keep.append((g, o))
         self._to_withdraw = keep
+
+    def _place_obstacles(self, ts: float) -> None:
+        m = self.model
+        keep = []
+        for g, o, contype, conaffinity in self._to_appear:
+            # the body's own filter too: MuJoCo's broadphase skips a body none of whose geoms collide
+            if ts >= o.from_s:
+                m.geom_contype[g], m.geom_conaffinity[g] = contype, conaffinity
+                b = m.geom_bodyid[g]
+                m.body_contype[b] |= contype
+                m.body_conaffinity[b] |= conaffinity
+            else:
+                keep.append((g, o, contype, conaffinity))
+        self._to_appear = keep
 
     def _obstacle_contacts(self) -> tuple[ContactTruth, ...]:
         m, d = self.model, self.data
@@ -423,8 +456,9 @@ class World:
             mujoco.mj_contactForce(m, d, i, f6)
             force = c.frame.reshape(3, 3).T @ f6[:3]  # world frame; acts on geom2 (normal from geom1 to geom2)
             force_on_arm, arm_geom = (force, g2) if arm2 else (-force, g1)
+            label = self._geom_label.get(g1 if arm2 else g2, "") if self._geom_label else ""
             out.append(ContactTruth(self._geom_link[arm_geom], self._on_arm_surface(arm_geom, c.pos, force_on_arm),
-                                    force_on_arm, "obstacle"))
+                                    force_on_arm, "obstacle", label))
         return tuple(out)
 
     def _on_arm_surface(self, geom: int, pos: np.ndarray, force: np.ndarray) -> np.ndarray:

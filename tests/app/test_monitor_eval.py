@@ -120,7 +120,7 @@ def test_the_cramer_rao_bound_of_a_truth_record(contacts):
     bound = crlb_of_truth(scene)
     assert bound({"t": 0.0, "contact": False, "contacts": [], "q": list(q)}) is None
     sp, force = contacts(ArmModel(scene), q, 1, seed=3, max_angle_deg=20, f_range=(50.0, 50.0))[0]
-    contact = SimpleNamespace(link=sp.link, point=sp.point, force=force, source="probe")
+    contact = SimpleNamespace(link=sp.link, point=sp.point, force=force, source="probe", label="")
     b = bound(truth_record(SimpleNamespace(t=0.0, q=q, contacts=(contact,))))
     assert b is not None and 0.01 < b < 5.0, b
 
@@ -159,7 +159,7 @@ def test_the_solvers_own_error_at_a_truth_record(contacts):
     own = solver_rms_of_truth(scene, draws=400)
     assert own({"t": 0.0, "contact": False, "contacts": [], "q": list(q)}) is None
     sp, force = contacts(ArmModel(scene), q, 1, seed=3, max_angle_deg=20, f_range=(50.0, 50.0))[0]
-    contact = SimpleNamespace(link=sp.link, point=sp.point, force=force, source="probe")
+    contact = SimpleNamespace(link=sp.link, point=sp.point, force=force, source="probe", label="")
     rec = truth_record(SimpleNamespace(t=0.25, q=q, contacts=(contact,)))
     rms, bound = own(rec), crlb_of_truth(scene)(rec)
     assert rms == own(rec)
@@ -232,3 +232,28 @@ def test_the_ground_truth_table_reads_whole_at_100_columns_and_in_a_file(monkeyp
     assert not console.is_terminal
     console.print(evaluation_table(ev))
     _headers_and_links_whole(out.getvalue(), ev)
+
+
+def test_a_scripted_contact_s_kind_is_scored_against_its_final_class():
+    tr = truth(400, set(range(100, 200)) | set(range(300, 350)))
+    for i in range(100, 200):
+        tr[i]["contacts"] = [{"link": "link3", "point": [0.1, 0.0, 0.5], "force": [0.0, 0.0, -10.0],
+                              "source": "obstacle", "class": "clamping"}]
+    for i in range(300, 350):
+        tr[i]["contacts"] = [{"link": "link3", "point": [0.1, 0.0, 0.5], "force": [0.0, 0.0, -10.0],
+                              "source": "probe", "class": "guidance"}]
+
+    def classified(kind, t_ns, cid, cls, intent):
+        return event(kind, t_ns) | {"contact_id": cid, "contact_class": cls, "intent": intent}
+
+    evs = [classified("onset", T0 + 101 * MS, 1, "unknown", "unknown"),
+           classified("offset", T0 + 205 * MS, 1, "quasi_static", "impact"),
+           classified("onset", T0 + 301 * MS, 2, "unknown", "unknown"),
+           classified("offset", T0 + 355 * MS, 2, "quasi_static", "impact")]
+    ev = evaluate(evs, tr, 0.001)
+    assert [(c.true_class, c.classified, c.class_right) for c in ev.contacts] == [
+        ("clamping", "quasi_static/impact", True), ("guidance", "quasi_static/impact", False)]
+    # a truth without kinds, events without classes: nothing scored
+    plain = evaluate([event("onset", T0 + 101 * MS), event("offset", T0 + 205 * MS)], truth(400, set(range(100, 200))),
+                     0.001)
+    assert (plain.contacts[0].true_class, plain.contacts[0].class_right) == (None, None)

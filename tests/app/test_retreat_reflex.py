@@ -26,13 +26,6 @@ TOPIC = joints_topic("arm")
 Q0 = np.array(SCENE.robot.home)
 
 
-@dataclasses.dataclass(frozen=True, slots=True, eq=False)
-class ClassifiedEvent(ContactEvent):
-    """A contact event as a classifier would give it: with the probability that it is intended guidance."""
-
-    guidance: float | None = None
-
-
 class RecordingArm:
     servo_period_s = 0.002
 
@@ -70,7 +63,8 @@ def _onset(contact_id: int = 1, guidance: float | None = None, force=(0.0, 0.0, 
                              contact_id=contact_id)
     if guidance is None:
         return base
-    return ClassifiedEvent(*(getattr(base, f.name) for f in dataclasses.fields(ContactEvent)), guidance=guidance)
+    # as the classifier gives it (ftc_hw/pipeline/classify.py): the intent and its probability
+    return dataclasses.replace(base, intent="guidance" if guidance > 0.5 else "impact", p_guidance=guidance)
 
 
 def _settle(reflex: RetreatReflex) -> None:

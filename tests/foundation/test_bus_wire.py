@@ -28,6 +28,9 @@ FRAMES = [
     ContactEvent.make(126, "update", "wrist_3", [0.1, 0.2, 0.3], [1.0, 2.0, 3.0], [0.01, 0.01, 0.02],
                       flags=("ambiguous", "impact"), probability=0.7, contact_id=3, duration_s=0.2, peak_force=10.0,
                       impulse=1.5),
+    ContactEvent.make(126, "offset", "forearm", [0.1, 0.2, 0.3], [1.0, 2.0, 3.0], [0.01, 0.01, 0.02],
+                      contact_class="quasi_static", p_quasi_static=0.97, intent="impact", p_guidance=0.01,
+                      class_features={"held_s": 2.1, "v_onset_mps": -0.03}),
     DeviceEvent.make(127, "ft", "stale", "no frame on wrench/ft for 0.052 s", {"frames": 10.0, "timeout_s": 0.05}),
     DeviceEvent.make(128, "bus", "connect"),
 ]
@@ -96,3 +99,17 @@ def test_truncated_unknown_or_non_finite_messages_are_wire_errors():
         decode(bytes(bad_kind))
     with pytest.raises(TypeError, match="not a bus frame"):
         encode(object())
+
+
+def test_a_contact_event_of_minor_version_0_decodes_unclassified():
+    ev = ContactEvent.make(126, "onset", "wrist_3", [0.1, 0.2, 0.3], [1.0, 2.0, 3.0])
+    data = bytearray(encode(ev))
+    assert data[3] == MINOR >= 2
+    # 1.0: without its limits (a byte: none) and its class (two empty names, 2 f64, 0 features: 19 bytes)
+    old = bytes(data[:3]) + bytes([0]) + bytes(data[4:-20])
+    back = decode(old)
+    assert _same(ev, back)
+    assert (back.contact_class, back.intent, back.p_quasi_static, back.p_guidance) == ("", "", 0.5, 0.5)
+    assert _same(ev, decode(bytes(data[:3]) + bytes([1]) + bytes(data[4:-19])))  # 1.1: limits, no class
+    with pytest.raises(WireError):  # a minor-0 message with the class's bytes after its end: not ours
+        decode(bytes(data[:3]) + bytes([0]) + bytes(data[4:]))

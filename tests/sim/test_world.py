@@ -132,7 +132,9 @@ def test_halt_stops_the_arm():
 
 # what each scenario puts in the world besides its motion (its description says so)
 SCRIPTED = {"hold": (), "static-pokes": ("probes",), "sweep": (), "sweep-with-collision": ("obstacles",),
-            "excitation": (), "payload-poses": ("payload",)}
+            "excitation": (), "payload-poses": ("payload",), "clamping": ("obstacles",), "guidance": ("probes",),
+            "impacts": ("obstacles",), "contact-kinds": ("probes", "obstacles")}
+LONGER = {"contact-kinds": 15.0}  # s: one contact of each kind takes longer than the others' 5 s
 
 
 @pytest.mark.parametrize("scene_name", builtin_names())
@@ -147,7 +149,7 @@ def test_every_scenario_builds_for_every_scene(scene_name):
     touchable = {t.link for t in scene.touchable}
     period = 1.0 / sample_rate_hz(scene)
     for name in SCENARIOS:
-        duration = 5.0
+        duration = LONGER.get(name, 5.0)
         setup = build_scenario(name, scene, model, 0, duration)
         held = {"probes": bool(setup.probes), "obstacles": bool(setup.obstacles), "payload": setup.payload is not None}
         assert {k for k, v in held.items() if v} == set(SCRIPTED[name]), (name, held)

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from ftc_hw.model import ArmModel, Contact
+from ftc_hw.sim_devices.world.contact_kinds import EXPECTED_CLASS
 from ftc_hw.solver import ContactSolver
 from ftc_hw.solver.bound import crlb_point_cov
 
@@ -75,6 +76,9 @@ class ContactResult:
     err_over_solver: float | None = None  # RMS error / solver_rms_mm, over the same estimates
     err_over_std_rms: float | None = None  # RMS of |error| / |reported point_std| over the unflagged estimates
     cut: bool = False  # still in contact at the truth's last sample: the run ended during it
+    true_class: str | None = None  # the scripted contact's kind the truth says (clamping, guidance, impact)
+    classified: str | None = None  # the final class of the contact reported first in it: "contact_class/intent"
+    class_right: bool | None = None  # that class is the kind's (EXPECTED_CLASS); None: no kind said or not reported
 
     @property
     def detected(self) -> bool:
@@ -135,6 +139,18 @@ class Evaluation:
                 "delay_limit_ms": self.delay_limit_ms, "events": self.events, "truth_samples": self.truth_samples}
 
 
+def _class_of(records: list[dict[str, Any]], offset: dict[str, Any] | None) -> tuple[str | None, str | None,
+                                                                                    bool | None]:
+    """An episode's scripted kind (the truth's ``class``, most samples), the final class of the contact
+    reported in it (its offset's) and whether that is the kind's."""
+    kinds = [c["class"] for r in records for c in r.get("contacts", ()) if c.get("class")]
+    kind = max(set(kinds), key=kinds.count) if kinds else None
+    if offset is None or not offset.get("contact_class"):
+        return kind, None, None
+    got = (offset["contact_class"], offset.get("intent", ""))
+    return kind, "/".join(got), (got == EXPECTED_CLASS[kind]) if kind in EXPECTED_CLASS else None
+
+
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x ** 2)))
 
@@ -176,6 +192,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
         return float(np.interp(t_ns, th, ts)) if len(th) else float("nan")
 
     first_onset: dict[int, int] = {}
+    first_id: dict[int, int] = {}  # the contact id of each episode's first onset
+    final: dict[int, dict[str, Any]] = {}  # each contact id's offset
     onsets_in: dict[int, int] = {}
     false_alarms: list[float] = []
     # (point err mm, force err N, link, flagged, bound mm or None, solver's RMS error mm or None,
@@ -194,6 +212,9 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             else:
                 onsets_in[k] = onsets_in.get(k, 0) + 1
                 first_onset.setdefault(k, t)
+                first_id.setdefault(k, ev.get("contact_id", 0))
+        if ev["kind"] == "offset":
+            final[ev.get("contact_id", 0)] = ev
         # an offset repeats the last estimate, an exceedance the event that crossed its limit
         if ev["kind"] in ("offset", "exceedance") or not ev["link"] or "no_estimate" in ev["flags"]:
             continue
@@ -217,6 +238,7 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
         delay_due = float(first_onset[k] - due[a]) / 1e6 if k in first_onset else None
         rows = errs.get(k, [])
         good = [r for r in rows if not r[3]]
+        true_class, classified, class_right = _class_of(truth[a:b + 1], final.get(first_id.get(k, -1)))
         e = np.array([r[0] for r in good])
         est = [r[2] for r in good]
 
@@ -242,7 +264,7 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             err_over_solver=(round(float(_rms(ref_err) / _rms(ref_rms)), 2) if len(ref) and _rms(ref_rms) > 0
                              else None),
             err_over_std_rms=stat(np.array([r[0] / r[6] for r in good if r[6] > 0]), _rms),
-            cut=bool(b == len(truth) - 1)))
+            cut=bool(b == len(truth) - 1), true_class=true_class, classified=classified, class_right=class_right))
     splits = sum(max(0, n - 1) for n in onsets_in.values())
     return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))
 

@@ -68,13 +68,12 @@ class StopReflex:
         self._thread.join(5.0)
 
 
-GUIDANCE_FIELD = "guidance"  # a ContactEvent's probability (0-1) that the contact is intended guidance, if it has one
-
-
 def guidance_of(ev: Any) -> float | None:
-    """The event's guidance probability, or None when nothing classified the contact (an optional field)."""
-    value = getattr(ev, GUIDANCE_FIELD, None)
-    return None if value is None else float(value)
+    """The event's probability that a person is guiding the arm (``p_guidance``, docs/contacts.md), or None
+    when nothing classified the contact (``intent`` empty: an event from before the classifier)."""
+    if not getattr(ev, "intent", ""):
+        return None
+    return float(ev.p_guidance)
 
 
 def kind_trigger(kind: str) -> Callable[[Any], bool]:

@@ -91,7 +91,7 @@ def event_text(ev, t0_ns: int) -> str:
     if isinstance(ev, ContactEvent):
         text = (f"{t:8.3f} s  {ev.kind:6s} {ev.link or '-':14s} point {np.round(np.asarray(ev.point) * 1e3, 1)} mm  "
                 f"|F| {np.linalg.norm(ev.force):5.1f} N  +-{np.linalg.norm(ev.point_std) * 1e3:.1f} mm  "
-                f"{','.join(ev.flags)}")
+                f"{class_text(ev)}{','.join(ev.flags)}")
         return text + limits_text(ev)
     if isinstance(ev, DeviceEvent):
         return f"{t:8.3f} s  device {ev.source}: {ev.kind} {ev.message}"
@@ -108,6 +108,17 @@ def limits_text(ev: ContactEvent) -> str:
     text = (f"  {c.region} {kind} {c.limit_n:.0f} N margin {c.margin_n:+.1f} N  m_R {c.effective_mass_kg:.3g} kg  "
             f"v {c.speed_mps:.2f}/{c.permissible_speed_mps:.2f} m/s")
     return f"  !!{text}" if ev.kind == "exceedance" else text
+
+
+def class_text(ev: ContactEvent) -> str:
+    """The contact's class so far: ``transient 0.97 / impact 0.99  `` (each value with its probability;
+    ``final`` at the offset), empty for an event with none."""
+    if not ev.contact_class:
+        return ""
+    p_cls = ev.p_quasi_static if ev.contact_class != "transient" else 1.0 - ev.p_quasi_static
+    p_int = ev.p_guidance if ev.intent != "impact" else 1.0 - ev.p_guidance
+    final = " final" if ev.kind == "offset" else ""
+    return f"{ev.contact_class} {p_cls:.2f} / {ev.intent} {p_int:.2f}{final}  "
 
 
 class LiveView:
@@ -147,6 +158,15 @@ class LiveView:
                      Text("\n".join(self.log) or "(no events yet)"), Text(f"monitor: {counters}\n", style="dim"))
 
 
+def _class_caption(ev: Evaluation) -> str:
+    """The scripted contacts' kinds against their final classes (docs/contacts.md), where the truth says kinds."""
+    scored = [c for c in ev.contacts if c.true_class]
+    if not scored:
+        return ""
+    rows = ", ".join(f"#{c.index} {c.true_class}: {c.classified or 'not reported'}" for c in scored)
+    return f" Classified right: {sum(bool(c.class_right) for c in scored)} of {len(scored)} ({rows})."
+
+
 def evaluation_table(ev: Evaluation, title: str = "contacts: detected against ground truth") -> Group:
     """Two tables, each whole at 100 columns and in a file (no cell cut): when and on which link each
     contact was detected, then how far its estimates were from the truth; the legend under them."""
@@ -181,7 +201,8 @@ def evaluation_table(ev: Evaluation, title: str = "contacts: detected against gr
                     f"(late: after that), false alarms {len(ev.false_alarms)}"
                     + (f" at {ev.false_alarms} s" if ev.false_alarms else "") + f", split detections {ev.splits}. "
                     "Delay: from the first contact sample's publication (from due: from when it was due). "
-                    "Link ok: the estimates on the true link. Cut: the run ended during the contact.")
+                    "Link ok: the estimates on the true link. Cut: the run ended during the contact."
+                    + _class_caption(ev))
     where.caption = ("Over the estimates without a solver flag (rms all: with the flagged ones); "
                      "CRLB rms: the Cramer-Rao bound of the same samples (what the sensor noise allows); "
                      "err/CRLB: RMS of each estimate's error over its own bound (about 1 at the limit); "

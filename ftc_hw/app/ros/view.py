@@ -25,7 +25,16 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.bus import CONTACT_KINDS, STREAM_EVENT_KINDS, ContactEvent, DeviceEvent, JointFrame, WrenchFrame
+from ftc_hw.bus import (
+    CONTACT_CLASSES,
+    CONTACT_KINDS,
+    INTENTS,
+    STREAM_EVENT_KINDS,
+    ContactEvent,
+    DeviceEvent,
+    JointFrame,
+    WrenchFrame,
+)
 from ftc_hw.monitor import JudgedFrame, PipelineInput
 from ftc_hw.record.events import event_record
 from ftc_hw.record.foxglove_messages import FRAME_TRANSFORMS
@@ -50,7 +59,9 @@ EVENT_JSON_SCHEMA = {"$schema": "https://json-schema.org/draft/2020-12/schema", 
         **_COMMON, "kind": {"enum": sorted(CONTACT_KINDS)}, "limits": LIMITS_JSON_SCHEMA, "contact_id": _INT,
         "link": _STR, "point": _VEC3,
         "force": _VEC3, "point_std": _VEC3, "flags": {"type": "array", "items": _STR}, "probability": _NUM,
-        "duration_s": _NUM, "peak_force": _NUM, "impulse": _NUM}},
+        "duration_s": _NUM, "peak_force": _NUM, "impulse": _NUM, "contact_class": {"enum": sorted(CONTACT_CLASSES)},
+        "p_quasi_static": _NUM, "intent": {"enum": sorted(INTENTS)}, "p_guidance": _NUM,
+        "class_features": {"type": "object", "additionalProperties": _NUM}}},
     {"type": "object", "additionalProperties": False, "required": [*_COMMON, "kind", "source", "message"],
      "properties": {**_COMMON, "kind": {"enum": sorted(STREAM_EVENT_KINDS)}, "source": _STR, "message": _STR}}]}
 
