@@ -33,6 +33,7 @@ from rich.table import Table
 
 from ftc_hw.app.calibration.identify import identify
 from ftc_hw.app.calibration.identify_joints import identify_joints
+from ftc_hw.bench.detectable import Floor, TruthVector
 from ftc_hw.bench.joint import arm_rate, judge_events, probes, summarize, sweep
 from ftc_hw.bench.report import table_console
 from ftc_hw.calibration.free_motion import MotionData
@@ -119,6 +120,9 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
     ft_driven = isinstance(pipe, ContactPipeline)
     every = world.steps_per_sample if ft_driven else max(1, round(1.0 / (arm_rate(scene) * world.dt)))
     sensing = scene.sensing
+    floor = Floor()  # the tested vector's spread where the world has no contact (detectable.py)
+    truth_vector = TruthVector(scene, joints=not ft_driven, ft=ft_driven or sensing.ft == "flange")
+    truth: list[tuple[float, np.ndarray]] = []
     tare: list[tuple] = []
     tare_left = (sensing.ft is not None or (sensing.joint_torques and not _has_offsets(settings)))
     onsets, events, truth_t, costs, active = [], [], [], [], []
@@ -138,6 +142,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         main = max(s.contacts, key=lambda c: float(np.linalg.norm(c.force)), default=None)
         if main is not None:
             truth_t.append(s.t)
+            truth.append((s.t, truth_vector(s.q, s.contacts)))
         t_ns = int(round(s.t * 1e9))
         c0 = time.thread_time()  # CPU time: this host's other load does not count
         if ft_driven:
@@ -148,9 +153,12 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
                                       tau_j=s.tau_j if sensing.joint_torques else None, wrench=wrench)
         costs.append(time.thread_time() - c0)
         active.append(res.detection.active)
+        if main is None:
+            floor.add(res.external if ft_driven else pipe.tested)
         judge_events(res.events, s.t, main, onsets, events)
     return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
-            "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt)}
+            "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt),
+            "floor": floor.cov(), "truth": truth, "threshold": pipe.detector.on}
 
 
 def _has_offsets(settings: PipelineSettings) -> bool:
@@ -201,7 +209,7 @@ def combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
         n = sum(r["n"] for r in rows)
         bands[band] = {"n": n, "detected": sum(r["detected"] * r["n"] for r in rows) / n,
                        "within_20ms": sum(r["within_20ms"] * r["n"] for r in rows) / n,
-                       "delay_ms_median": _nanmedian([r["delay_ms_median"] for r in rows])}
+                       "delay_ms_median": _nanmedian([r["delay_ms_median"] for r in rows])} | _over_detectable(rows)
 
     def mean(key: str, sub: str | None = None) -> float:
         values = [(d[key][sub] if sub else d[key]) for d in draws]
@@ -214,7 +222,30 @@ def combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
             "error_mm_median": mean("last3_unflagged_error_mm", "median"),
             "error_mm_p95": mean("last3_unflagged_error_mm", "p95"),
             "all_error_mm_median": mean("last3_error_mm", "median"),
-            "coverage95": mean("coverage95_unflagged"), "per_draw": draws}
+            "coverage95": mean("coverage95_unflagged"), "undetectable_per_link": _undetectable(draws),
+            "per_draw": draws}
+
+
+def _over_detectable(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """A band's detection over its detectable probes, the draws' counts summed (``bench/detectable.py``)."""
+    n = sum(r.get("n_detectable", 0) for r in rows)
+    if not n:
+        return {"n_detectable": 0, "detected_detectable": math.nan, "within_20ms_detectable": math.nan}
+    kept = [r for r in rows if r.get("n_detectable", 0)]
+    return {"n_detectable": n,
+            "detected_detectable": sum(r["detected_detectable"] * r["n_detectable"] for r in kept) / n,
+            "within_20ms_detectable": sum(r["within_20ms_detectable"] * r["n_detectable"] for r in kept) / n}
+
+
+def _undetectable(draws: list[dict[str, Any]]) -> dict[str, dict[str, int]]:
+    """Per link, over the draws: probes, undetectable ones, undetectable ones of 50 N and more."""
+    out: dict[str, dict[str, int]] = {}
+    for d in draws:
+        for link, v in d["per_link"].items():
+            row = out.setdefault(link, {"probes": 0, "undetectable": 0, "undetectable_50n": 0})
+            for k in row:
+                row[k] += v.get(k, 0)
+    return out
 
 
 def run(json_path: Path | None = None, *, columns: tuple[Column, ...] = COLUMNS, draws: int = 2,
@@ -237,8 +268,9 @@ def run(json_path: Path | None = None, *, columns: tuple[Column, ...] = COLUMNS,
 
 def _table(results: dict[str, Any]) -> None:
     t = Table(title="contact sensing by what the arm senses (typical world, identified first)")
-    for c in ("column", "min", "false alarms /min", ">=50 N detected (in 20 ms)", "10-25 N detected", "delay ms",
-              "link right", "err mm med / p95 (last 3)", "ambiguous", "coverage 95"):
+    for c in ("column", "min", "false alarms /min", ">=50 N detected (in 20 ms)",
+              ">=50 N detectable: n, detected (in 20 ms)", "undetectable (>=50 N) per link", "10-25 N detected",
+              "delay ms", "link right", "err mm med / p95 (last 3)", "ambiguous", "coverage 95"):
         t.add_column(c, justify="left" if c == "column" else "right")
 
     def pct(x: float) -> str:
@@ -252,6 +284,10 @@ def _table(results: dict[str, Any]) -> None:
         mid = r["detection"].get("10-25 N", {})
         t.add_row(r["column"], num(r["free_minutes"]), num(r["false_alarms_per_min"], "{:.2f}"),
                   f"{pct(big.get('detected', math.nan))} ({pct(big.get('within_20ms', math.nan))})",
+                  f"{big.get('n_detectable', 0)}, {pct(big.get('detected_detectable', math.nan))} "
+                  f"({pct(big.get('within_20ms_detectable', math.nan))})",
+                  ", ".join(f"{link} {v['undetectable']} ({v['undetectable_50n']})"
+                            for link, v in r["undetectable_per_link"].items() if v["undetectable"]) or "-",
                   pct(mid.get("detected", math.nan)), num(big.get("delay_ms_median", math.nan)),
                   pct(r["link_right_unflagged"]),
                   f"{num(r['error_mm_median'])} / {num(r['error_mm_p95'])}", pct(r["ambiguous_share"]),

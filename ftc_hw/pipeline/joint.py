@@ -71,6 +71,7 @@ class JointContactPipeline(PipelineView):
         d = settings.detection
         dims = scene.n_joints + (6 if self.flange is not None else 0)  # the flange wrench joins the test
         self.detector = JointDetector(dims, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off)
+        self.tested = np.zeros(dims)  # the vector the detector tested last: r, or [r, w] with a flange sensor
         self.solver = JointContactSolver(model, spacing=js.spacing_m, fine_spacing=js.fine_spacing_m,
                                          friction_mu=js.friction_mu, force_prior=js.force_prior_n,
                                          ambiguity_radius=js.ambiguity_radius_m, ambiguity_mass=js.ambiguity_mass,
@@ -127,9 +128,11 @@ class JointContactPipeline(PipelineView):
         w = None
         if self.flange is not None:
             w = self.flange.contact(wrench, q, qd, self.residual.observer.qdd)
-            det = self.detector.update(t_ns, *self.flange.stacked(r, cov, w))
+            z, z_cov = self.flange.stacked(r, cov, w)
         else:
-            det = self.detector.update(t_ns, r, cov)
+            z, z_cov = r, cov
+        self.tested = z
+        det = self.detector.update(t_ns, z, z_cov)
         clock.lap("detection")
         estimate = None
         external = self._zero6

@@ -29,3 +29,15 @@ def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
     assert row["free_minutes"] == pytest.approx(2 * out["free_minutes"]) and row["false_alarms"] == 0
     assert row["detection"]["50-100 N"]["n"] == 2
     assert out["events"] > 0 and 0.0 <= row["ambiguous_share"] <= 1.0  # events in contact, shares of them
+    # detectability: each probe's true d2 against the free run's floor and the detector's own threshold
+    assert out["onset_threshold"] == pytest.approx(53.34, abs=0.01)  # chi-square, 6 dof, p 1e-9
+    assert len(out["noise_floor_std"]) == 6 and min(out["noise_floor_std"]) > 0.0
+    for p in out["probes"]:
+        assert p["detectable"] == (p["d2_true"] > out["onset_threshold"])
+    for band, b in out["detection"].items():
+        able = [p for p in out["probes"] if p["band"] == band and p["detectable"] and p["link"] != "base"]
+        assert b["n_detectable"] == len(able)
+        if able:
+            assert b["detected_detectable"] == pytest.approx(sum(p["detected"] for p in able) / len(able))
+    assert sum(v["undetectable"] for v in row["undetectable_per_link"].values()) == \
+        2 * sum(not p["detectable"] for p in out["probes"])
