@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.bench.detectable import probe_d2
+from ftc_hw.bench.detectable import SPEED_EDGES, probe_d2
 from ftc_hw.model import ArmModel
 from ftc_hw.model.inertials import body_params
 from ftc_hw.model.true_arm import compile_true_arm, true_arm_spec
@@ -216,7 +216,7 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
                             "within_20ms_detectable": _share([x[0] and x[1] <= 20.0 for x in v if x[3]])}
                         for b, v in sorted(bands.items())}
     if free is not None and free.get("floor") is not None and "threshold" in probed:
-        out["noise_floor_std"] = np.sqrt(np.diag(free["floor"])).tolist()
+        out["noise_floor_std_by_speed"] = {"speed_edges_rad_s": SPEED_EDGES.tolist(), "std": free["floor"].table()}
         out["onset_threshold"] = float(probed["threshold"])
     ev = probed["events"]
     for e in ev:

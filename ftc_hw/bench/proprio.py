@@ -120,8 +120,10 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
     ft_driven = isinstance(pipe, ContactPipeline)
     every = world.steps_per_sample if ft_driven else max(1, round(1.0 / (arm_rate(scene) * world.dt)))
     sensing = scene.sensing
-    floor = Floor()  # the tested vector's spread where the world has no contact (detectable.py)
     truth_vector = TruthVector(scene, joints=not ft_driven, ft=ft_driven or sensing.ft == "flange")
+    n_tested = (0 if ft_driven else scene.n_joints) + (6 if truth_vector.ft else 0)
+    # the tested vector's spread where the world has no contact (detectable.py)
+    floor = Floor(n_tested, 0 if ft_driven else scene.n_joints)
     truth: list[tuple[float, np.ndarray]] = []
     tare: list[tuple] = []
     tare_left = (sensing.ft is not None or (sensing.joint_torques and not _has_offsets(settings)))
@@ -142,7 +144,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         main = max(s.contacts, key=lambda c: float(np.linalg.norm(c.force)), default=None)
         if main is not None:
             truth_t.append(s.t)
-            truth.append((s.t, truth_vector(s.q, s.contacts)))
+            truth.append((s.t, truth_vector(s.q, s.contacts), s.qd))
         t_ns = int(round(s.t * 1e9))
         c0 = time.thread_time()  # CPU time: this host's other load does not count
         if ft_driven:
@@ -154,11 +156,11 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         costs.append(time.thread_time() - c0)
         active.append(res.detection.active)
         if main is None:
-            floor.add(res.external if ft_driven else pipe.tested)
+            floor.add(res.external if ft_driven else pipe.tested, s.qd)
         judge_events(res.events, s.t, main, onsets, events)
     return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
             "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt),
-            "floor": floor.cov(), "truth": truth, "threshold": pipe.detector.on}
+            "floor": floor if floor.frames else None, "truth": truth, "threshold": pipe.detector.on}
 
 
 def _has_offsets(settings: PipelineSettings) -> bool:

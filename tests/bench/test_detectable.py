@@ -45,20 +45,27 @@ def test_the_flange_part_sees_only_the_tool():
     assert np.allclose(on_arm[6:], 0.0, atol=1e-9) and np.linalg.norm(on_arm[:6]) > 1.0
 
 
-def test_floor_and_window():
+def test_floor_by_joint_speed_and_window():
     rng = np.random.default_rng(0)
-    floor = Floor()
-    assert floor.cov() is None
-    sigma = np.array([0.5, 0.1])
-    for _ in range(20000):
-        floor.add(rng.normal(0.0, sigma))
-    floor.add(np.array([np.nan, 0.0]))  # refused, not counted
-    s = floor.cov()
+    floor = Floor(3, 2)  # two joints' residuals and one wrench component
+    # joint 0 spreads 2.0 at rest and 0.5 while sliding; joint 1 0.1 throughout; the wrench component 1.0
+    for k in range(20000):
+        qd = np.array([0.0 if k % 4 == 0 else 0.15, 0.15])
+        sigma = np.array([2.0 if qd[0] == 0.0 else 0.5, 0.1, 1.0])
+        floor.add(rng.normal(0.0, sigma), qd)
+    floor.add(np.array([np.nan, 0.0, 0.0]), np.zeros(2))  # refused, not counted
     assert floor.frames == 20000
-    assert np.sqrt(np.diag(s)) == pytest.approx(sigma, rel=0.03)
-    # 1 N m on the quiet joint counts 25 times as much as on the noisy one
-    assert d2_against(np.array([0.0, 1.0]), s) == pytest.approx(25 * d2_against(np.array([1.0, 0.0]), s), rel=0.06)
-    truth = [(1.000, np.array([0.0, 0.5])), (1.010, np.array([0.0, 1.0])), (1.025, np.array([0.0, 9.0]))]
+    assert floor.std(np.array([0.15, 0.15])) == pytest.approx([0.5, 0.1, 1.0], rel=0.03)
+    assert floor.std(np.array([0.0, 0.15])) == pytest.approx([2.0, 0.1, 1.0], rel=0.03)
+    # a bin the free run never reached: the component's spread over every bin
+    assert floor.std(np.array([0.03, 0.0]))[0] == pytest.approx(np.sqrt(0.25 * 4.0 + 0.75 * 0.25), rel=0.03)
+    s = floor.std(np.array([0.15, 0.15]))
+    # 1 N m on the quiet joint counts 25 times as much as on the sliding noisy one
+    assert d2_against(np.array([0.0, 1.0, 0.0]), s) == pytest.approx(25 * d2_against(np.array([1.0, 0.0, 0.0]), s),
+                                                                     rel=0.06)
+    moving = np.array([0.15, 0.15])
+    truth = [(1.000, np.array([0.0, 0.5, 0.0]), moving), (1.010, np.array([0.0, 1.0, 0.0]), moving),
+             (1.025, np.array([0.0, 9.0, 0.0]), moving)]
     # the frame at 25 ms lies past the 20 ms window: the largest inside is the 10 ms frame's
-    assert probe_d2(truth, s, 1.0) == pytest.approx(d2_against(truth[1][1], s))
-    assert probe_d2(truth, s, 2.0) == 0.0
+    assert probe_d2(truth, floor, 1.0) == pytest.approx(d2_against(truth[1][1], s))
+    assert probe_d2(truth, floor, 2.0) == 0.0

@@ -31,7 +31,8 @@ def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
     assert out["events"] > 0 and 0.0 <= row["ambiguous_share"] <= 1.0  # events in contact, shares of them
     # detectability: each probe's true d2 against the free run's floor and the detector's own threshold
     assert out["onset_threshold"] == pytest.approx(53.34, abs=0.01)  # chi-square, 6 dof, p 1e-9
-    assert len(out["noise_floor_std"]) == 6 and min(out["noise_floor_std"]) > 0.0
+    floor = out["noise_floor_std_by_speed"]["std"]
+    assert len(floor) == 6 and all(v is None or v > 0.0 for row in floor for v in row)
     for p in out["probes"]:
         assert p["detectable"] == (p["d2_true"] > out["onset_threshold"])
     for band, b in out["detection"].items():
