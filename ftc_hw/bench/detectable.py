@@ -3,22 +3,24 @@ so that a bench's detection rate can be told apart into the method's misses and 
 
 The criterion. The detector tests one vector z per frame (the momentum observer's residual r (n,) N m for
 joint signals; [r, w] with a flange F/T sensor's contact wrench w; the compensated wrench for a base F/T
-sensor) against a chi-square threshold ``on`` (its onset quantile at its per-sample false-alarm
-probability, with its own degrees of freedom). The **noise floor** is z's measured spread in the same
-world's free run (same draw, same sweep, no contact), per component: its root mean square about zero,
-what the test faces from noise, friction and model error together while the arm moves; a joint's
-component by the speed of that joint (bins of |qd_j|, ``SPEED_EDGES``), since its friction's share is set
-by it (measured, ur10e typical, shoulder-lift joint: 0.34 N m above 0.1 rad/s, 2.5 N m at 0.01-0.03, 10 N m
-below 0.01 rad/s, where static friction holds anything within +-f_c). A probe's **true vector** is what
-its contact alone puts into z: ``J^T f`` (the world's force at the world's point, the Jacobian at the
-world's pose) for the joints; the contact's wrench at the F/T sensor (none where the sensor does not see
-the touched link). A probe is **detectable** when, within 20 ms of its start (the acceptance's window),
-some frame's ``sum_k (z_true,k / floor_k)^2`` (each joint's floor at that frame's speed) exceeds ``on``:
-a contact that stands out of the measured floor as far as the detector's threshold asks. Below it no test
-on these signals at this false-alarm rate could call it reliably; above it a miss is the method's (its
-covariance, its observer's lag, its test). Nothing here is tuned to the result: the floor is measured,
-``on`` is the detector's, the window is the acceptance's. The floor is diagonal (the components'
-correlations left out).
+sensor). The criterion's threshold is an ideal detector's that knows which link is touched: the chi-square
+quantile at the detector's per-sample false-alarm probability ``p_false`` with as many degrees of freedom
+as components the contact can load (``link_dof``: the joints that move the link, the wrench's 6 where the
+F/T sensor carries the link) -- the same whichever test the pipeline runs. The **noise floor** is z's
+measured spread in the same world's free run (same draw, same sweep, no contact), per component: its root
+mean square about zero, what the test faces from noise, friction and model error together while the arm
+moves; a joint's component by the speed of that joint (bins of |qd_j|, ``SPEED_EDGES``), since its
+friction's share is set by it (measured, ur10e typical, shoulder-lift joint: 0.34 N m above 0.1 rad/s, 2.5
+N m at 0.01-0.03, 10 N m below 0.01 rad/s, where static friction holds anything within +-f_c). A probe's
+**true vector** is what its contact alone puts into z: ``J^T f`` (the world's force at the world's point,
+the Jacobian at the world's pose) for the joints; the contact's wrench at the F/T sensor (none where the
+sensor does not see the touched link). A probe is **detectable** when, within 20 ms of its start (the
+acceptance's window), some frame's ``sum_k (z_true,k / floor_k)^2`` (each joint's floor at that frame's
+speed) exceeds that threshold: a contact that stands out of the measured floor as far as the ideal test
+asks. Below it no test on these signals at this false-alarm rate could call it reliably; above it a miss is
+the method's (its covariance, its observer's lag, its test). Nothing here is tuned to the result: the floor
+is measured, the threshold is the chi-square's at the detector's false-alarm probability, the window is the
+acceptance's. The floor is diagonal (the components' correlations left out).
 
 What the floor holds besides physics: the identified model's own error (a better identification lowers
 it, and more probes become detectable); the criterion measures the detector against the residual it is
@@ -30,7 +32,9 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from ftc_hw.detection.joint import chi2_isf
 from ftc_hw.model import ArmModel, Contact
+from ftc_hw.pipeline.joint import sensor_sees
 from ftc_hw.scene import Scene
 
 WINDOW_S = 0.020  # from the probe's start: the acceptance's "within 20 ms"
@@ -117,3 +121,16 @@ def probe_d2(truth: list[tuple[float, np.ndarray, np.ndarray]], floor: Floor, t_
     frame falls there."""
     inside = [(z, qd) for t, z, qd in truth if t_start <= t <= t_start + WINDOW_S + 1e-9]
     return max((d2_against(z, floor.std(qd)) for z, qd in inside), default=0.0)
+
+
+def link_threshold(model: ArmModel, link: str, *, joints: bool, ft: bool, p_false: float) -> float:
+    """The ideal test's threshold for a contact on ``link``: the chi-square quantile at ``p_false`` with
+    ``link_dof`` degrees of freedom (inf where the contact loads nothing tested)."""
+    k = link_dof(model, link, joints=joints, ft=ft)
+    return chi2_isf(p_false, k) if k else float("inf")
+
+
+def link_dof(model: ArmModel, link: str, *, joints: bool, ft: bool) -> int:
+    """How many tested components a contact on ``link`` can load: the joints that move it (``joints``),
+    and the F/T sensor's 6 where the sensor carries the link (``ft``)."""
+    return (int(model.moving_joints(link).sum()) if joints else 0) + (6 if ft and sensor_sees(model, link) else 0)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from ftc_hw.bench.detectable import SPEED_EDGES, probe_d2
+from ftc_hw.bench.detectable import SPEED_EDGES, link_threshold, probe_d2
 from ftc_hw.model import ArmModel
 from ftc_hw.model.inertials import body_params
 from ftc_hw.model.true_arm import compile_true_arm, true_arm_spec
@@ -191,18 +191,20 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
     bands: dict[str, list] = {}
     per_link: dict[str, dict[str, list]] = {}
     d2_true = _probe_d2(pr, free, probed)
+    tested = probed.get("tested")
     out["probes"] = []
     for p, d2 in zip(pr, d2_true, strict=True):
         hit = [t for t, _ in probed["onsets"] if p.t_start <= t <= p.t_end + 0.05]
         delay = (hit[0] - p.t_start) * 1e3 if hit else math.nan
         band = next(f"{lo:g}-{hi:g} N" for lo, hi in BANDS if lo <= p.magnitude <= hi)
-        able = bool(d2 > probed["threshold"]) if d2 is not None else None
+        threshold = None if d2 is None else link_threshold(model, p.link, **tested)
+        able = bool(d2 > threshold) if d2 is not None else None
         row = per_link.setdefault(p.link, {"detected": [], "events": [], "undetectable": [], "undetectable_50": []})
         row["detected"].append(bool(hit))
         row["undetectable"].append(able is False)
         row["undetectable_50"].append(able is False and p.magnitude >= 50.0)
         out["probes"].append({"link": p.link, "force_n": p.magnitude, "band": band, "detected": bool(hit),
-                              "delay_ms": delay, "d2_true": d2, "detectable": able})
+                              "delay_ms": delay, "d2_true": d2, "threshold": threshold, "detectable": able})
         if p.link not in seen:
             continue
         bands.setdefault(band, []).append((bool(hit), delay, p.link in last3, able))
@@ -215,9 +217,8 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
                             "detected_detectable": _share([x[0] for x in v if x[3]]),
                             "within_20ms_detectable": _share([x[0] and x[1] <= 20.0 for x in v if x[3]])}
                         for b, v in sorted(bands.items())}
-    if free is not None and free.get("floor") is not None and "threshold" in probed:
+    if free is not None and free.get("floor") is not None and tested is not None:
         out["noise_floor_std_by_speed"] = {"speed_edges_rad_s": SPEED_EDGES.tolist(), "std": free["floor"].table()}
-        out["onset_threshold"] = float(probed["threshold"])
     ev = probed["events"]
     for e in ev:
         per_link.setdefault(e["true_link"], {"detected": [], "events": [], "undetectable": [],
@@ -252,7 +253,7 @@ def _probe_d2(pr: tuple[Probe, ...], free: dict | None, probed: dict) -> list[fl
     """Each probe's true d2 against the free run's floor within the acceptance's window
     (``bench/detectable.py``); None each where the runs carry no floor or truth."""
     floor = None if free is None else free.get("floor")
-    if floor is None or "truth" not in probed:
+    if floor is None or "truth" not in probed or "tested" not in probed:
         return [None] * len(pr)
     return [probe_d2(probed["truth"], floor, p.t_start) for p in pr]
 

@@ -160,7 +160,9 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         judge_events(res.events, s.t, main, onsets, events)
     return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
             "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt),
-            "floor": floor if floor.frames else None, "truth": truth, "threshold": pipe.detector.on}
+            "floor": floor if floor.frames else None, "truth": truth,
+            "tested": {"joints": truth_vector.joints, "ft": truth_vector.ft,
+                       "p_false": settings.detection.p_false}}
 
 
 def _has_offsets(settings: PipelineSettings) -> bool:

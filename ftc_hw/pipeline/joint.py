@@ -70,7 +70,8 @@ class JointContactPipeline(PipelineView):
         self.flange = FlangeWrench(scene, model, settings) if sensing.ft == "flange" else None
         d = settings.detection
         dims = scene.n_joints + (6 if self.flange is not None else 0)  # the flange wrench joins the test
-        self.detector = JointDetector(dims, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off)
+        subspaces = link_subspaces(model, scene, dims) if js.link_subspaces else None
+        self.detector = JointDetector(dims, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off, subspaces=subspaces)
         self.tested = np.zeros(dims)  # the vector the detector tested last: r, or [r, w] with a flange sensor
         self.solver = JointContactSolver(model, spacing=js.spacing_m, fine_spacing=js.fine_spacing_m,
                                          friction_mu=js.friction_mu, force_prior=js.force_prior_n,
@@ -262,6 +263,35 @@ def pipeline_for(scene: Scene, settings: PipelineSettings | None = None, *,
     if scene.sensing.ft == "base":
         return ContactPipeline(scene, settings, clock=clock)
     return JointContactPipeline(scene, settings, clock=clock)
+
+
+def link_subspaces(model: ArmModel, scene: Scene, dims: int) -> tuple[int, ...] | None:
+    """The leading blocks of the tested vector ([r] or [r, w]) a contact on each touchable link can load:
+    its moving joints (the first k of a serial chain), everything (``dims``) where a flange sensor sees the
+    link; ``dims`` always (a contact off the declared links). None where some link's joints are not the
+    first k (a coupling): the full test alone."""
+    out = {dims}
+    flange = dims > scene.n_joints
+    for t in scene.touchable:
+        mask = model.moving_joints(t.link)
+        k = int(mask.sum())
+        if k == 0:
+            continue  # no joint moves it (the base): no joint signal sees it
+        if not mask[:k].all():
+            return None
+        out.add(dims if flange and sensor_sees(model, t.link) else k)
+    return tuple(sorted(out))
+
+
+def sensor_sees(model: ArmModel, link: str) -> bool:
+    """Whether the model's F/T sensor carries ``link`` (the link hangs beyond the sensor's body; every
+    link for a sensor under the base)."""
+    if model.sensor_body is None:
+        return False
+    m, body = model.model, model.model.body(link).id
+    while body not in (0, model.sensor_body):
+        body = int(m.body_parentid[body])
+    return body == model.sensor_body
 
 
 def add_rotor_inertia(model: ArmModel, rotor: np.ndarray) -> None:
