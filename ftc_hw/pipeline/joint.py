@@ -138,7 +138,7 @@ class JointContactPipeline(PipelineView):
         estimate = None
         external = self._zero6
         if det.active:
-            estimate = self._localize(t_ns, det, r, cov, q, w)
+            estimate = self._localize(t_ns, det, r, q, qd, current, w)
             external = self._external(estimate, q)
             clock.lap("localization")
         events: list[ContactEvent] = []
@@ -152,9 +152,10 @@ class JointContactPipeline(PipelineView):
         clock.end()
         return FrameResult(t_ns, external, det, estimate, r.copy(), tuple(events))
 
-    def _localize(self, t_ns: int, det: Detection, r, cov, q, w) -> ContactEstimate:
+    def _localize(self, t_ns: int, det: Detection, r, q, qd, current, w) -> ContactEstimate:
         """A frame in contact: the estimate (at the onset, then at most every ``localize_period_s``; else
-        the last one), fused into the contact's track."""
+        the last one), fused into the contact's track; r's covariance with the contact's own torque
+        through the torque constants' uncertainty (``JointResidual.contact_cov``)."""
         if det.change == "onset":
             self._last = None
             if self.events.track is not None:
@@ -163,6 +164,7 @@ class JointContactPipeline(PipelineView):
             return self._last
         self._solved_ns = t_ns
         w_cov = None if w is None else self.flange.cov
+        cov = self.residual.contact_cov(q, qd, current if self.source == "currents" else None)
         e = self.solver.solve(r, cov, q, wrench=w, wrench_cov=w_cov)
         self._last = e
         self.events.fuse(t_ns, e, q, self.solver.solved_body_poses())
