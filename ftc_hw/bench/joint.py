@@ -108,7 +108,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         if main is not None:
             truth_t.append(s.t)
         current = world.read_current(s)
-        tau_j = getattr(s, "tau_j", None) if use_tau else None
+        tau_j = world.read_joint_torques(s) if use_tau else None  # the sensors' reading: offsets, noise
         t_ns = int(round(s.t * 1e9))
         c0 = time.thread_time()  # CPU time: this host's other load does not count
         res = pipe.process_joints(t_ns, s.q, s.qd, current=current, tau_j=tau_j)
@@ -291,7 +291,8 @@ def time_frames(scene_name: str, *, n_probes: int = 8, seed: int = 0, sensing: t
     for _ in range(int(round((pr[-1].t_end + 0.3) / world.dt))):
         s = world.step()
         if world.steps % every == 0:
-            frames.append((int(round(s.t * 1e9)), s.q, s.qd, world.read_current(s), getattr(s, "tau_j", None)))
+            tau_j = world.read_joint_torques(s) if s.tau_j is not None else None
+            frames.append((int(round(s.t * 1e9)), s.q, s.qd, world.read_current(s), tau_j))
     best = np.full(len(frames), np.inf)
     active = np.zeros(len(frames), dtype=bool)
     for _ in range(repeats):

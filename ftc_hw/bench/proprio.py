@@ -97,7 +97,7 @@ def identified(scene: Scene, world_scene: Scene, identify_s: float, seed: int) -
         rows["qd"].append(s.qd)
         rows["current"].append(world.read_current(s))
         if s.tau_j is not None:
-            rows["tau_j"].append(s.tau_j)
+            rows["tau_j"].append(world.read_joint_torques(s))  # the sensors' reading: offsets, noise
         if ft:
             rows["wrench"].append(world.read_sensor(s).wrench)
     a = {k: np.array(v) for k, v in rows.items() if v}
@@ -135,8 +135,9 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         reading = world.read_sensor(s) if s.wrench is not None and sensing.ft else None
         wrench = reading.wrench if reading is not None else None
         current = world.read_current(s)
+        tau_j = world.read_joint_torques(s) if s.tau_j is not None else None  # offsets, noise: not the truth
         if tare_left:
-            tare.append((wrench, s.q, s.tau_j))
+            tare.append((wrench, s.q, tau_j))
             if s.t >= TARE_S:
                 _tare(pipe, tare, s.t)
                 tare_left = False
@@ -152,7 +153,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
                                saturated=bool(reading.saturated.any()))
         else:
             res = pipe.process_joints(t_ns, s.q, s.qd, current=current if sensing.currents else None,
-                                      tau_j=s.tau_j if sensing.joint_torques else None, wrench=wrench)
+                                      tau_j=tau_j if sensing.joint_torques else None, wrench=wrench)
         costs.append(time.thread_time() - c0)
         active.append(res.detection.active)
         if main is None:
