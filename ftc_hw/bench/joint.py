@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ftc_hw.bench.detectable import SPEED_EDGES, link_threshold, probe_d2
 from ftc_hw.model import ArmModel
 from ftc_hw.model.inertials import body_params
 from ftc_hw.model.true_arm import compile_true_arm, true_arm_spec
@@ -107,7 +108,7 @@ def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: 
         if main is not None:
             truth_t.append(s.t)
         current = world.read_current(s)
-        tau_j = getattr(s, "tau_j", None) if use_tau else None
+        tau_j = world.read_joint_torques(s) if use_tau else None  # the sensors' reading: offsets, noise
         t_ns = int(round(s.t * 1e9))
         c0 = time.thread_time()  # CPU time: this host's other load does not count
         res = pipe.process_joints(t_ns, s.q, s.qd, current=current, tau_j=tau_j)
@@ -189,22 +190,42 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
     out["false_alarms_probed_run"] = len(stray)
     bands: dict[str, list] = {}
     per_link: dict[str, dict[str, list]] = {}
-    for p in pr:
+    d2_true = _probe_d2(pr, free, probed)
+    tested = probed.get("tested")
+    out["probes"] = []
+    for p, d2 in zip(pr, d2_true, strict=True):
         hit = [t for t, _ in probed["onsets"] if p.t_start <= t <= p.t_end + 0.05]
-        per_link.setdefault(p.link, {"detected": [], "events": []})["detected"].append(bool(hit))
+        delay = (hit[0] - p.t_start) * 1e3 if hit else math.nan
+        band = next(f"{lo:g}-{hi:g} N" for lo, hi in BANDS if lo <= p.magnitude <= hi)
+        threshold = None if d2 is None else link_threshold(model, p.link, **tested)
+        able = bool(d2 > threshold) if d2 is not None else None
+        row = per_link.setdefault(p.link, {"detected": [], "events": [], "undetectable": [], "undetectable_50": []})
+        row["detected"].append(bool(hit))
+        row["undetectable"].append(able is False)
+        row["undetectable_50"].append(able is False and p.magnitude >= 50.0)
+        out["probes"].append({"link": p.link, "force_n": p.magnitude, "band": band, "detected": bool(hit),
+                              "delay_ms": delay, "d2_true": d2, "threshold": threshold, "detectable": able})
         if p.link not in seen:
             continue
-        band = next(f"{lo:g}-{hi:g} N" for lo, hi in BANDS if lo <= p.magnitude <= hi)
-        bands.setdefault(band, []).append((bool(hit), (hit[0] - p.t_start) * 1e3 if hit else math.nan,
-                                           p.link in last3))
-    # detection over the probes on links some joint moves (``unseen_links`` apart)
+        bands.setdefault(band, []).append((bool(hit), delay, p.link in last3, able))
+    # detection over the probes on links some joint moves (``unseen_links`` apart); and over the detectable
+    # ones alone (``bench/detectable.py``: the true contact stands out of the free run's measured floor)
     out["detection"] = {b: {"n": len(v), "detected": float(np.mean([x[0] for x in v])),
                             "within_20ms": float(np.mean([x[0] and x[1] <= 20.0 for x in v])),
-                            "delay_ms_median": _pct([x[1] for x in v if x[0]], 50)} for b, v in sorted(bands.items())}
+                            "delay_ms_median": _pct([x[1] for x in v if x[0]], 50),
+                            "n_detectable": sum(1 for x in v if x[3]),
+                            "detected_detectable": _share([x[0] for x in v if x[3]]),
+                            "within_20ms_detectable": _share([x[0] and x[1] <= 20.0 for x in v if x[3]])}
+                        for b, v in sorted(bands.items())}
+    if free is not None and free.get("floor") is not None and tested is not None:
+        out["noise_floor_std_by_speed"] = {"speed_edges_rad_s": SPEED_EDGES.tolist(), "std": free["floor"].table()}
     ev = probed["events"]
     for e in ev:
-        per_link.setdefault(e["true_link"], {"detected": [], "events": []})["events"].append(e)
+        per_link.setdefault(e["true_link"], {"detected": [], "events": [], "undetectable": [],
+                                             "undetectable_50": []})["events"].append(e)
     out["per_link"] = {link: {"probes": len(v["detected"]), "detected": _share(v["detected"]),
+                              "undetectable": int(sum(v["undetectable"])),
+                              "undetectable_50n": int(sum(v["undetectable_50"])),
                               "events": len(v["events"]),
                               "right": _share([e["link"] == e["true_link"] for e in v["events"]]),
                               "ambiguous": _share([("ambiguous" in e["flags"]) for e in v["events"]]),
@@ -226,6 +247,15 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
     out["coverage95_unflagged"] = _share([e["covered"] for e in unflagged])
     out["frame_cost_us"] = frame_costs(probed)
     return out
+
+
+def _probe_d2(pr: tuple[Probe, ...], free: dict | None, probed: dict) -> list[float | None]:
+    """Each probe's true d2 against the free run's floor within the acceptance's window
+    (``bench/detectable.py``); None each where the runs carry no floor or truth."""
+    floor = None if free is None else free.get("floor")
+    if floor is None or "truth" not in probed or "tested" not in probed:
+        return [None] * len(pr)
+    return [probe_d2(probed["truth"], floor, p.t_start) for p in pr]
 
 
 def frame_costs(run: dict[str, Any]) -> dict[str, dict[str, float]]:
@@ -261,7 +291,8 @@ def time_frames(scene_name: str, *, n_probes: int = 8, seed: int = 0, sensing: t
     for _ in range(int(round((pr[-1].t_end + 0.3) / world.dt))):
         s = world.step()
         if world.steps % every == 0:
-            frames.append((int(round(s.t * 1e9)), s.q, s.qd, world.read_current(s), getattr(s, "tau_j", None)))
+            tau_j = world.read_joint_torques(s) if s.tau_j is not None else None
+            frames.append((int(round(s.t * 1e9)), s.q, s.qd, world.read_current(s), tau_j))
     best = np.full(len(frames), np.inf)
     active = np.zeros(len(frames), dtype=bool)
     for _ in range(repeats):

@@ -33,6 +33,7 @@ from rich.table import Table
 
 from ftc_hw.app.calibration.identify import identify
 from ftc_hw.app.calibration.identify_joints import identify_joints
+from ftc_hw.bench.detectable import Floor, TruthVector
 from ftc_hw.bench.joint import arm_rate, judge_events, probes, summarize, sweep
 from ftc_hw.bench.report import table_console
 from ftc_hw.calibration.free_motion import MotionData
@@ -96,7 +97,7 @@ def identified(scene: Scene, world_scene: Scene, identify_s: float, seed: int) -
         rows["qd"].append(s.qd)
         rows["current"].append(world.read_current(s))
         if s.tau_j is not None:
-            rows["tau_j"].append(s.tau_j)
+            rows["tau_j"].append(world.read_joint_torques(s))  # the sensors' reading: offsets, noise
         if ft:
             rows["wrench"].append(world.read_sensor(s).wrench)
     a = {k: np.array(v) for k, v in rows.items() if v}
@@ -112,21 +113,33 @@ def identified(scene: Scene, world_scene: Scene, identify_s: float, seed: int) -
 def run_world(scene: Scene, world_scene: Scene, setup: ScenarioSetup, duration: float, seed: int,
               settings: PipelineSettings) -> dict[str, Any]:
     """The scene's pipeline over ``duration`` s of the world: onsets, events in contact with the truth,
-    per-frame CPU time (s). The F/T pipeline takes each sensor sample, the joint pipeline each joint sample;
-    the first ``TARE_S`` (at rest) tare the F/T sensor and the joint torque sensors where not identified."""
+    per-frame CPU time (s), the tested signal's free-motion floor and its truth in contact (detectable.py).
+    The F/T pipeline takes each sensor sample, the joint pipeline each joint sample; the first ``TARE_S``
+    (at rest) tare the F/T sensor and the joint torque sensors where not identified."""
     world = World(world_scene, setup, seed=seed)
     pipe = pipeline_for(scene, settings)
+    ft_driven = isinstance(pipe, ContactPipeline)
+    truth_vector = TruthVector(scene, joints=not ft_driven, ft=ft_driven or scene.sensing.ft == "flange")
+    n_tested = (0 if ft_driven else scene.n_joints) + (6 if truth_vector.ft else 0)
+    floor = Floor(n_tested, 0 if ft_driven else scene.n_joints)  # the tested vector's spread out of contact
+    truth: list[tuple[float, np.ndarray, np.ndarray]] = []
     onsets, events, truth_t, costs, active = [], [], [], [], []
     for s, res, cost in drive(scene, world, pipe, duration, tare_torques=not _has_offsets(settings)):
         main = max(s.contacts, key=lambda c: float(np.linalg.norm(c.force)), default=None)
         if main is not None:
             truth_t.append(s.t)
+            truth.append((s.t, truth_vector(s.q, s.contacts), s.qd))
         costs.append(cost)
         active.append(res.detection.active)
+        if main is None:
+            floor.add(res.external if ft_driven else pipe.tested, s.qd)
         judge_events(res.events, s.t, main, onsets, events)
-    every = world.steps_per_sample if isinstance(pipe, ContactPipeline) else sample_every(scene, world)
+    every = world.steps_per_sample if ft_driven else sample_every(scene, world)
     return {"onsets": onsets, "events": events, "truth_t": np.array(truth_t), "cost_s": np.array(costs),
-            "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt)}
+            "active": np.array(active, dtype=bool), "rate_hz": 1.0 / (every * world.dt),
+            "floor": floor if floor.frames else None, "truth": truth,
+            "tested": {"joints": truth_vector.joints, "ft": truth_vector.ft,
+                       "p_false": settings.detection.p_false}}
 
 
 def sample_every(scene: Scene, world: World) -> int:
@@ -137,8 +150,8 @@ def sample_every(scene: Scene, world: World) -> int:
 def drive(scene: Scene, world: World, pipe, duration: float, *, tare_torques: bool = True):
     """Yield (world state, the pipeline's FrameResult, its CPU time s) for ``duration`` s of the world, at the
     samples the scene's devices would deliver: the F/T pipeline each sensor sample, the joint pipeline each
-    joint sample; the first ``TARE_S`` (at rest) tare the F/T sensor and (``tare_torques``) the joint torque
-    sensors, and yield nothing."""
+    joint sample, each sensor as read (offsets, noise: not the truth); the first ``TARE_S`` (at rest) tare
+    the F/T sensor and (``tare_torques``) the joint torque sensors, and yield nothing."""
     ft_driven = isinstance(pipe, ContactPipeline)
     every = world.steps_per_sample if ft_driven else sample_every(scene, world)
     sensing = scene.sensing
@@ -151,8 +164,9 @@ def drive(scene: Scene, world: World, pipe, duration: float, *, tare_torques: bo
         reading = world.read_sensor(s) if s.wrench is not None and sensing.ft else None
         wrench = reading.wrench if reading is not None else None
         current = world.read_current(s)
+        tau_j = world.read_joint_torques(s) if s.tau_j is not None else None
         if tare_left:
-            tare.append((wrench, s.q, s.tau_j))
+            tare.append((wrench, s.q, tau_j))
             if s.t >= TARE_S:
                 _tare(pipe, tare, s.t)
                 tare_left = False
@@ -164,7 +178,7 @@ def drive(scene: Scene, world: World, pipe, duration: float, *, tare_torques: bo
                                saturated=bool(reading.saturated.any()))
         else:
             res = pipe.process_joints(t_ns, s.q, s.qd, current=current if sensing.currents else None,
-                                      tau_j=s.tau_j if sensing.joint_torques else None, wrench=wrench)
+                                      tau_j=tau_j if sensing.joint_torques else None, wrench=wrench)
         yield s, res, time.thread_time() - c0
 
 
@@ -216,7 +230,7 @@ def combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
         n = sum(r["n"] for r in rows)
         bands[band] = {"n": n, "detected": sum(r["detected"] * r["n"] for r in rows) / n,
                        "within_20ms": sum(r["within_20ms"] * r["n"] for r in rows) / n,
-                       "delay_ms_median": _nanmedian([r["delay_ms_median"] for r in rows])}
+                       "delay_ms_median": _nanmedian([r["delay_ms_median"] for r in rows])} | _over_detectable(rows)
 
     def mean(key: str, sub: str | None = None) -> float:
         values = [(d[key][sub] if sub else d[key]) for d in draws]
@@ -229,7 +243,30 @@ def combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
             "error_mm_median": mean("last3_unflagged_error_mm", "median"),
             "error_mm_p95": mean("last3_unflagged_error_mm", "p95"),
             "all_error_mm_median": mean("last3_error_mm", "median"),
-            "coverage95": mean("coverage95_unflagged"), "per_draw": draws}
+            "coverage95": mean("coverage95_unflagged"), "undetectable_per_link": _undetectable(draws),
+            "per_draw": draws}
+
+
+def _over_detectable(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """A band's detection over its detectable probes, the draws' counts summed (``bench/detectable.py``)."""
+    n = sum(r.get("n_detectable", 0) for r in rows)
+    if not n:
+        return {"n_detectable": 0, "detected_detectable": math.nan, "within_20ms_detectable": math.nan}
+    kept = [r for r in rows if r.get("n_detectable", 0)]
+    return {"n_detectable": n,
+            "detected_detectable": sum(r["detected_detectable"] * r["n_detectable"] for r in kept) / n,
+            "within_20ms_detectable": sum(r["within_20ms_detectable"] * r["n_detectable"] for r in kept) / n}
+
+
+def _undetectable(draws: list[dict[str, Any]]) -> dict[str, dict[str, int]]:
+    """Per link, over the draws: probes, undetectable ones, undetectable ones of 50 N and more."""
+    out: dict[str, dict[str, int]] = {}
+    for d in draws:
+        for link, v in d["per_link"].items():
+            row = out.setdefault(link, {"probes": 0, "undetectable": 0, "undetectable_50n": 0})
+            for k in row:
+                row[k] += v.get(k, 0)
+    return out
 
 
 def run(json_path: Path | None = None, *, columns: tuple[Column, ...] = COLUMNS, draws: int = 2,
@@ -252,8 +289,9 @@ def run(json_path: Path | None = None, *, columns: tuple[Column, ...] = COLUMNS,
 
 def _table(results: dict[str, Any]) -> None:
     t = Table(title="contact sensing by what the arm senses (typical world, identified first)")
-    for c in ("column", "min", "false alarms /min", ">=50 N detected (in 20 ms)", "10-25 N detected", "delay ms",
-              "link right", "err mm med / p95 (last 3)", "ambiguous", "coverage 95"):
+    for c in ("column", "min", "false alarms /min", ">=50 N detected (in 20 ms)",
+              ">=50 N detectable: n, detected (in 20 ms)", "undetectable (>=50 N) per link", "10-25 N detected",
+              "delay ms", "link right", "err mm med / p95 (last 3)", "ambiguous", "coverage 95"):
         t.add_column(c, justify="left" if c == "column" else "right")
 
     def pct(x: float) -> str:
@@ -267,6 +305,10 @@ def _table(results: dict[str, Any]) -> None:
         mid = r["detection"].get("10-25 N", {})
         t.add_row(r["column"], num(r["free_minutes"]), num(r["false_alarms_per_min"], "{:.2f}"),
                   f"{pct(big.get('detected', math.nan))} ({pct(big.get('within_20ms', math.nan))})",
+                  f"{big.get('n_detectable', 0)}, {pct(big.get('detected_detectable', math.nan))} "
+                  f"({pct(big.get('within_20ms_detectable', math.nan))})",
+                  ", ".join(f"{link} {v['undetectable']} ({v['undetectable_50n']})"
+                            for link, v in r["undetectable_per_link"].items() if v["undetectable"]) or "-",
                   pct(mid.get("detected", math.nan)), num(big.get("delay_ms_median", math.nan)),
                   pct(r["link_right_unflagged"]),
                   f"{num(r['error_mm_median'])} / {num(r['error_mm_p95'])}", pct(r["ambiguous_share"]),

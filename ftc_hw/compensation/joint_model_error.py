@@ -98,12 +98,16 @@ class JointModelError:
         ``current`` (n,) A the motor currents where the torque constants are among ``joints``."""
         if self._t is not None and t_ns - self._t < self.refresh_ns:
             return self._cov
+        self._cov = self.cov_now(q, qd, qdd, current)
+        self._t = t_ns
+        return self._cov
+
+    def cov_now(self, q, qd, qdd, current=None) -> np.ndarray:
+        """:meth:`cov` computed afresh (no cache)."""
         y = self.regressor(q, qd, qdd)
         if self.joints:
             y = np.hstack([y, *(np.diag(self._column(k, qd, qdd, current)) for k in self.joints)])
-        self._cov = y @ self.param_cov @ y.T
-        self._t = t_ns
-        return self._cov
+        return y @ self.param_cov @ y.T
 
     def _column(self, key: str, qd, qdd, current) -> np.ndarray:
         """dr/d(term) per joint: the residual's derivative with respect to one joint term."""

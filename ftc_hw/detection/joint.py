@@ -7,15 +7,27 @@ d2 = r^T cov^-1 r follows a chi-square law with n degrees of freedom: onset when
 for a per-sample false-alarm probability ``p_false`` for ``n_on`` samples (the onset time the first of
 them), offset when it stays below ``release`` x that for ``n_off`` samples -- the settings of
 :class:`~ftc_hw.detection.ContactDetector`, which is fixed to a 6-D wrench.
+
+Per-link subspaces (``subspaces``): a contact on a link puts torque only on the joints that move it, the
+first k of a serial chain (k = 1 for a UR's shoulder, turned by the pan joint alone). The matched-subspace
+detector (Scharf & Friedlander, "Matched subspace detectors", IEEE T-SP 42(8), 1994) tests the residual's
+energy in that subspace, whitened by the whole covariance: ``d2_k = (H^T C^-1 r)^T (H^T C^-1 H)^-1 (H^T
+C^-1 r)`` with H the first k unit vectors, a chi-square with k degrees of freedom without contact: its
+threshold is lower than the full test's, so a contact on a proximal link needs less torque to be seen.
+One test per distinct k; each at ``p_false / (number of tests)`` (a union bound: the per-sample false-
+alarm probability of "any test fires" stays at most ``p_false``). The statistic handed to the hysteresis
+is ``on x max_k (d2_k / on_k)``, ``on`` the largest subspace's threshold: above ``on`` when any test
+fires, below ``release x on`` when every d2_k is below ``release x on_k``.
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from .detector import ContactDetector, Detection
-from .kernels import chol_quad
+from .kernels import chol_quad, nested_quads
 
 
 def _gamma_q(a: float, x: float) -> float:
@@ -83,18 +95,37 @@ def mahalanobis_n(r: np.ndarray, cov: np.ndarray) -> float:
 
 class JointDetector(ContactDetector):
     """The chi-square test with hysteresis on an n-dimensional residual (see the module's notes): the
-    F/T detector's state machine, its statistic r^T cov^-1 r with a covariance given every sample."""
+    F/T detector's state machine, its statistic r^T cov^-1 r with a covariance given every sample, or the
+    per-link matched-subspace tests' combined statistic."""
 
     def __init__(self, n: int, *, p_false: float = 1e-9, release: float = 0.25, n_on: int = 2,
-                 n_off: int = 5) -> None:
+                 n_off: int = 5, subspaces: Sequence[int] | None = None) -> None:
+        """``subspaces``: the sizes k of the leading blocks of r to test (each 1..n; None: n alone, the
+        full test)."""
         if n < 1:
             raise ValueError("the residual needs at least one joint")
+        ks = sorted(set(subspaces)) if subspaces else [n]
+        if ks[0] < 1 or ks[-1] > n:
+            raise ValueError(f"subspaces must lie in 1..{n}, got {ks}")
         self.n = self.dof = n
-        self._hysteresis(chi2_isf(p_false, n), release, n_on, n_off, 0.0)
+        self.subspaces = tuple(ks)
+        each = p_false / len(ks)
+        self.on_k = np.array([chi2_isf(each, k) for k in ks])
+        self._k_index = np.array(ks) - 1
+        self._quads = np.empty(n)
+        self._hysteresis(float(self.on_k[-1]), release, n_on, n_off, 0.0)
 
     def statistic(self, r, cov) -> float:
-        """d2 = r^T cov^-1 r (inf: a broken covariance or a non-finite residual)."""
-        return mahalanobis_n(np.asarray(r, dtype=float), np.asarray(cov, dtype=float))
+        """d2 = r^T cov^-1 r, or with subspaces ``on x max_k (d2_k / on_k)`` (inf: a broken covariance or a
+        non-finite residual)."""
+        r = np.asarray(r, dtype=float)
+        cov = np.asarray(cov, dtype=float)
+        if self.subspaces == (self.n,):
+            return mahalanobis_n(r, cov)
+        if not nested_quads(r, cov, self._quads):
+            return math.inf
+        d2 = self.on * float(np.max(self._quads[self._k_index] / self.on_k))
+        return d2 if math.isfinite(d2) else math.inf
 
     def update(self, t_ns: int, r, cov) -> Detection:
         """One sample's residual r (n,) N m and its covariance cov (n, n) N^2 m^2. ``ValueError`` when

@@ -28,19 +28,8 @@ def chol_quad(w: np.ndarray, a: np.ndarray) -> float:
     overwritten); inf when ``a`` is not positive definite."""
     n = w.shape[0]
     # Cholesky a = L L^T in place (lower triangle), then solve L y = w: d2 = |y|^2
-    for j in range(n):
-        s = a[j, j]
-        for p in range(j):
-            s -= a[j, p] * a[j, p]
-        if not s > 0.0:
-            return np.inf
-        d = np.sqrt(s)
-        a[j, j] = d
-        for i in range(j + 1, n):
-            t = a[i, j]
-            for p in range(j):
-                t -= a[i, p] * a[j, p]
-            a[i, j] = t / d
+    if not cholesky_in_place(a):
+        return np.inf
     d2 = 0.0
     y = np.empty(n)
     for i in range(n):
@@ -50,6 +39,27 @@ def chol_quad(w: np.ndarray, a: np.ndarray) -> float:
         y[i] = t / a[i, i]
         d2 += y[i] * y[i]
     return d2
+
+
+@njit(cache=True, nogil=True)
+def cholesky_in_place(a: np.ndarray) -> bool:
+    """a = L L^T for a symmetric (n, n), L written into a's lower triangle; False when a is not positive
+    definite (a then partly overwritten)."""
+    n = a.shape[0]
+    for j in range(n):
+        s = a[j, j]
+        for p in range(j):
+            s -= a[j, p] * a[j, p]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        a[j, j] = d
+        for i in range(j + 1, n):
+            t = a[i, j]
+            for p in range(j):
+                t -= a[i, p] * a[j, p]
+            a[i, j] = t / d
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -96,3 +106,30 @@ def quad_sum(u: np.ndarray, inv: np.ndarray) -> float:
                 t += inv[i, j] * u[k, j]
             acc += u[k, i] * t
     return acc
+
+
+@njit(cache=True, nogil=True)
+def nested_quads(w: np.ndarray, a: np.ndarray, out: np.ndarray) -> bool:
+    """out[k - 1] = the matched-subspace statistic of w (n,) for the subspace of its first k coordinates,
+    k = 1..n, under covariance a (n, n) (left intact): w^T a^-1 w less the trailing n - k coordinates'
+    own w_b^T a_bb^-1 w_b. One Cholesky factorization of a in reversed order gives every trailing
+    block's statistic as a running sum. False when ``a`` is not positive definite (``out`` then inf)."""
+    n = w.shape[0]
+    c = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            c[i, j] = a[n - 1 - i, n - 1 - j]
+    if not cholesky_in_place(c):
+        out[:] = np.inf
+        return False
+    y = np.empty(n)
+    tail = np.zeros(n + 1)  # tail[m]: the statistic of the last m coordinates alone
+    for i in range(n):
+        t = w[n - 1 - i]
+        for p in range(i):
+            t -= c[i, p] * y[p]
+        y[i] = t / c[i, i]
+        tail[i + 1] = tail[i] + y[i] * y[i]
+    for k in range(1, n + 1):
+        out[k - 1] = tail[n] - tail[n - k]
+    return True

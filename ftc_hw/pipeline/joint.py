@@ -70,7 +70,9 @@ class JointContactPipeline(PipelineView):
         self.flange = FlangeWrench(scene, model, settings) if sensing.ft == "flange" else None
         d = settings.detection
         dims = scene.n_joints + (6 if self.flange is not None else 0)  # the flange wrench joins the test
-        self.detector = JointDetector(dims, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off)
+        subspaces = link_subspaces(model, scene, dims) if js.link_subspaces else None
+        self.detector = JointDetector(dims, p_false=d.p_false, n_on=d.n_on, n_off=d.n_off, subspaces=subspaces)
+        self.tested = np.zeros(dims)  # the vector the detector tested last: r, or [r, w] with a flange sensor
         self.solver = JointContactSolver(model, spacing=js.spacing_m, fine_spacing=js.fine_spacing_m,
                                          friction_mu=js.friction_mu, force_prior=js.force_prior_n,
                                          ambiguity_radius=js.ambiguity_radius_m, ambiguity_mass=js.ambiguity_mass,
@@ -127,14 +129,16 @@ class JointContactPipeline(PipelineView):
         w = None
         if self.flange is not None:
             w = self.flange.contact(wrench, q, qd, self.residual.observer.qdd)
-            det = self.detector.update(t_ns, *self.flange.stacked(r, cov, w))
+            z, z_cov = self.flange.stacked(r, cov, w)
         else:
-            det = self.detector.update(t_ns, r, cov)
+            z, z_cov = r, cov
+        self.tested = z
+        det = self.detector.update(t_ns, z, z_cov)
         clock.lap("detection")
         estimate = None
         external = self._zero6
         if det.active:
-            estimate = self._localize(t_ns, det, r, cov, q, w)
+            estimate = self._localize(t_ns, det, r, q, qd, current, w)
             external = self._external(estimate, q)
             clock.lap("localization")
         events: list[ContactEvent] = []
@@ -149,9 +153,10 @@ class JointContactPipeline(PipelineView):
         clock.end()
         return FrameResult(t_ns, external, det, estimate, r.copy(), tuple(events))
 
-    def _localize(self, t_ns: int, det: Detection, r, cov, q, w) -> ContactEstimate:
+    def _localize(self, t_ns: int, det: Detection, r, q, qd, current, w) -> ContactEstimate:
         """A frame in contact: the estimate (at the onset, then at most every ``localize_period_s``; else
-        the last one), fused into the contact's track."""
+        the last one), fused into the contact's track; r's covariance with the contact's own torque
+        through the torque constants' uncertainty (``JointResidual.contact_cov``)."""
         if det.change == "onset":
             self._last = None
             if self.events.track is not None:
@@ -160,6 +165,7 @@ class JointContactPipeline(PipelineView):
             return self._last
         self._solved_ns = t_ns
         w_cov = None if w is None else self.flange.cov
+        cov = self.residual.contact_cov(q, qd, current if self.source == "currents" else None)
         e = self.solver.solve(r, cov, q, wrench=w, wrench_cov=w_cov)
         self._last = e
         self.events.fuse(t_ns, e, q, self.solver.solved_body_poses())
@@ -260,6 +266,35 @@ def pipeline_for(scene: Scene, settings: PipelineSettings | None = None, *,
     if scene.sensing.ft == "base":
         return ContactPipeline(scene, settings, clock=clock)
     return JointContactPipeline(scene, settings, clock=clock)
+
+
+def link_subspaces(model: ArmModel, scene: Scene, dims: int) -> tuple[int, ...] | None:
+    """The leading blocks of the tested vector ([r] or [r, w]) a contact on each touchable link can load:
+    its moving joints (the first k of a serial chain), everything (``dims``) where a flange sensor sees the
+    link; ``dims`` always (a contact off the declared links). None where some link's joints are not the
+    first k (a coupling): the full test alone."""
+    out = {dims}
+    flange = dims > scene.n_joints
+    for t in scene.touchable:
+        mask = model.moving_joints(t.link)
+        k = int(mask.sum())
+        if k == 0:
+            continue  # no joint moves it (the base): no joint signal sees it
+        if not mask[:k].all():
+            return None
+        out.add(dims if flange and sensor_sees(model, t.link) else k)
+    return tuple(sorted(out))
+
+
+def sensor_sees(model: ArmModel, link: str) -> bool:
+    """Whether the model's F/T sensor carries ``link`` (the link hangs beyond the sensor's body; every
+    link for a sensor under the base)."""
+    if model.sensor_body is None:
+        return False
+    m, body = model.model, model.model.body(link).id
+    while body not in (0, model.sensor_body):
+        body = int(m.body_parentid[body])
+    return body == model.sensor_body
 
 
 def add_rotor_inertia(model: ArmModel, rotor: np.ndarray) -> None:

@@ -160,7 +160,9 @@ class JointSettings:
     posterior lies farther than that from the answer; ``significant_sigma``: a joint's residual beyond this
     bounds the touched link; ``localize_period_s``: in contact, localize at the onset and then at most this
     often (the frames between carry the last estimate: a localization costs several times a detection,
-    and consecutive frames of the observer's lagged residual say nearly the same; 0: every frame)."""
+    and consecutive frames of the observer's lagged residual say nearly the same; 0: every frame);
+    ``link_subspaces``: detect by the per-link matched-subspace tests (each link's joints alone, its own
+    chi-square threshold: ``detection/joint.py``) besides the full test; False: the full test alone."""
 
     observer_gain: float = 150.0
     friction_rel_std: float = 0.25
@@ -174,6 +176,7 @@ class JointSettings:
     ambiguity_mass: float = 0.1
     significant_sigma: float = 3.0
     localize_period_s: float = 0.004
+    link_subspaces: bool = True
 
     def __post_init__(self) -> None:
         if not (self.observer_gain > 0 and self.spacing_m > 0 and self.fine_spacing_m > 0

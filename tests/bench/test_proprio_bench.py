@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ftc_hw.bench.proprio import COLUMNS, Job, combine, run_job, select
+from ftc_hw.detection.joint import chi2_isf
 
 
 def test_the_columns_are_the_sensings_the_issue_names():
@@ -29,3 +30,22 @@ def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
     assert row["free_minutes"] == pytest.approx(2 * out["free_minutes"]) and row["false_alarms"] == 0
     assert row["detection"]["50-100 N"]["n"] == 2
     assert out["events"] > 0 and 0.0 <= row["ambiguous_share"] <= 1.0  # events in contact, shares of them
+    # detectability: each probe's true d2 against the free run's floor and the ideal test's threshold (the
+    # chi-square at p 1e-9 with the touched link's joints as degrees of freedom: 37.3 for 1, 53.3 for 6)
+    dof = {"shoulder": 1, "upper_arm": 2, "forearm": 3, "wrist_1": 4, "wrist_2": 5, "wrist_3": 6, "tool": 6}
+    for p in out["probes"]:
+        if p["link"] == "base":
+            assert p["d2_true"] == 0.0 and not p["detectable"]  # no joint moves it
+        else:
+            assert p["threshold"] == pytest.approx(chi2_isf(1e-9, dof[p["link"]]))
+    floor = out["noise_floor_std_by_speed"]["std"]
+    assert len(floor) == 6 and all(v is None or v > 0.0 for row in floor for v in row)
+    for p in out["probes"]:
+        assert p["detectable"] == (p["d2_true"] > p["threshold"])
+    for band, b in out["detection"].items():
+        able = [p for p in out["probes"] if p["band"] == band and p["detectable"] and p["link"] != "base"]
+        assert b["n_detectable"] == len(able)
+        if able:
+            assert b["detected_detectable"] == pytest.approx(sum(p["detected"] for p in able) / len(able))
+    assert sum(v["undetectable"] for v in row["undetectable_per_link"].values()) == \
+        2 * sum(not p["detectable"] for p in out["probes"])

@@ -12,6 +12,7 @@ import pytest
 from ftc_hw.compensation import JointResidual
 from ftc_hw.compensation.joint_model_error import JointModelError
 from ftc_hw.detection import JointDetector, chi2_isf, chi2_isf6, chi2_sf
+from ftc_hw.detection.kernels import nested_quads
 from ftc_hw.model import ArmModel
 from ftc_hw.model.inertials import body_params
 from ftc_hw.pipeline import (
@@ -215,6 +216,46 @@ def test_joint_detector_onset_and_offset():
     assert changes.index("offset") == 8
     with pytest.raises(ValueError):
         det.update(20, np.full(5, np.nan), cov)
+
+
+def test_per_link_subspace_tests_see_a_proximal_torque_the_full_test_misses():
+    full = JointDetector(6, p_false=1e-9)
+    per_link = JointDetector(6, p_false=1e-9, subspaces=(1, 2, 3, 6))
+    # thresholds: each test at p / 4 (any test firing stays at most p), its own degrees of freedom
+    assert per_link.on_k == pytest.approx([chi2_isf(2.5e-10, k) for k in (1, 2, 3, 6)])
+    assert per_link.on == pytest.approx(chi2_isf(2.5e-10, 6)) and per_link.on > full.on
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(6, 6))
+    cov = a @ a.T + 6 * np.eye(6)
+    # a torque on the first joint alone, 6.5 sigma (whitened by the whole covariance): d2 = 42.25, between
+    # the 1-dof threshold (40.0) and the full test's (53.3): only the subspace test fires
+    r = np.zeros(6)
+    r[0] = 6.5 / np.sqrt(np.linalg.inv(cov)[0, 0])
+    assert r @ np.linalg.solve(cov, r) == pytest.approx(42.25)
+    assert full.statistic(r, cov) < full.on
+    assert per_link.statistic(r, cov) > per_link.on
+    # the same energy spread over all six joints: the full test's business, the subspace tests no help
+    spread = np.linalg.cholesky(cov) @ np.full(6, 6.5 / np.sqrt(6))
+    assert per_link.statistic(spread, cov) < per_link.on and full.statistic(spread, cov) < full.on
+    # the subspace statistic is the matched-subspace detector's (H the first k unit vectors)
+    quads = np.empty(6)
+    noisy = r + np.linalg.cholesky(cov) @ rng.normal(size=6)
+    assert nested_quads(noisy, cov, quads)
+    p = np.linalg.inv(cov)
+    u = p @ noisy
+    assert quads == pytest.approx([u[:k] @ np.linalg.solve(p[:k, :k], u[:k]) for k in range(1, 7)])
+    with pytest.raises(ValueError):
+        JointDetector(6, subspaces=(0, 6))
+
+
+def test_no_false_onset_from_any_subspace_under_gaussian_noise():
+    det = JointDetector(6, p_false=1e-4, subspaces=(1, 2, 3, 4, 5, 6))
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(6, 6))
+    cov = a @ a.T + np.eye(6)
+    chol = np.linalg.cholesky(cov)
+    fired = sum(det.statistic(chol @ rng.normal(size=6), cov) > det.on for _ in range(20000))
+    assert fired <= 10  # at most p = 1e-4 a sample (2 expected from the union bound; nested tests share)
 
 
 def test_joint_settings_round_trip_and_old_recordings():
