@@ -52,6 +52,15 @@ def test_a_timely_onset_detects_the_contact_and_localization_is_measured():
     assert c.link_right == 1.0
 
 
+def test_a_streams_events_among_the_contacts_are_no_contact_of_their_own():
+    tr = truth(400, set(range(100, 200)))
+    lost = {"t": (T0 + 150 * MS) / 1e9, "t_host_ns": T0 + 150 * MS, "kind": "sensor_lost", "source": "ft",
+            "message": "no F/T frame for 0.258 s"}
+    evs = [event("onset", T0 + 101 * MS), lost, event("offset", T0 + 205 * MS, flags=("lost",))]
+    ev = evaluate(evs, tr, 0.001)
+    assert [c.detected for c in ev.contacts] == [True] and not ev.false_alarms and ev.contacts[0].estimates == 1
+
+
 def test_late_missing_false_and_split_onsets_are_reported():
     tr = truth(1000, set(range(100, 200)) | set(range(500, 600)) | set(range(800, 900)))
     evs = [event("onset", T0 + 104 * MS),  # 4 ms: detected, late

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from ftc_hw.bus import CONTACT_KINDS
 from ftc_hw.model import ArmModel, Contact
 from ftc_hw.sim_devices.world.contact_kinds import EXPECTED_CLASS
 from ftc_hw.solver import ContactSolver
@@ -202,6 +203,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
     evs = sorted(events, key=lambda e: e["t_host_ns"])
     t_last = int(th[-1]) if len(th) else 0
     for ev in evs:
+        if ev["kind"] not in CONTACT_KINDS:
+            continue  # a stream's event (sensor_lost, ...): no contact to judge
         t = int(ev["t_host_ns"])
         if t > t_last:
             continue  # after the truth ends (the world's post-roll): nothing to judge it against
