@@ -5,12 +5,12 @@ are in its folder's ``conftest.py``.
 Real-time tests are marked where they are defined. A test whose world, emulators or streams run
 against the wall clock is marked ``realtime`` (``pytestmark = pytest.mark.realtime`` at a module's
 top, or ``@pytest.mark.realtime`` on the test): ``./run-tests`` runs those one at a time, and the
-others beside them on every core at idle priority (``-m "not realtime"`` with pytest-xdist). A test that uses the
+others beside them on every core at the lowest priority (``-m "not realtime"`` with pytest-xdist). A test that uses the
 ``world_feeder`` fixture is real-time without saying so (the hook below). In the folders where most
 tests are real-time (``app``, ``devices``, ``sim``, ``cli``, ``record``) every test says which it is:
 ``realtime``, or ``compute`` (it only computes: worlds stepped as fast as they go, files, codecs,
 refusals); ``tests/test_markers.py`` fails on a test there that says neither. ``./run-tests`` runs the
-computing tests beside the real-time ones at idle priority, so a computing test's wall time says nothing:
+computing tests beside the real-time ones at the lowest priority, so a computing test's wall time says nothing:
 Hypothesis runs without its per-example deadline (speed is measured by ``ftc bench``)."""
 from __future__ import annotations
 
