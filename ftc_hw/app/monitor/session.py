@@ -202,7 +202,7 @@ def _start_ros(cfg: MonitorOptions, console: Console, scene: Scene, bus: Bus, st
     from ftc_hw.app.ros.publisher import RosPublisher  # lazy: ROS only for its options
     ros = RosPublisher(bus, scene, namespace=cfg.ros_namespace).start()
     stack.callback(ros.stop)  # on a failed start; a no-op after the stop below
-    console.print(f"ROS 2: node ftc_monitor publishing under {cfg.ros_namespace} (ROS_DOMAIN_ID "
+    console.print(f"ROS 2: node {ros.node_name} publishing under {cfg.ros_namespace} (ROS_DOMAIN_ID "
                   f"{os.environ.get('ROS_DOMAIN_ID', '0')})")
     return ros
 

@@ -37,13 +37,14 @@ def _spin(executor: Any, context: Context) -> None:
             raise
 
 
-def acquire(name: str = "ftc_hw") -> Node:
-    """The process's node (``<name>_<pid>`` made on first use), its executor spinning."""
+def acquire(name: str = "ftc_hw", *, unique: bool = True) -> Node:
+    """The process's node, its executor spinning; made on first use, named ``<name>_<pid>`` (``unique``) or
+    ``name``: a later caller shares the node whatever name it asks."""
     with _lock:
         if not _state:
             context = Context()
             rclpy.init(context=context)
-            node = Node(f"{name}_{os.getpid()}", context=context)
+            node = Node(f"{name}_{os.getpid()}" if unique else name, context=context)
             executor = EventsExecutor(context=context)
             executor.add_node(node)
             thread = threading.Thread(target=_spin, args=(executor, context), name="ros-executor", daemon=True)

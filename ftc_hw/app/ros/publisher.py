@@ -1,5 +1,5 @@
-"""``ftc monitor --ros``: the node ``ftc_monitor`` publishing the bus's frames as ROS 2 messages
-(:class:`~.view.RosView`), from a thread of its own.
+"""``ftc monitor --ros``: the node ``ftc_monitor`` (the process's one node, :mod:`.context`) publishing the
+bus's frames as ROS 2 messages (:class:`~.view.RosView`), from a thread of its own.
 
 The monitor never waits for ROS: the node's thread drains a queue subscription of the bus every ``poll_s``
 (a full queue drops its oldest frames, counted in ``dropped``), encodes, and hands the CDR bytes to rclpy's
@@ -16,12 +16,12 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-import rclpy
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ftc_hw.bus import Bus
 from ftc_hw.scene import Scene
 
+from . import context
 from . import layout as L
 from .view import RosMessage, RosView
 
@@ -54,7 +54,6 @@ class RosPublisher:
         self.failed: Counter[str] = Counter()
         self.error = ""  # the first failure's message
         self.dropped = 0
-        self._context: Any = None
         self._node: Any = None
         self._pubs: dict[str, Any] = {}
         self._sub: Any = None
@@ -63,9 +62,7 @@ class RosPublisher:
         self._next_diag = 0
 
     def start(self) -> RosPublisher:
-        self._context = rclpy.Context()
-        rclpy.init(context=self._context)
-        self._node = rclpy.create_node(NODE_NAME, context=self._context)
+        self._node = context.acquire(NODE_NAME, unique=False)  # the process's one node (its ROS devices' too)
         for topic in L.TOPICS:
             if topic.live:
                 name = topic.full_name(self.namespace)
@@ -74,6 +71,10 @@ class RosPublisher:
         self._thread = threading.Thread(target=self._run, name="ros-publisher", daemon=True)
         self._thread.start()
         return self
+
+    @property
+    def node_name(self) -> str:
+        return self._node.get_name()
 
     def subscribers(self, topic: L.Topic) -> int:
         """How many subscriptions match ``topic`` now (discovery takes up to ~2 s)."""
@@ -127,8 +128,10 @@ class RosPublisher:
         self._pass()
         self.dropped = self._sub.drops
         self._sub = None
-        self._node.destroy_node()
-        rclpy.shutdown(context=self._context)
+        for pub in self._pubs.values():
+            self._node.destroy_publisher(pub)
+        self._pubs.clear()
+        context.release()
 
     def summary(self) -> dict[str, Any]:
         return {"published": dict(self.counts), "failed": dict(self.failed), "dropped": self.dropped,
