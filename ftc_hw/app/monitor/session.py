@@ -498,9 +498,15 @@ def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, 
         published = out.ros["published"]
         console.print(f"ROS 2: published {sum(published.values())} messages ("
                       + ", ".join(f"{k} {v}" for k, v in sorted(published.items()))
-                      + f"); failed {sum(out.ros['failed'].values())}, frames dropped {out.ros['dropped']}",
-                      highlight=False)
+                      + f"); failed {sum(out.ros['failed'].values())}, frames dropped {out.ros['dropped']}"
+                      + f", not published {_skips(out.ros['skipped'])}", highlight=False)
     print_summary(console, cfg, _served(cfg), live.bus, live.topics, out, rig.adapters, live.recorder)
+
+
+def _skips(skipped: dict[str, int]) -> str:
+    """``"0"`` or ``"3 (external_not_finite 3)"``: the frames the ROS view could not publish, by reason."""
+    n = sum(skipped.values())
+    return f"{n} (" + ", ".join(f"{k} {v}" for k, v in sorted(skipped.items())) + ")" if n else "0"
 
 
 def _setpoints_at_interface(retreats: list[dict], applied: list) -> list[float | None]:
