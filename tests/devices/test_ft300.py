@@ -80,7 +80,8 @@ def test_stream_faults_counted_and_no_corrupted_frame_published(ft_sim, sat_worl
 
 
 def test_poll_mode_with_response_faults(ft_sim, sat_world, originals, wait_for):
-    scene, spec = ft_sim.device("dxl-arm", "ft300", mode="poll", poll_hz=200.0)
+    # a timeout long enough that a loaded host's stall is not taken for a dropped response
+    scene, spec = ft_sim.device("dxl-arm", "ft300", mode="poll", poll_hz=200.0, timeout=0.5)
     faults = {"drop": 0.03, "corrupt": 0.03, "truncate": 0.03, "duplicate": 0.03}
     world = ft_sim.world(100.0, n_joints=4, fn=sat_world)
     emu = ft_sim.start_emulator(spec, scene, world, faults=faults, seed=5)
