@@ -12,6 +12,7 @@ is a contact's point (base frame: the root's children are in the base frame), ``
 """
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import queue
@@ -52,6 +53,8 @@ def _limits_md(c: dict[str, Any] | None) -> str:
         return ""
     return (f", {c['region']} {c['limit_kind'].replace('_', '-')} limit {c['limit_n']:.0f} N, "
             f"margin **{c['margin_n']:+.1f} N**")
+BATCH_TICKS = 64  # at most this many waiting ticks drawn as one update
+
 
 class Page:
     """The page's state; ``apply(tick)`` draws one tick, ``reset()`` forgets what time made (a seek)."""
@@ -132,42 +135,46 @@ class Page:
         self._t = 0.0
         self.rate_note = ""  # the feed's rate when it slowed down (the monitor fell behind)
 
-    def apply(self, tick: dict[str, Any]) -> None:
-        t = self._t = float(tick["t"])
+    def apply(self, *ticks: dict[str, Any]) -> None:
+        """Draw ``ticks`` (oldest first) as one update: each one's events listed and samples plotted, the
+        newest poses, truth and panels drawn (a page that fell behind catches up in one step, not tick by tick)."""
+        last = ticks[-1]
+        t = self._t = float(last["t"])
         with self.server.atomic():
-            if "poses" in tick:
-                for link, (pos, wxyz) in zip(self.setup["links"], tick["poses"], strict=True):
+            if (posed := _newest(ticks, "poses")) is not None:
+                for link, (pos, wxyz) in zip(self.setup["links"], posed["poses"], strict=True):
                     h = self.links[link]
                     h.position, h.wxyz = pos, wxyz
-            if "raw_entity" in tick:
-                self.wrench.draw({**tick["raw_entity"], "texts": []})
-            newest = {}  # a contact drawn once a tick: at its newest event (the others only listed)
-            for ev in tick.get("events", ()):
-                self._event(t, ev)
-                if "entity" in ev:
-                    newest[ev["contact_id"]] = ev
-            for ev in newest.values():
-                self._draw_contact(t, ev)
-            if "truth" in tick:
-                self._truth = tick["truth"]
-                self.truth.draw(tick["truth_entity"])
+            if (raw := _newest(ticks, "raw_entity")) is not None:
+                self.wrench.draw({**raw["raw_entity"], "texts": []})
+            newest = {}  # a contact drawn once an update: at its newest event (the others only listed)
+            for tick in ticks:
+                for ev in tick.get("events", ()):
+                    self._event(float(tick["t"]), ev)
+                    if "entity" in ev:
+                        newest[ev["contact_id"]] = (float(tick["t"]), ev)
+            for t_ev, ev in newest.values():
+                self._draw_contact(t_ev, ev)
+            if (truth := _newest(ticks, "truth")) is not None:
+                self._truth = truth["truth"]
+                self.truth.draw(truth["truth_entity"])
             self._expire(t)
-            if "external" in tick:
-                self.series.append((t, *tick["external"], tick["d2"], tick["threshold"]))
-            if "streams" in tick:
-                self._streams = tick
-            if "rate_hz" in tick:
-                self._rate(tick)
-            news = any(ev.get("kind") != "update" for ev in tick.get("events", ()))
+            self.series.extend((float(k["t"]), *k["external"], k["d2"], k["threshold"]) for k in ticks
+                               if "external" in k)
+            if (streams := _newest(ticks, "streams")) is not None:
+                self._streams = streams
+            if (rate := _newest(ticks, "rate_hz")) is not None:
+                self._rate(rate)
+            news = any(ev.get("kind") != "update" for k in ticks for ev in k.get("events", ()))
             if t - self._panel_t >= PANEL_PERIOD_S or t < self._panel_t:
                 self._panel_t = t
-                self._draw_text(tick)
+                self._draw_text(last)
                 self._draw_plots()
                 if self._streams is not None:
                     self._draw_streams(self._streams)
                     self._streams = None
             elif news:
-                self._draw_text(tick)  # an onset or offset at once
+                self._draw_text(last)  # an onset or offset at once
 
     def _event(self, t: float, ev: dict[str, Any]) -> None:
         if "contact_id" not in ev:  # a stream lost or back (with the contacts), or a device's own (with the streams)
@@ -290,13 +297,24 @@ def _live(page: Page, inbox: Any, outbox: Any) -> None:
             continue
         if msg is None:
             break
-        page.drops = msg.get("drops", page.drops)
-        page.apply(msg)
-        ticks += 1
+        batch = [msg]  # the ticks that waited meanwhile: drawn as one update
+        with contextlib.suppress(queue.Empty):
+            while len(batch) < BATCH_TICKS and (msg := inbox.get_nowait()) is not None:
+                batch.append(msg)
+        page.drops = batch[-1].get("drops", page.drops)
+        page.apply(*batch)
+        ticks += len(batch)
         now = time.monotonic_ns()
-        tick_ms.append((now - msg["t_host_ns"]) / 1e6)
-        onset_ms.extend((now - ev["t_host_ns"]) / 1e6 for ev in msg.get("events", ()) if ev["kind"] == "onset")
+        tick_ms.extend((now - m["t_host_ns"]) / 1e6 for m in batch)
+        onset_ms.extend((now - ev["t_host_ns"]) / 1e6 for m in batch for ev in m.get("events", ())
+                        if ev["kind"] == "onset")
+        if msg is None:
+            break
     outbox.put(("stats", {"ticks": ticks, "tick_ms": _quantiles(tick_ms), "onset_ms": list(onset_ms)}))
+
+
+def _newest(ticks: tuple[dict[str, Any], ...], key: str) -> dict[str, Any] | None:
+    return next((k for k in reversed(ticks) if key in k), None)
 
 
 def orphaned() -> bool:
