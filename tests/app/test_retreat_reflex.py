@@ -106,6 +106,42 @@ def test_a_guided_contact_is_not_fought(rig):
     assert reflex.should_retreat(_onset(3)) and not reflex.should_retreat(_onset(3, guidance=0.51))
 
 
+def _unknown(ev: ContactEvent, kind: str = "onset", guidance: float = 0.4, **kw) -> ContactEvent:
+    """``ev`` as the classifier gives it before it knows: intent unknown (or named, where ``guidance`` says)."""
+    intent = "guidance" if guidance >= 0.8 else "impact" if guidance <= 0.2 else "unknown"
+    return dataclasses.replace(ev, kind=kind, intent=intent, p_guidance=guidance, **kw)
+
+
+def test_an_undecided_onset_holds_the_arm_and_lets_go_of_a_guiding_hand(rig):
+    bus, arm, reflex = rig
+    onset = _unknown(_onset(5))
+    bus.publish(EVENTS_CONTACT, onset)
+    time.sleep(0.01)
+    bus.publish(EVENTS_CONTACT, _unknown(onset, "update", 0.9, t_host_ns=onset.t_host_ns + 20_000_000))
+    _settle(reflex)
+    assert not reflex.retreats and len(arm.setpoints) == 1 and np.allclose(arm.setpoints[0], Q0)
+    assert arm.ended == 1  # held while undecided, then let go
+    (nf,) = reflex.not_fought
+    assert nf["contact_id"] == 5 and nf["guidance"] == 0.9 and nf["held_ms"] > 5.0
+
+
+def test_an_undecided_onset_retreats_at_the_deadline_or_from_the_update_that_names_an_impact(rig):
+    bus, arm, reflex = rig
+    bus.publish(EVENTS_CONTACT, _unknown(_onset(6)))  # nothing more comes: decided on the onset, at decide_s
+    _settle(reflex)
+    (r,) = reflex.retreats
+    assert r["decided_on"] == "onset" and r["intent"] == "unknown" and r["decided_after_onset_ms"] >= 60.0
+    onset = _unknown(_onset(7))
+    moved = onset.point + np.array([0.0, 0.0, -0.02])  # the update's estimate: 2 cm lower on the link
+    bus.publish(EVENTS_CONTACT, onset)
+    bus.publish(EVENTS_CONTACT, _unknown(onset, "update", 0.05, point=moved))
+    _settle(reflex)
+    r = reflex.retreats[1]
+    assert r["decided_on"] == "update" and r["intent"] == "impact" and r["decide_ms"] < 50.0
+    end = point_at(MODEL, Q0, arm.setpoints[-1], link="wrist_3", point=moved)
+    assert (end - moved) @ np.array([0.0, 0.0, 1.0]) >= 0.03 - 1e-4  # the update's point went back the distance
+
+
 def test_other_triggers_come_in_through_trigger(rig):
     """An update is no trigger by default; ``trigger(event)`` retreats from it (a limit's exceedance would)."""
     bus, arm, reflex = rig

@@ -73,6 +73,10 @@ class RetreatSettings:
     trigger: str = "onset"  # or "exceedance": a contact's force past its body region's limit (docs/limits.md)
     # a contact whose guidance probability exceeds this is not retreated from (the classifier's, if any)
     guided_above: float = 0.5
+    # at an onset the classifier may not know yet whether a hand guides the arm: the reflex then holds the arm
+    # where it is and decides at the contact's first event whose intent is known, or this long after the onset
+    # at the latest (ESTIMATE: the classifier's onset window, 60 ms; an impact is known at once, docs/contacts.md)
+    decide_s: float = 0.06
     # a touched point faster than this (m/s) ran into what it touched and goes back the way it came
     # (ESTIMATE: ten times what the joints' holding error moves a point)
     moving_above_m_s: float = 0.05
@@ -102,6 +106,8 @@ class RetreatSettings:
             raise ValueError(f"retreat trigger {self.trigger!r}: expected one of {', '.join(RETREAT_TRIGGERS)}")
         if not 0.0 <= self.guided_above <= 1.0:
             raise ValueError(f"guided_above {self.guided_above!r}: expected a probability")
+        if not 0.0 <= self.decide_s <= 1.0:
+            raise ValueError(f"decide_s {self.decide_s!r} s: expected [0, 1]")
         if not 1.0 <= self.max_scale <= 10.0:
             raise ValueError(f"max_scale {self.max_scale!r}: expected [1, 10]")
         if not 0.0 <= max(self.region_floor_m, self.region_tube_m) <= self.region_reach_m <= 1.0:

@@ -76,6 +76,12 @@ def guidance_of(ev: Any) -> float | None:
     return float(ev.p_guidance)
 
 
+def intent_known(ev: Any) -> bool:
+    """The classifier has named the contact's intent (guidance or impact), or nothing classifies it, or it
+    has ended: the reflex need not wait for a later event of it."""
+    return getattr(ev, "intent", "") != "unknown" or getattr(ev, "kind", "") == "offset"
+
+
 def kind_trigger(kind: str) -> Callable[[Any], bool]:
     """A trigger on contact events of one kind (``onset``, the default; ``exceedance``: a limit crossed)."""
     return lambda ev: isinstance(ev, ContactEvent) and ev.kind == kind
@@ -108,6 +114,8 @@ class RetreatReflex:
         self._pending: ContactEvent | None = None
         self._force_sum: dict[int, np.ndarray] = {}  # per contact id: its estimates' forces added (N)
         self._planned: set[int] = set()  # contact ids whose retreat is planned (their later estimates unused)
+        self._newest: dict[int, ContactEvent] = {}  # per recent contact id: its newest event (its class so far)
+        self._news = threading.Event()  # a contact event came (a held retreat's decision may be due)
         self._busy = False
         self._wake = threading.Event()
         self._quit = threading.Event()
@@ -118,6 +126,11 @@ class RetreatReflex:
         self._thread.start()
 
     def _on_event(self, ev: Any) -> None:
+        if isinstance(ev, ContactEvent):
+            self._newest[ev.contact_id] = ev
+            if len(self._newest) > 64:
+                self._newest.pop(next(iter(self._newest)))
+            self._news.set()
         if isinstance(ev, ContactEvent) and ev.kind != "offset" and ev.contact_id not in self._planned:
             # the contact's force estimates until the retreat begins (an update's may be better than the
             # onset's first frame; during the retreat the arm's own acceleration disturbs them)
@@ -154,23 +167,35 @@ class RetreatReflex:
             self._busy = True  # before the pending one is taken: idle() never sees neither
             self._pending = None
             try:
-                self.retreats.append(self._retreat(ev))
+                done = self._retreat(ev)
+                if done is not None:
+                    self.retreats.append(done)
             except Exception as exc:  # noqa: BLE001 - reported, the monitor goes on
                 self.errors.append(f"{type(exc).__name__}: {exc}")
             finally:
                 self._busy = False
 
-    def _retreat(self, ev: ContactEvent) -> dict[str, Any]:
+    def _retreat(self, ev: ContactEvent) -> dict[str, Any] | None:
+        """One retreat's figures, or None for a contact that turned out guided while the arm was held."""
         t0 = time.monotonic_ns()
         frame = self.bus.latest(self.joints_topic)
         if frame is None:
             raise RetreatError(f"no joint state on {self.joints_topic}")
-        # first a setpoint where the arm is: it brakes while the retreat is planned (milliseconds, more on a
-        # loaded host), as the stop reflex would
+        # first a setpoint where the arm is: it brakes while the retreat is decided and planned (milliseconds,
+        # more on a loaded host), as the stop reflex would
         self.arm.servo(frame.q)
         t_first = time.monotonic_ns()
+        decided = self._decide(ev)
+        if not self.should_retreat(decided):  # a hand guides it: let go, the arm follows the hand again
+            self.arm.end_servo()
+            self.not_fought.append({"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id,
+                                    "guidance": self.guidance(decided), "held_ms": (time.monotonic_ns() - t0) / 1e6})
+            return None
+        if decided.kind != "offset":
+            frame = self.bus.latest(self.joints_topic) or frame
+        t_decided = time.monotonic_ns()
         try:
-            direction, why, path = self._plan(ev, frame)
+            direction, why, path = self._plan(ev, frame, decided if decided.kind != "offset" else ev)
         except Exception:
             self.arm.end_servo()  # no retreat: the arm stays where the first setpoint held it (a stop)
             raise
@@ -178,7 +203,9 @@ class RetreatReflex:
         short = self._say_short(ev, path)
         sent = 1 + self._stream(path)
         return {"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id, "link": ev.link,
-                "plan_ms": (t_planned - t0) / 1e6, "planning_ms": (t_planned - t_first) / 1e6,
+                "decided_on": decided.kind, "intent": getattr(decided, "intent", ""),
+                "decide_ms": (t_decided - t_first) / 1e6, "decided_after_onset_ms": (t_decided - ev.t_host_ns) / 1e6,
+                "plan_ms": (t_planned - t0) / 1e6, "planning_ms": (t_planned - t_decided) / 1e6,
                 "first_setpoint_after_onset_ms": (t_first - ev.t_host_ns) / 1e6,
                 "setpoints": sent, "duration_s": path.duration_s, "moved_m": path.moved_m, "least_m": path.least_m,
                 "region_points": path.points, "needed_s": path.needed_s, "time_cut": path.time_cut,
@@ -204,21 +231,39 @@ class RetreatReflex:
              "duration_s": path.duration_s, "needed_s": path.needed_s, "time_cut": float(path.time_cut)}))
         return msg
 
-    def _plan(self, ev: ContactEvent, frame: Any) -> tuple[np.ndarray, str, RetreatPath]:
-        """The direction, why that one, and the path, from the arm's joints now (``frame``) and at the onset."""
+    def _decide(self, ev: ContactEvent) -> ContactEvent:
+        """The contact's newest event once its intent is known (:func:`intent_known`), or at ``decide_s`` after
+        its onset sample at the latest."""
+        deadline = ev.t_host_ns + int(self.settings.decide_s * 1e9)
+        newest = self._newest.get(ev.contact_id, ev)
+        while not intent_known(newest) and not self._quit.is_set():
+            remaining = (deadline - time.monotonic_ns()) / 1e9
+            if remaining <= 0:
+                break
+            self._news.clear()
+            newest = self._newest.get(ev.contact_id, ev)  # again: one may have come before the clear
+            if intent_known(newest):
+                break
+            self._news.wait(remaining)
+            newest = self._newest.get(ev.contact_id, ev)
+        return newest
+
+    def _plan(self, ev: ContactEvent, frame: Any, at: ContactEvent) -> tuple[np.ndarray, str, RetreatPath]:
+        """The direction, why that one, and the path, from the arm's joints now (``frame``) and at the onset
+        ``ev``; the contact where its newest estimate ``at`` (the onset, or an update) puts it."""
         try:  # where the arm was at the onset: the point moves back from there
             touch = self.bus.sample_at(self.joints_topic, ev.t_host_ns)
         except StaleDataError:
             touch = frame
         force = self._force_sum.get(ev.contact_id, ev.force)  # the estimates so far: their sum's direction
         self._planned.add(ev.contact_id)
-        direction, why = retreat_direction(self.model, touch.q, touch.qd, link=ev.link, point=ev.point, force=force,
+        direction, why = retreat_direction(self.model, touch.q, touch.qd, link=at.link, point=at.point, force=force,
                                            settings=self.settings)
         s = self.settings
-        region = self._samples.region(touch.q, link=ev.link, point=ev.point, point_std=ev.point_std,
-                                      floor_m=s.region_floor_m, reach_m=s.region_reach_m, force=ev.force,
+        region = self._samples.region(touch.q, link=at.link, point=at.point, point_std=at.point_std,
+                                      floor_m=s.region_floor_m, reach_m=s.region_reach_m, force=at.force,
                                       tube_m=s.region_tube_m)
-        path = plan_retreat(self.model, frame.q, link=ev.link, point=ev.point, direction=direction, settings=s,
+        path = plan_retreat(self.model, frame.q, link=at.link, point=at.point, direction=direction, settings=s,
                             period_s=self.arm.servo_period_s, q_touch=touch.q, region=region)
         return direction, why, path
 
