@@ -787,6 +787,9 @@ def ros_publish(
                                                          "site).")] = None,
     joint_prefix: Annotated[Optional[str], typer.Option(help="Prefixed to the scene's joint names (default "  # noqa: UP045
                                                            "fr3_ or panda_ for a Franka, else none).")] = None,
+    stop_service: Annotated[Optional[str], typer.Option(help="Serve a std_srvs/Trigger that stops the arm (default "  # noqa: UP045
+                                                            "/dashboard_client/stop for a UR, as ur_robot_driver "
+                                                            "does, else none; '' for none).")] = None,
     device: DeviceOption = None,
     rig: RigOption = None,
 ) -> None:
@@ -797,7 +800,7 @@ def ros_publish(
     raise typer.Exit(run_publish_command(
         scene=scene, devices=tuple(device or ()), rig=rig, sim=sim, scenario=scenario, reality=reality.value, seed=seed,
         duration=duration, hold_s=hold, joints_topic=joints_topic, wrench_topic=wrench_topic, frame_id=frame_id,
-        joint_prefix=joint_prefix, truth=truth))
+        joint_prefix=joint_prefix, stop_service=stop_service, truth=truth))
 
 
 @app.command(hidden=True)

@@ -28,6 +28,8 @@ def run_publish_command(**options: Any) -> int:
         return 1
     counts = ", ".join(f"{topic} {n}" for topic, n in out.published.items()) or "nothing"
     typer.echo(f"published: {counts}" + (f" ({out.stopped_by})" if out.stopped_by else ""), err=True)
+    if out.stop_service:
+        typer.echo(f"{out.stop_service}: {out.stop_calls} calls, {out.stop_failures} failed", err=True)
     for name, counters in out.device_counters.items():
         typer.echo(f"{name}: {counters}", err=True)
     return 130 if out.stopped_by else 0

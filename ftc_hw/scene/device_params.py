@@ -240,6 +240,8 @@ KINDS: dict[str, DeviceKind] = {k.kind: k for k in (
         *_ROS_QOS,
         Param("stale_after", "number", "seconds without a message before a stale event (default max(50 ms, 10 "
               "periods) with rate_hz, else 0.1 s)", lo=0.0, hi=60.0, above=True),
+        Param("stop_service", "str", "a std_srvs/Trigger service that stops the arm, called by --reflex stop "
+              "(ur_robot_driver: /dashboard_client/stop); without it the stop reflex is refused"),
     ), locators=("topic",)),
     DeviceKind("ros-wrench", ("ros",), "a ROS 2 topic of geometry_msgs/WrenchStamped (params.topic)",
                "/force_torque_sensor_broadcaster/wrench", (

@@ -9,7 +9,7 @@ INSTALL_HINT = ("install the ROS 2 extra: pip install 'ftc-hw[ros]' (scripts/boo
 
 # what ftc_hw.app.ros imports, each from the extra's wheels (pyproject.toml, [project.optional-dependencies])
 REQUIRED = ("rclpy", "rosbags", "std_msgs", "geometry_msgs", "sensor_msgs", "visualization_msgs",
-            "diagnostic_msgs")
+            "diagnostic_msgs", "std_srvs")
 
 
 class RosUnavailable(RuntimeError):

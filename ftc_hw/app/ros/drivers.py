@@ -8,6 +8,8 @@ scene's devices the same way; a rig file reading those drivers says the same (th
   ``tool0_controller``.
 - ``franka_ros2``: the ``joint_state_broadcaster`` remapped to ``/franka/joint_states``, joints
   ``fr3_joint1..7`` (an FR3; ``panda_joint1..7`` on a Panda), ``effort`` = libfranka's ``tau_J`` (N m).
+- ``ur_robot_driver``'s ``dashboard_client`` node serves ``/dashboard_client/stop`` (std_srvs/Trigger: the
+  dashboard server's ``stop``, which stops the running program and the arm with it).
 - ``net_ft_driver`` (ros2_net_ft_driver): ``force_torque_sensor_broadcaster``'s
   ``/force_torque_sensor_broadcaster/wrench`` in its configured ``frame_id``.
 All publish with rclcpp's ``SystemDefaultsQoS`` (reliable, volatile, keep last).
@@ -24,6 +26,15 @@ FRANKA_JOINT_STATES = "/franka/joint_states"
 FT_BROADCASTER_WRENCH = "/force_torque_sensor_broadcaster/wrench"
 UR_FLANGE_FRAME = "tool0_controller"
 FRANKA_PREFIX = {"pylibfranka": "fr3_", "panda-py": "panda_"}  # the device's client: its arm's robot_type
+UR_DASHBOARD_STOP = "/dashboard_client/stop"  # ur_robot_driver's dashboard client: std_srvs/Trigger
+
+
+def stop_service(arm: DeviceSpec, asked: str | None = None) -> str:
+    """The arm's driver's stop service (``asked``: the user's; "" none): ur_robot_driver's dashboard
+    ``stop`` for a UR; franka_ros2 offers none that takes a std_srvs/Trigger."""
+    if asked is not None:
+        return asked
+    return UR_DASHBOARD_STOP if arm.kind == "ur-rtde" else ""
 
 
 @dataclass(frozen=True)

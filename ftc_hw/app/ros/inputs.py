@@ -60,6 +60,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from . import context  # noqa: E402
+from .stop_service import UR_DASHBOARD_STOP, StopClient  # noqa: E402
 
 RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 SAID_MAX = 32  # distinct problems said in events, per adapter (each is counted whatever)
@@ -155,9 +156,11 @@ class RosJointStateArm(_Subscribed, ArmAdapter):
 
     def __init__(self, name: str, bus: Bus, topic: str, *, names: Sequence[str], effort: str,
                  torque_constant: Sequence[float] | None = None, reliability: str = "reliable", depth: int = 1000,
-                 rate_hz: float | None = None, stale_after: float | None = None,
+                 rate_hz: float | None = None, stale_after: float | None = None, stop_service: str | None = None,
                  reconnect_backoff: tuple[float, float] = (0.05, 0.5)) -> None:
         ArmAdapter.__init__(self, name, bus, reconnect_backoff=reconnect_backoff)
+        self.stop_service = stop_service or None
+        self._stopper: StopClient | None = None
         self._ros_setup(topic, reliability, depth, rate_hz)
         self.topic = joints_topic(name)
         self.names = tuple(names)
@@ -185,6 +188,10 @@ class RosJointStateArm(_Subscribed, ArmAdapter):
     def close(self) -> None:
         super().close()
         self._unsubscribe()
+        stopper, self._stopper = self._stopper, None
+        if stopper is not None:
+            stopper.close()
+            context.release()
 
     def _read_once(self) -> None:
         self._stale_on_failure(self._read)
@@ -254,8 +261,19 @@ class RosJointStateArm(_Subscribed, ArmAdapter):
         return self._zeros, None
 
     def stop(self) -> None:
-        raise DeviceError(f"{self.name}: an arm read from a ROS topic ({self.ros_topic}) cannot be stopped by ftc: "
-                          "stop it through its driver (no --reflex with a ros-joint-state arm)")
+        """The driver's stop service called (``stop_service``, e.g. ur_robot_driver's ``/dashboard_client/stop``)
+        and its answer awaited; :class:`DeviceError` without one."""
+        if self.stop_service is None:
+            raise DeviceError(f"{self.name}: an arm read from a ROS topic ({self.ros_topic}) is stopped through its "
+                              f"driver's stop service: set params.stop_service (ur_robot_driver: {UR_DASHBOARD_STOP})")
+        if self._stopper is None:
+            self._stopper = StopClient(context.acquire(), self.stop_service)
+        try:
+            self._stopper.call()
+        except DeviceError:
+            self.counters["stop_failures"] += 1
+            raise
+        self.counters["stops"] += 1
 
 
 class RosWrenchFT(_Subscribed, FTAdapter):
@@ -343,6 +361,8 @@ def joint_state_arm(device: DeviceSpec, bus: Bus, endpoint: Any, scene: Scene | 
     kw: dict[str, Any] = {"names": names, "effort": effort, "torque_constant": kt, **_ros_common(device)}
     if "stale_after" in p:
         kw["stale_after"] = float(p["stale_after"])
+    if p.get("stop_service"):
+        kw["stop_service"] = str(p["stop_service"])
     return RosJointStateArm(device.name, bus, str(p["topic"]), **{**kw, **overrides})
 
 

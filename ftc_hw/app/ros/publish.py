@@ -32,7 +32,7 @@ from ftc_hw.scene import Scene, SceneError, load_rig_scene
 from ftc_hw.sim_devices.host import WorldHost
 
 from .availability import require_ros
-from .drivers import Stream, joint_stream, wrench_stream
+from .drivers import Stream, joint_stream, stop_service, wrench_stream
 
 require_ros("ftc ros publish")
 
@@ -41,6 +41,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from . import context  # noqa: E402
+from .stop_service import StopServer  # noqa: E402
 
 # the drivers' reliability (SystemDefaultsQoS); ESTIMATE: a second of a 1 kHz stream kept for a slow subscriber
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -65,6 +66,7 @@ class PublishOptions:
     wrench_topic: str | None = None
     frame_id: str | None = None
     joint_prefix: str | None = None
+    stop_service: str | None = None  # a std_srvs/Trigger stopping the arm (None: its driver's, drivers.stop_service)
     truth: Path | None = None
 
 
@@ -73,6 +75,9 @@ class PublishOutcome:
     published: Counter[str] = field(default_factory=Counter)  # by ROS topic
     device_counters: dict[str, dict[str, int]] = field(default_factory=dict)  # by device: its adapter's
     stopped_by: str = ""
+    stop_service: str = ""  # served ("" none)
+    stop_calls: int = 0
+    stop_failures: int = 0
 
 
 class StampClock:
@@ -149,8 +154,11 @@ def run_publish(opts: PublishOptions, say: Callable[[str], None] = print) -> Pub
             raise PublishError(str(exc)) from None
         streams = streams_of(scene, rig, opts)
         forwards: list[_Forward] = []
+        specs = {d.name: d for d in scene.devices}
+        arm = rig.arm if rig.arm is not None and rig.arm.name in specs else None
+        out.stop_service = stop_service(specs[arm.name], opts.stop_service) if arm is not None else ""
         try:
-            _publish(opts, scene, rig.bus, streams, world, forwards, say)
+            _publish(opts, scene, rig.bus, streams, world, forwards, say, out, arm)
         except KeyboardInterrupt:
             out.stopped_by = "interrupted"
     # the adapters' readers, which publish, are stopped now: the counts are final
@@ -194,10 +202,12 @@ class _Forward:
 
 
 def _publish(opts: PublishOptions, scene: Scene, bus: Bus, streams: list[Stream], world: WorldHost | None,
-             forwards: list[_Forward], say: Callable[[str], None]) -> None:
-    """Each stream forwarded (``forwards`` filled) until done."""
+             forwards: list[_Forward], say: Callable[[str], None], out: PublishOutcome, arm: Any) -> None:
+    """Each stream forwarded (``forwards`` filled), and the arm's stop served where ``out.stop_service`` names
+    a service, until done."""
     node = context.acquire("ftc_ros_publish")
     subs: list[Any] = []
+    server = StopServer(node, out.stop_service, arm.stop) if out.stop_service else None
     try:
         offset = time.time_ns() - time.monotonic_ns()
         forwards += [_Forward(s, node.create_publisher(JointState if s.kind == "joints" else WrenchStamped,
@@ -207,11 +217,15 @@ def _publish(opts: PublishOptions, scene: Scene, bus: Bus, streams: list[Stream]
             subs.append(bus.subscribe(topic, f))
         say(json.dumps({"scene": scene.name, "topics": [
             {"topic": s.topic, "type": "sensor_msgs/msg/JointState" if s.kind == "joints"
-             else "geometry_msgs/msg/WrenchStamped", "source": s.source} for s in streams]}))
+             else "geometry_msgs/msg/WrenchStamped", "source": s.source} for s in streams],
+            "services": [{"service": out.stop_service, "type": "std_srvs/srv/Trigger"}] if server else []}))
         _until_done(opts, world, [f.publisher for f in forwards])
     finally:
         for sub in subs:
             sub.close()
+        if server is not None:
+            out.stop_calls, out.stop_failures = server.calls, server.failures
+            server.close()
         context.release()
 
 

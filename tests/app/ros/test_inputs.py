@@ -4,6 +4,7 @@ or refused with a counter and one event (messages handed in directly: no ROS gra
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +12,11 @@ import pytest
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
-from ftc_hw.app.ros import RosUnavailable
+from ftc_hw.app.ros import RosUnavailable, context
+from ftc_hw.app.ros.stop_service import StopClient, StopServer
 from ftc_hw.bus import EVENTS_DEVICE, Bus, JointFlag, WrenchFlag
 from ftc_hw.devices import registry
+from ftc_hw.devices.base import DeviceError, DeviceIOError
 from ftc_hw.devices.registry import make_adapter, roles_of
 from ftc_hw.scene import SceneError, load_rig_scene, load_scene
 
@@ -147,3 +150,41 @@ def test_without_the_extra_a_ros_kind_says_what_to_install(tmp_path, monkeypatch
     monkeypatch.setattr(registry, "_registered", {})
     with pytest.raises(RosUnavailable, match=r"pip install 'ftc-hw\[ros\]'"):
         make_adapter(scene.devices[1], Bus(), scene=scene)
+
+
+def test_the_stop_reflex_on_a_ros_arm_needs_its_drivers_stop_service(tmp_path):
+    bus, made = adapters(tmp_path)
+    with pytest.raises(DeviceError, match="params.stop_service .*/dashboard_client/stop"):
+        made["arm"].stop()
+    bus, made = adapters(tmp_path, UR_RIG + 'stop_service = "/ftc_test/no_server"\n')
+    try:
+        with pytest.raises(DeviceIOError, match="no server of /ftc_test/no_server"):
+            made["arm"].stop()
+        assert made["arm"].counters["stop_failures"] == 1
+    finally:
+        made["arm"].close()
+
+
+def test_a_stop_service_call_is_answered_and_a_failing_stop_says_why():
+    node = context.acquire("ftc_test")
+    stops: list[int] = []
+
+    def stop() -> None:
+        stops.append(1)
+        if len(stops) == 2:
+            raise RuntimeError("not in remote control")
+
+    server = StopServer(node, "/ftc_test/stop", stop)
+    client = StopClient(node, "/ftc_test/stop", timeout_s=5.0)
+    try:
+        deadline = time.monotonic() + 10.0
+        while not client.ready() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert client.call() == "Stopped"
+        with pytest.raises(DeviceError, match="refused the stop: RuntimeError: not in remote control"):
+            client.call()
+        assert (server.calls, server.failures, len(stops)) == (2, 1, 2)
+    finally:
+        client.close()
+        server.close()
+        context.release()
