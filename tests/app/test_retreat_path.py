@@ -258,3 +258,39 @@ def test_the_line_of_actions_other_crossing_is_in_the_region():
                         period_s=PERIOD_S, region=region)
     moved = (point_at(model, q0, path.q[-1], link="gripper_left_link", point=left) - left) @ path.direction
     assert moved >= 0.03 - 1e-3 and path.least_m >= 0.03 - 1e-4
+
+
+def test_an_arm_that_ran_into_a_contact_retraces_its_way_wherever_the_contact_is(arm):
+    """A moving arm whose estimate is on the wrong link (an onset's estimate can be 25-55 cm off on ur5e): the
+    joints go back along their velocity's reverse, so a true point on another link goes back the way it came
+    too (never on into what it ran into), while the estimate goes back the distance along its own way."""
+    scene, model = arm
+    q0 = np.array(scene.robot.home)
+    rng = np.random.default_rng(7)
+    truths = sample_surface_points(model, q0, 200, rng)
+    settings = RetreatSettings(distance_m=0.03)
+    links = [s.link for s in model.surfaces if model.moving_joints(s.link).sum() >= 2]
+    planned = 0
+    for k in range(12):
+        qd = rng.normal(0.0, 0.5, model.n_joints)
+        link = links[k % len(links)]
+        point = model.kinematics(q0)[link][:3, 3]
+        v = model.jacobian(q0, link, point) @ qd
+        if np.linalg.norm(v) <= settings.moving_above_m_s:  # the link's origin barely moved: a still point
+            continue
+        direction, why = retreat_direction(model, q0, qd, link=link, point=point, force=-v, settings=settings)
+        assert why == "motion"
+        planned += 1
+        path = plan_retreat(model, q0, link=link, point=point, direction=direction, settings=settings,
+                            period_s=PERIOD_S, qd_touch=qd)
+        assert np.allclose(path.direction, -v / np.linalg.norm(v)) and path.moved_m >= 0.03 - 1e-4, k
+        dq = path.q[-1] - q0
+        assert np.allclose(dq / np.linalg.norm(dq), -qd / np.linalg.norm(qd))  # straight back along -qd
+        for t in truths:
+            came = model.jacobian(q0, t.link, t.point) @ qd  # its velocity at the touch
+            if np.linalg.norm(came) < 0.05:
+                continue
+            moved = point_at(model, q0, path.q[-1], link=t.link, point=t.point) - t.point
+            assert moved @ came < 0.0, (k, t.link)  # back the way it came, on any link
+        _check_limits(scene, model, path)
+    assert planned >= 6

@@ -264,7 +264,8 @@ class RetreatReflex:
                                       floor_m=s.region_floor_m, reach_m=s.region_reach_m, force=at.force,
                                       tube_m=s.region_tube_m)
         path = plan_retreat(self.model, frame.q, link=at.link, point=at.point, direction=direction, settings=s,
-                            period_s=self.arm.servo_period_s, q_touch=touch.q, region=region)
+                            period_s=self.arm.servo_period_s, q_touch=touch.q, region=region,
+                            qd_touch=touch.qd if why == "motion" else None)  # ran into it: every point retraces
         return direction, why, path
 
     def _stream(self, path: RetreatPath) -> int:

@@ -29,7 +29,16 @@ import numpy as np
 from ftc_hw.model import ArmModel
 
 from .config import RetreatSettings
-from .retreat_fit import cover_scale, joint_line, profile_time, reach_in, rest_to_rest, trapezoid
+from .retreat_fit import (
+    along,
+    cover_scale,
+    joint_line,
+    profile_time,
+    reach_in,
+    region_jacobian,
+    rest_to_rest,
+    trapezoid,
+)
 from .retreat_region import Region, frozen_joints
 
 
@@ -94,13 +103,16 @@ def retreat_direction(model: ArmModel, q, qd, *, link: str, point, force, settin
 
 
 def plan_retreat(model: ArmModel, q0, *, link: str, point, direction, settings: RetreatSettings,
-                 period_s: float, q_touch=None, region=None) -> RetreatPath:
+                 period_s: float, q_touch=None, region=None, qd_touch=None) -> RetreatPath:
     """The retreat from a contact at ``point`` (base, m) on ``link`` along ``direction`` (base, normalized
     here; :func:`retreat_direction`), the arm now at ``q0`` (rad), as setpoints every ``period_s``.
     ``q_touch``: the joints when the point was there (the onset's; default q0): every point ends
     ``distance_m`` back from where it was touched (however far the arm went on before the retreat took
     over) and from where it is now. ``region``: the points the contact may be at, the estimate first
-    (:meth:`.retreat_region.SurfaceSamples.region`; default: the estimate alone)."""
+    (:meth:`.retreat_region.SurfaceSamples.region`; default: the estimate alone). ``qd_touch`` (n, rad/s):
+    where the arm ran into the contact (``direction`` from its motion), its joints' velocity then: the joints
+    go straight back along ``-qd_touch`` and every point of the arm retraces its way (free a moment ago),
+    wherever the contact is, the estimate wrong or not; each point's motion is judged along its own way back."""
     robot = model.scene.robot
     if robot.max_speed is None or robot.max_acceleration is None:
         raise RetreatError(f"scene {model.scene.name!r} gives no [robot] max_speed / max_acceleration")
@@ -113,15 +125,23 @@ def plan_retreat(model: ArmModel, q0, *, link: str, point, direction, settings: 
     q_touch = q0 if q_touch is None else np.asarray(q_touch, dtype=float)
     if region is None:
         region = Region.of_point(link, in_link(model, q_touch, link=link, point=point))
+    touched = region.at(model, q_touch)
+    retrace = qd_touch is not None
+    if retrace:  # each point back the way it came
+        direction = _ways_back(model, q_touch, np.asarray(qd_touch, dtype=float), region, touched, direction)
     # from where each point was touched, or from where it is now if it was pushed back meanwhile: it ends at
     # least distance_m from both (one that went on deeper before the retreat began comes back further)
     now = region.at(model, q0)
-    ahead = (now - region.at(model, q_touch)) @ direction
+    ahead = along(now - touched, direction)
     need = settings.distance_m + np.maximum(0.0, -ahead)
     # the joints go straight from q0 through the fit's end (a short path: the points stay near their lines,
     # and no corner between waypoints asks a joint for an acceleration step), as far as the least point needs
-    delta, clipped = _joint_motion(model, q0, region=region, now=now, need=need, direction=direction,
-                                   settings=settings)
+    if retrace:
+        delta, clipped = _reversed_joints(model, q_touch, np.asarray(qd_touch, dtype=float), region, touched,
+                                          direction, need[0]), False
+    else:
+        delta, clipped = _joint_motion(model, q0, region=region, now=now, need=need, direction=direction,
+                                       settings=settings)
     try:
         v, a = rest_to_rest(delta, robot.max_speed, robot.max_acceleration)
     except ValueError:
@@ -133,13 +153,35 @@ def plan_retreat(model: ArmModel, q0, *, link: str, point, direction, settings: 
     time_cut = needed_s > settings.time_limit_s
     if time_cut:  # at the joints' limits already: only a shorter path ends in time
         scale = reach_in(settings.time_limit_s, v, a)
-        moved = (region.at(model, q0 + scale * delta) - now) @ direction
+        moved = along(region.at(model, q0 + scale * delta) - now, direction)
     total = profile_time(scale, v, a)
     t = np.append(np.arange(0.0, total, period_s), total)
     q = q0 + trapezoid(scale, v, a, t)[:, None] * delta
     back = moved - np.maximum(0.0, -ahead)  # from where each was touched, or pushed back to
-    return RetreatPath(t, q, direction, float(back[0]), total, clipped, least_m=float(back.min()), points=len(region),
+    return RetreatPath(t, q, direction if direction.ndim == 1 else direction[0], float(back[0]), total, clipped,
+                       least_m=float(back.min()), points=len(region),
                        needed_s=needed_s, time_cut=time_cut)
+
+
+def _ways_back(model: ArmModel, q_touch: np.ndarray, qd: np.ndarray, region: Region, touched: np.ndarray,
+               fallback: np.ndarray) -> np.ndarray:
+    """Each region point's way back (k, 3, unit, base): the reverse of its velocity at the touch (``fallback``
+    for a point that was not moving, e.g. on the axis of the only moving joint)."""
+    v = region_jacobian(model, q_touch, region, touched) @ qd
+    speed = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.where(speed > 1e-6, -v / np.maximum(speed, 1e-12), fallback)
+
+
+def _reversed_joints(model: ArmModel, q_touch: np.ndarray, qd: np.ndarray, region: Region, touched: np.ndarray,
+                     ways: np.ndarray, need: float) -> np.ndarray:
+    """The joints' motion (n, rad) along ``-qd`` that moves the estimate (the region's first point) ``need``
+    back along its way to first order (:func:`~.retreat_fit.cover_scale` then finds how far every point needs)."""
+    jac0 = region_jacobian(model, q_touch, region.take(np.array([0])), touched[:1])[0]
+    back = -qd / float(np.linalg.norm(qd))
+    rate = float(ways[0] @ (jac0 @ back))  # m per rad along the reversed joints: |v| / |qd| > 0
+    if not rate > 1e-9:
+        raise RetreatError("the touched point does not move with the joints' motion: no way back to retrace")
+    return back * (need / rate)
 
 
 def _joint_motion(model: ArmModel, q0: np.ndarray, *, region: Region, now: np.ndarray, need: np.ndarray,

@@ -31,6 +31,13 @@ def stacked_jacobian(model: ArmModel, q: np.ndarray, link: str, points: np.ndarr
     return out + j0
 
 
+def along(displacement: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """Each displacement (k, 3) along ``direction``: one (3,) for all, or each its own (k, 3) -> (k,)."""
+    if direction.ndim == 1:
+        return displacement @ direction
+    return np.einsum("ij,ij->i", displacement, direction)
+
+
 def region_jacobian(model: ArmModel, q: np.ndarray, region: Region, points: np.ndarray) -> np.ndarray:
     """The positional Jacobians (k, 3, n) of the region's points, at ``points`` (k, 3, base) at q."""
     out = np.empty((len(region), 3, model.n_joints))
@@ -77,12 +84,13 @@ def joint_line(model: ArmModel, q0: np.ndarray, *, region: Region, targets: np.n
 def cover_scale(model: ArmModel, q0: np.ndarray, delta: np.ndarray, *, region: Region, need: np.ndarray,
                 direction: np.ndarray, most: float) -> tuple[float, np.ndarray]:
     """The least s (at most ``most``) at which every point of ``region`` moves at least its ``need`` (k, m)
-    along ``direction`` from q0 to ``q0 + s delta``, and each one's motion there (k, m). The motions are
+    along ``direction`` (3: one for all; k, 3: each point's own) from q0 to ``q0 + s delta``, and each one's
+    motion there (k, m). The motions are
     nearly linear in s (a few cm on an arm's links): a few fixed-point steps."""
     start = region.at(model, q0)
 
     def motion(s: float) -> np.ndarray:
-        return (region.at(model, q0 + s * delta) - start) @ direction
+        return along(region.at(model, q0 + s * delta) - start, direction)
 
     s = 1.0
     for _ in range(5):
