@@ -147,8 +147,10 @@ def plan_retreat(model: ArmModel, q0, *, link: str, point, direction, settings: 
     except ValueError:
         raise RetreatError(f"no joint moves the point on {link!r} back (a link fixed to the base, or at a limit)"
                            ) from None
-    scale, moved = cover_scale(model, q0, delta, region=region, need=need, direction=direction,
-                               most=min(settings.max_scale, _in_range(model, q0, delta)))
+    # retracing goes back over free space: as far as the region needs, within the joints' ranges (and the time
+    # limit below); a fitted line only max_scale times its fit (beyond, it may move points into something)
+    most = _in_range(model, q0, delta) if retrace else min(settings.max_scale, _in_range(model, q0, delta))
+    scale, moved = cover_scale(model, q0, delta, region=region, need=need, direction=direction, most=most)
     needed_s = profile_time(scale, v, a)
     time_cut = needed_s > settings.time_limit_s
     if time_cut:  # at the joints' limits already: only a shorter path ends in time
