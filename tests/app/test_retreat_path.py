@@ -167,7 +167,7 @@ def test_a_retreat_that_cannot_be_planned_says_why():
         with pytest.raises(RetreatError, match="no direction"):  # a still arm: the force must give it
             retreat_direction(model, np.array(ur.robot.home), np.zeros(6), link="wrist_3", point=np.zeros(3),
                               force=bad, settings=RetreatSettings())
-    for bad in ({"distance_m": 0.0}, {"time_limit_s": -1.0}, {"guided_above": 1.5}):
+    for bad in ({"distance_m": 0.0}, {"time_limit_s": -1.0}, {"guided_above": 1.5}, {"decide_s": -0.01}):
         with pytest.raises(ValueError):
             RetreatSettings(**bad)
 
