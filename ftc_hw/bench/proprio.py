@@ -239,6 +239,7 @@ def combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
 
     return {"column": draws[0]["column"], "draws": len(draws), "free_minutes": minutes, "false_alarms": fa,
             "false_alarms_per_min": fa / minutes if minutes else math.nan, "detection": bands,
+            "at_least_10n": _at_least(bands, 10.0),
             "link_right_unflagged": mean("link_right_unflagged"), "ambiguous_share": mean("ambiguous_share"),
             "error_mm_median": mean("last3_unflagged_error_mm", "median"),
             "error_mm_p95": mean("last3_unflagged_error_mm", "p95"),
@@ -256,6 +257,14 @@ def _over_detectable(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return {"n_detectable": n,
             "detected_detectable": sum(r["detected_detectable"] * r["n_detectable"] for r in kept) / n,
             "within_20ms_detectable": sum(r["within_20ms_detectable"] * r["n_detectable"] for r in kept) / n}
+
+
+def _at_least(bands: dict[str, dict[str, Any]], low_n: float) -> dict[str, Any]:
+    """Detection over the bands from ``low_n`` up, as one (the issue's "contacts of 10 N and more")."""
+    rows = [v for b, v in bands.items() if float(b.split("-")[0]) >= low_n]
+    n = sum(r["n"] for r in rows)
+    return {"n": n, "detected": sum(r["detected"] * r["n"] for r in rows) / n if n else math.nan,
+            "within_20ms": sum(r["within_20ms"] * r["n"] for r in rows) / n if n else math.nan} | _over_detectable(rows)
 
 
 def _undetectable(draws: list[dict[str, Any]]) -> dict[str, dict[str, int]]:
@@ -289,7 +298,7 @@ def run(json_path: Path | None = None, *, columns: tuple[Column, ...] = COLUMNS,
 
 def _table(results: dict[str, Any]) -> None:
     t = Table(title="contact sensing by what the arm senses (typical world, identified first)")
-    for c in ("column", "min", "false alarms /min", ">=50 N detected (in 20 ms)",
+    for c in ("column", "min", "false alarms /min", ">=10 N detected", ">=50 N detected (in 20 ms)",
               ">=50 N detectable: n, detected (in 20 ms)", "undetectable (>=50 N) per link", "10-25 N detected",
               "delay ms", "link right", "err mm med / p95 (last 3)", "ambiguous", "coverage 95"):
         t.add_column(c, justify="left" if c == "column" else "right")
@@ -304,6 +313,7 @@ def _table(results: dict[str, Any]) -> None:
         big = r["detection"].get("50-100 N", {})
         mid = r["detection"].get("10-25 N", {})
         t.add_row(r["column"], num(r["free_minutes"]), num(r["false_alarms_per_min"], "{:.2f}"),
+                  pct(r["at_least_10n"]["detected"]),
                   f"{pct(big.get('detected', math.nan))} ({pct(big.get('within_20ms', math.nan))})",
                   f"{big.get('n_detectable', 0)}, {pct(big.get('detected_detectable', math.nan))} "
                   f"({pct(big.get('within_20ms_detectable', math.nan))})",

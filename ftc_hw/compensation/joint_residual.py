@@ -3,13 +3,14 @@
 
 Covariance of the residual r (n x n), per sample:
 
-    cov = diag(white x f_white) + D M diag(sigma_v^2) M D + diag(s_slow^2)
+    cov = diag(white x f_white) + D M diag(sigma_v^2) M D + diag(s_slow^2) + diag(offset_var)
 
 ``f_white``, ``D = diag(sqrt(f_vel))``: the observer's variance factors for white torque and velocity noise
 (``sigma_v`` rad/s the joint velocities' noise, 0 where the arm reports a clean velocity); ``s_slow``: the
 slowly varying errors' 1-sigma (friction, static friction, model) through the observer's own lag, which
 bounds the filtered error when the errors of consecutive samples are fully correlated (a static friction
-that lasted until a joint broke loose still sits in r for about 1/K); and, where identification gave its
+that lasted until a joint broke loose still sits in r for about 1/K); ``offset_var``: the tracked torque
+sensors' offsets' error variance (:mod:`.joint_offset`; zeros unless set); and, where identification gave its
 parameters' covariance, that carried to the joint torques (:mod:`.joint_model_error`) -- at the currents
 the model predicts without contact, ``i + r / kt`` (the null hypothesis the detector tests): at the measured
 ones the torque constants' uncertainty (3.4 % for ur10e from its currents: their common scale with the
@@ -49,6 +50,7 @@ class JointResidual:
         self._slow = np.zeros(n)
         self._slow_now = np.zeros(n)
         self._model_cov = np.zeros((n, n))  # the model error's part of cov (at the contact-free currents)
+        self.offset_var = np.zeros(n)  # N^2 m^2: the tracked offsets' error (set by the offset tracker)
         self.cov = np.zeros((n, n))
 
     def warm_up(self, home: np.ndarray) -> None:
@@ -92,7 +94,7 @@ class JointResidual:
             d = np.sqrt(f_vel)
             m = obs.mass * d[:, None]
             cov += self.velocity_var * (m @ m.T)
-        cov[np.diag_indices(self.n)] += self.signals.white_var * f_white + self._slow**2
+        cov[np.diag_indices(self.n)] += self.signals.white_var * f_white + self._slow**2 + self.offset_var
         if self.model_error is not None:
             null = None if current is None else np.asarray(current, dtype=float) + r / self.signals.residuals.kt
             self._model_cov = self.model_error.cov(t_ns, q, qd, obs.qdd, null)

@@ -6,7 +6,8 @@ its uncertainty split by how it behaves in time (the momentum observer filters t
   model's error (a share ``friction_rel_std`` of the modelled friction while the joint slides) and at
   standstill the static friction, anything within +-f_c (taken as 1 sigma f_c, as ``JointResiduals`` does).
 - ``joint_torques``: ``tau_in = tau_J`` (link side of the gears: no joint friction between the sensor
-  and the link). White: the sensors' noise. Slow: none here (an offset is identification's).
+  and the link). White: the sensors' noise. Slow: none here (an offset is identification's, or the tare's;
+  what is left of it and its drift are tracked while the arm is free: :mod:`.joint_offset`).
 
 Both: the rigid-body model's error, a share ``model_rel_std`` of the model torque (slow).
 """

@@ -21,6 +21,7 @@ import numpy as np
 from ftc_hw.bus import ContactEvent
 from ftc_hw.compensation import Compensator
 from ftc_hw.compensation.joint_model_error import JointModelError
+from ftc_hw.compensation.joint_offset import OffsetTracker
 from ftc_hw.compensation.joint_residual import JointResidual
 from ftc_hw.detection import Detection
 from ftc_hw.detection.joint import JointDetector
@@ -67,6 +68,9 @@ class JointContactPipeline(PipelineView):
                                           source=self.source),
                                       offset=joints.get("torque_offset") if self.source == "joint_torques" else None,
                                       identified_std=identified)
+        # the torque sensors' offsets tracked while the arm is clearly free (the currents have none)
+        self.offsets = OffsetTracker(js.offset, scene.joint_torque.range) if self.source == "joint_torques" else None
+        self._offset0 = self.residual.signals.offset.copy()  # identified or tared: the tracker's reference
         self.flange = FlangeWrench(scene, model, settings) if sensing.ft == "flange" else None
         d = settings.detection
         dims = scene.n_joints + (6 if self.flange is not None else 0)  # the flange wrench joins the test
@@ -134,6 +138,7 @@ class JointContactPipeline(PipelineView):
             z, z_cov = r, cov
         self.tested = z
         det = self.detector.update(t_ns, z, z_cov)
+        self._track_offsets(t_ns, det)
         clock.lap("detection")
         estimate = None
         external = self._zero6
@@ -152,6 +157,16 @@ class JointContactPipeline(PipelineView):
         clock.lap("events")
         clock.end()
         return FrameResult(t_ns, external, det, estimate, r.copy(), tuple(events))
+
+    def _track_offsets(self, t_ns: int, det: Detection) -> None:
+        """The torque sensors' offsets refined on this sample where it is clearly contact-free (from the next
+        sample on), their uncertainty into the residual's covariance."""
+        tracker = self.offsets
+        if tracker is None:
+            return
+        if tracker.observe(t_ns, self.residual.r, free=not det.active, statistic_ratio=det.d2 / self.detector.on):
+            self.residual.signals.offset = self._offset0 + tracker.correction
+        self.residual.offset_var = tracker.var
 
     def _localize(self, t_ns: int, det: Detection, r, q, qd, current, w) -> ContactEstimate:
         """A frame in contact: the estimate (at the onset, then at most every ``localize_period_s``; else
@@ -201,6 +216,10 @@ class JointContactPipeline(PipelineView):
             q = np.asarray(q, dtype=float)
             gravity = self.model.joint_torques(q, np.zeros_like(q), np.zeros_like(q))
             self.residual.signals.offset = np.asarray(tau_j, dtype=float) - gravity
+            self._offset0 = self.residual.signals.offset.copy()
+            if self.offsets is not None:
+                self.offsets.reset()
+                self.residual.offset_var = self.offsets.var
             self.residual.reset()
 
     def recent_external(self) -> np.ndarray | None:

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ftc_hw.compensation.joint_offset import OffsetTracking
 from ftc_hw.model import Payload
 from ftc_hw.scene import CompensationLevel
 
@@ -162,7 +163,9 @@ class JointSettings:
     often (the frames between carry the last estimate: a localization costs several times a detection,
     and consecutive frames of the observer's lagged residual say nearly the same; 0: every frame);
     ``link_subspaces``: detect by the per-link matched-subspace tests (each link's joints alone, its own
-    chi-square threshold: ``detection/joint.py``) besides the full test; False: the full test alone."""
+    chi-square threshold: ``detection/joint.py``) besides the full test; False: the full test alone;
+    ``offset``: the joint torque sensors' offsets tracked while the arm is clearly free
+    (``compensation/joint_offset.py``; the currents have none)."""
 
     observer_gain: float = 150.0
     friction_rel_std: float = 0.25
@@ -177,6 +180,7 @@ class JointSettings:
     significant_sigma: float = 3.0
     localize_period_s: float = 0.004
     link_subspaces: bool = True
+    offset: OffsetTracking = field(default_factory=OffsetTracking)
 
     def __post_init__(self) -> None:
         if not (self.observer_gain > 0 and self.spacing_m > 0 and self.fine_spacing_m > 0
@@ -224,7 +228,7 @@ class PipelineSettings:
 
 
 # fields a recording made before them does not have (their defaults apply)
-ADDED_SINCE: dict[str, set[str]] = {"corrections": {"joint_residual_std", "joint_noise_std"}}
+ADDED_SINCE: dict[str, set[str]] = {"corrections": {"joint_residual_std", "joint_noise_std"}, "joint": {"offset"}}
 SECTION_TYPES: dict[str, type] = {"corrections": Corrections, "motion": MotionSettings,
                                    "detection": DetectionSettings, "localization": LocalizationSettings,
                                    "events": EventSettings, "joint": JointSettings}
@@ -256,6 +260,8 @@ def _value_out(v: Any) -> Any:
         return {"bodies": list(v.bodies), "cov": np.asarray(v.cov).tolist(), "gain": v.gain, "joints": list(v.joints)}
     if isinstance(v, Mapping):
         return {k: _value_out(x) for k, x in v.items()}
+    if isinstance(v, OffsetTracking):
+        return _section_out(v)
     return v.tolist() if hasattr(v, "tolist") else v
 
 
@@ -276,10 +282,24 @@ def _section_in(name: str, data: Any) -> Any:
     values = {k: _value_in(k, v) for k, v in data.items()} if cls is Corrections else dict(data)
     if cls is DetectionSettings and values["extra_cov"] is not None:
         values["extra_cov"] = np.asarray(values["extra_cov"], dtype=float)
+    if cls is JointSettings and "offset" in values:
+        values["offset"] = _offset_in(values["offset"])
     try:
         return cls(**values)
     except (TypeError, ValueError) as exc:
         raise SettingsError(f"pipeline settings {name}: {exc}") from None
+
+
+def _offset_in(data: Any) -> OffsetTracking:
+    """``joint.offset`` as JSON gave it (an older recording's lacks a field added since: its default)."""
+    if not isinstance(data, dict):
+        raise SettingsError(f"pipeline settings joint.offset: expected an object, got {type(data).__name__}")
+    names = {f.name for f in fields(OffsetTracking)}
+    _check_keys("pipeline settings joint.offset", set(data), names, set())
+    try:
+        return OffsetTracking(**data)
+    except (TypeError, ValueError) as exc:
+        raise SettingsError(f"pipeline settings joint.offset: {exc}") from None
 
 
 def _value_in(key: str, v: Any) -> Any:

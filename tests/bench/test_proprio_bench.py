@@ -29,6 +29,10 @@ def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
     row = combine([out, out])
     assert row["free_minutes"] == pytest.approx(2 * out["free_minutes"]) and row["false_alarms"] == 0
     assert row["detection"]["50-100 N"]["n"] == 2
+    # the "10 N and more": the bands from 10 N up as one (3 probes a draw)
+    big = [p for p in out["probes"] if p["force_n"] >= 10.0 and p["link"] != "base"]
+    assert row["at_least_10n"]["n"] == 2 * len(big)
+    assert row["at_least_10n"]["detected"] == pytest.approx(sum(p["detected"] for p in big) / len(big))
     assert out["events"] > 0 and 0.0 <= row["ambiguous_share"] <= 1.0  # events in contact, shares of them
     # detectability: each probe's true d2 against the free run's floor and the ideal test's threshold (the
     # chi-square at p 1e-9 with the touched link's joints as degrees of freedom: 37.3 for 1, 53.3 for 6)
