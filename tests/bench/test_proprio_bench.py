@@ -43,9 +43,15 @@ def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
     for p in out["probes"]:
         assert p["detectable"] == (p["d2_true"] > p["threshold"])
     for band, b in out["detection"].items():
-        able = [p for p in out["probes"] if p["band"] == band and p["detectable"] and p["link"] != "base"]
+        every = [p for p in out["probes"] if p["band"] == band]
+        able = [p for p in every if p["detectable"] and p["link"] != "base"]
         assert b["n_detectable"] == len(able)
         if able:
             assert b["detected_detectable"] == pytest.approx(sum(p["detected"] for p in able) / len(able))
+        # every probe counted in the first tier (the base's too), the undetectable ones said, none dropped
+        assert b["n_all"] == len(every) and b["n"] == sum(p["link"] != "base" for p in every)
+        assert b["detected_all"] == pytest.approx(sum(p["detected"] for p in every) / len(every))
+        assert b["n_undetectable"] == sum(not p["detectable"] for p in every)
+    assert row["detection"]["50-100 N"]["n_all"] == 2 * out["detection"]["50-100 N"]["n_all"]
     assert sum(v["undetectable"] for v in row["undetectable_per_link"].values()) == \
         2 * sum(not p["detectable"] for p in out["probes"])
