@@ -205,18 +205,8 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
         row["undetectable_50"].append(able is False and p.magnitude >= 50.0)
         out["probes"].append({"link": p.link, "force_n": p.magnitude, "band": band, "detected": bool(hit),
                               "delay_ms": delay, "d2_true": d2, "threshold": threshold, "detectable": able})
-        if p.link not in seen:
-            continue
-        bands.setdefault(band, []).append((bool(hit), delay, p.link in last3, able))
-    # detection over the probes on links some joint moves (``unseen_links`` apart); and over the detectable
-    # ones alone (``bench/detectable.py``: the true contact stands out of the free run's measured floor)
-    out["detection"] = {b: {"n": len(v), "detected": float(np.mean([x[0] for x in v])),
-                            "within_20ms": float(np.mean([x[0] and x[1] <= 20.0 for x in v])),
-                            "delay_ms_median": _pct([x[1] for x in v if x[0]], 50),
-                            "n_detectable": sum(1 for x in v if x[3]),
-                            "detected_detectable": _share([x[0] for x in v if x[3]]),
-                            "within_20ms_detectable": _share([x[0] and x[1] <= 20.0 for x in v if x[3]])}
-                        for b, v in sorted(bands.items())}
+        bands.setdefault(band, []).append((bool(hit), delay, p.link in seen, able))
+    out["detection"] = {b: _band(v) for b, v in sorted(bands.items())}
     if free is not None and free.get("floor") is not None and tested is not None:
         out["noise_floor_std_by_speed"] = {"speed_edges_rad_s": SPEED_EDGES.tolist(), "std": free["floor"].table()}
     ev = probed["events"]
@@ -247,6 +237,26 @@ def summarize(scene: Scene, pr: tuple[Probe, ...], free: dict | None, probed: di
     out["coverage95_unflagged"] = _share([e["covered"] for e in unflagged])
     out["frame_cost_us"] = frame_costs(probed)
     return out
+
+
+def _band(v: list[tuple[bool, float, bool, bool | None]]) -> dict[str, Any]:
+    """A band's detection from its probes (detected, delay ms, on a link some joint moves, detectable) in
+    three tiers, each apart: every probe (``*_all``: the base's too), the probes on links some joint moves
+    (the unmarked figures; ``unseen_links`` apart: no joint signal can see those), and the detectable ones
+    alone (``*_detectable``, ``bench/detectable.py``: the true contact stands out of the free run's
+    measured floor). ``n_undetectable``: the band's probes that are not detectable, the base's included."""
+    def within(x) -> bool:
+        return x[0] and x[1] <= 20.0
+
+    seen = [x for x in v if x[2]]
+    able = [x for x in seen if x[3]]
+    return {"n_all": len(v), "detected_all": _share([x[0] for x in v]),
+            "within_20ms_all": _share([within(x) for x in v]),
+            "n": len(seen), "detected": _share([x[0] for x in seen]), "within_20ms": _share([within(x) for x in seen]),
+            "delay_ms_median": _pct([x[1] for x in seen if x[0]], 50),
+            "n_detectable": len(able), "detected_detectable": _share([x[0] for x in able]),
+            "within_20ms_detectable": _share([within(x) for x in able]),
+            "n_undetectable": sum(1 for x in v if x[3] is False)}
 
 
 def _probe_d2(pr: tuple[Probe, ...], free: dict | None, probed: dict) -> list[float | None]:

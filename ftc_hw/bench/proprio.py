@@ -227,10 +227,10 @@ def combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
     bands: dict[str, dict[str, float]] = {}
     for band in sorted({b for d in draws for b in d["detection"]}):
         rows = [d["detection"][band] for d in draws if band in d["detection"]]
-        n = sum(r["n"] for r in rows)
-        bands[band] = {"n": n, "detected": sum(r["detected"] * r["n"] for r in rows) / n,
-                       "within_20ms": sum(r["within_20ms"] * r["n"] for r in rows) / n,
-                       "delay_ms_median": _nanmedian([r["delay_ms_median"] for r in rows])} | _over_detectable(rows)
+        bands[band] = {"delay_ms_median": _nanmedian([r["delay_ms_median"] for r in rows]),
+                       "n_undetectable": sum(r.get("n_undetectable", 0) for r in rows)}
+        for tier in ("_all", "", "_detectable"):
+            bands[band] |= _pooled(rows, tier)
 
     def mean(key: str, sub: str | None = None) -> float:
         values = [(d[key][sub] if sub else d[key]) for d in draws]
@@ -248,23 +248,27 @@ def combine(draws: list[dict[str, Any]]) -> dict[str, Any]:
             "per_draw": draws}
 
 
-def _over_detectable(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """A band's detection over its detectable probes, the draws' counts summed (``bench/detectable.py``)."""
-    n = sum(r.get("n_detectable", 0) for r in rows)
+def _pooled(rows: list[dict[str, Any]], tier: str) -> dict[str, Any]:
+    """A band's detection in one tier (``_band`` in ``bench/joint.py``: "_all", "" or "_detectable"), the draws'
+    counts summed."""
+    n_key, det_key, in_key = ("n" + tier, "detected" + tier, "within_20ms" + tier) if tier != "_detectable" else \
+        ("n_detectable", "detected_detectable", "within_20ms_detectable")
+    kept = [r for r in rows if r.get(n_key, 0)]
+    n = sum(r[n_key] for r in kept)
     if not n:
-        return {"n_detectable": 0, "detected_detectable": math.nan, "within_20ms_detectable": math.nan}
-    kept = [r for r in rows if r.get("n_detectable", 0)]
-    return {"n_detectable": n,
-            "detected_detectable": sum(r["detected_detectable"] * r["n_detectable"] for r in kept) / n,
-            "within_20ms_detectable": sum(r["within_20ms_detectable"] * r["n_detectable"] for r in kept) / n}
+        return {n_key: 0, det_key: math.nan, in_key: math.nan}
+    return {n_key: n, det_key: sum(r[det_key] * r[n_key] for r in kept) / n,
+            in_key: sum(r[in_key] * r[n_key] for r in kept) / n}
 
 
 def _at_least(bands: dict[str, dict[str, Any]], low_n: float) -> dict[str, Any]:
-    """Detection over the bands from ``low_n`` up, as one (the issue's "contacts of 10 N and more")."""
+    """Detection over the bands from ``low_n`` up, as one (the issue's "contacts of 10 N and more"), in the three
+    tiers of ``_band`` (``*_all``: every probe, the base's too)."""
     rows = [v for b, v in bands.items() if float(b.split("-")[0]) >= low_n]
-    n = sum(r["n"] for r in rows)
-    return {"n": n, "detected": sum(r["detected"] * r["n"] for r in rows) / n if n else math.nan,
-            "within_20ms": sum(r["within_20ms"] * r["n"] for r in rows) / n if n else math.nan} | _over_detectable(rows)
+    out: dict[str, Any] = {}
+    for tier in ("_all", "", "_detectable"):
+        out |= _pooled(rows, tier)
+    return out
 
 
 def _undetectable(draws: list[dict[str, Any]]) -> dict[str, dict[str, int]]:
@@ -298,8 +302,10 @@ def run(json_path: Path | None = None, *, columns: tuple[Column, ...] = COLUMNS,
 
 def _table(results: dict[str, Any]) -> None:
     t = Table(title="contact sensing by what the arm senses (typical world, identified first)")
-    for c in ("column", "min", "false alarms /min", ">=10 N detected", ">=50 N detected (in 20 ms)",
-              ">=50 N detectable: n, detected (in 20 ms)", "undetectable (>=50 N) per link", "10-25 N detected",
+    # >= 50 N in three tiers, each with its count: every probe, those on links a joint moves, the detectable
+    for c in ("column", "min", "false alarms /min", ">=10 N detected (all)", ">=50 N all: n, detected (in 20 ms)",
+              ">=50 N on moving links: n, detected (in 20 ms)", ">=50 N detectable: n, detected (in 20 ms)",
+              "undetectable (>=50 N) per link", "10-25 N detected",
               "delay ms", "link right", "err mm med / p95 (last 3)", "ambiguous", "coverage 95"):
         t.add_column(c, justify="left" if c == "column" else "right")
 
@@ -313,10 +319,9 @@ def _table(results: dict[str, Any]) -> None:
         big = r["detection"].get("50-100 N", {})
         mid = r["detection"].get("10-25 N", {})
         t.add_row(r["column"], num(r["free_minutes"]), num(r["false_alarms_per_min"], "{:.2f}"),
-                  pct(r["at_least_10n"]["detected"]),
-                  f"{pct(big.get('detected', math.nan))} ({pct(big.get('within_20ms', math.nan))})",
-                  f"{big.get('n_detectable', 0)}, {pct(big.get('detected_detectable', math.nan))} "
-                  f"({pct(big.get('within_20ms_detectable', math.nan))})",
+                  pct(r["at_least_10n"]["detected_all"]),
+                  *(f"{big.get('n' + tier, 0)}, {pct(big.get('detected' + tier, math.nan))} "
+                    f"({pct(big.get('within_20ms' + tier, math.nan))})" for tier in ("_all", "", "_detectable")),
                   ", ".join(f"{link} {v['undetectable']} ({v['undetectable_50n']})"
                             for link, v in r["undetectable_per_link"].items() if v["undetectable"]) or "-",
                   pct(mid.get("detected", math.nan)), num(big.get("delay_ms_median", math.nan)),

@@ -31,8 +31,10 @@ def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
     assert row["detection"]["50-100 N"]["n"] == 2
     # the "10 N and more": the bands from 10 N up as one (3 probes a draw)
     big = [p for p in out["probes"] if p["force_n"] >= 10.0 and p["link"] != "base"]
-    assert row["at_least_10n"]["n"] == 2 * len(big)
+    every = [p for p in out["probes"] if p["force_n"] >= 10.0]  # the base's too
+    assert row["at_least_10n"]["n"] == 2 * len(big) and row["at_least_10n"]["n_all"] == 2 * len(every)
     assert row["at_least_10n"]["detected"] == pytest.approx(sum(p["detected"] for p in big) / len(big))
+    assert row["at_least_10n"]["detected_all"] == pytest.approx(sum(p["detected"] for p in every) / len(every))
     assert out["events"] > 0 and 0.0 <= row["ambiguous_share"] <= 1.0  # events in contact, shares of them
     # detectability: each probe's true d2 against the free run's floor and the ideal test's threshold (the
     # chi-square at p 1e-9 with the touched link's joints as degrees of freedom: 37.3 for 1, 53.3 for 6)
@@ -47,9 +49,15 @@ def test_a_short_column_runs_the_pipeline_and_sums_its_draws():
     for p in out["probes"]:
         assert p["detectable"] == (p["d2_true"] > p["threshold"])
     for band, b in out["detection"].items():
-        able = [p for p in out["probes"] if p["band"] == band and p["detectable"] and p["link"] != "base"]
+        every = [p for p in out["probes"] if p["band"] == band]
+        able = [p for p in every if p["detectable"] and p["link"] != "base"]
         assert b["n_detectable"] == len(able)
         if able:
             assert b["detected_detectable"] == pytest.approx(sum(p["detected"] for p in able) / len(able))
+        # every probe counted in the first tier (the base's too), the undetectable ones said, none dropped
+        assert b["n_all"] == len(every) and b["n"] == sum(p["link"] != "base" for p in every)
+        assert b["detected_all"] == pytest.approx(sum(p["detected"] for p in every) / len(every))
+        assert b["n_undetectable"] == sum(not p["detectable"] for p in every)
+    assert row["detection"]["50-100 N"]["n_all"] == 2 * out["detection"]["50-100 N"]["n_all"]
     assert sum(v["undetectable"] for v in row["undetectable_per_link"].values()) == \
         2 * sum(not p["detectable"] for p in out["probes"])
