@@ -385,9 +385,10 @@ class LiveMonitor:
     def _judge_provisional(self, frame, t: int) -> None:
         """One F/T frame judged at once on the joint state extrapolated to its time (at most ``wait_s`` past the
         newest joint sample); its provisional onset goes out on ``events/device`` before anything else."""
-        newest = self.joints.newest_two() if self.tared and "arm" not in self.lost else None
+        ready = self.tared and "arm" not in self.lost and self.provisional.spread.ready
+        newest = self.joints.newest_two() if ready else None
         if newest is None or t < newest[1][0] or t - newest[0][0] > self.wait_s * 1e9:
-            self.counters["provisional_skipped"] += 1  # no joint state to extrapolate, or too far past it
+            self.counters["provisional_skipped"] += 1  # not yet ready, no joint state to extrapolate, too far past it
             return
         n = self.scene.n_joints
         (t0, x0), (t1, x1) = newest

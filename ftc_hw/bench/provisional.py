@@ -13,7 +13,8 @@ Figures: provisional onsets and confirmed ones against the truth (false alarms: 
 ``EARLY_S`` before it to ``LATE_S`` after a contact's end), provisional onsets not confirmed, contacts whose
 first onset was provisional, and the decision's delay: from the onset sample's time to the arrival of the frame
 whose judgement made the onset (the stop is sent then, plus the monitor's compute time, which this does not
-measure: the real-time run does).
+measure: the real-time run does). Not simulated: the arm's reaction to a stop (the world is computed ahead: the
+sweep goes on through each contact), so the stops' and resumptions' transients are the real-time run's to show.
 """
 from __future__ import annotations
 
@@ -102,10 +103,12 @@ def default_arrivals(seed: int, n: int = 100_000) -> Arrivals:
                     (rng.uniform(*DEFAULT_FT_DELAY_S, n) * 1e9).astype(np.int64), "ESTIMATE (no recording)")
 
 
-def arrivals_from_recording(path: Path, ft_topic: str = "wrench/ft", joint_topic: str = "joints/arm") -> Arrivals:
-    """The delays (receive time less the device time aligned by the minimum-delay filter, shifted so the least is
-    0) and the missed joint samples (the device clock's spacing over 1.5 periods) of a recording's two streams."""
-    rec = read_recording(path, topics={ft_topic, joint_topic})
+def arrivals_from_recording(path: Path, seed: int = 0, joint_topic: str = "joints/arm") -> Arrivals:
+    """The joint stream's delays (receive time less the device time aligned by the minimum-delay filter, shifted
+    so the least is 0) and missed samples (the device clock's spacing over 1.5 periods) of a recording; the F/T
+    frames' delays the estimate's (a recording's F/T delays on a host that fell behind are its backlog, seconds,
+    through a clock alignment capped at 1 ms/s: not a delivery pattern)."""
+    rec = read_recording(path, topics={joint_topic})
 
     def delays(frames: list) -> np.ndarray:
         clock = ClockAligner()
@@ -117,14 +120,14 @@ def arrivals_from_recording(path: Path, ft_topic: str = "wrench/ft", joint_topic
         return d - d.min()
 
     joints = [f for f in rec.topic(joint_topic) if f.t_device_ns is not None]
-    ft = [f for f in rec.topic(ft_topic) if f.t_device_ns is not None]
     t = np.array([f.t_device_ns for f in joints], dtype=np.int64)
     period = np.median(np.diff(t))
     missed = []
     for gap in np.diff(t):
         k = int(round(gap / period))
         missed += [True] * max(k - 1, 0) + [False]
-    return Arrivals(delays(joints), np.array(missed), delays(ft), str(path))
+    ft = default_arrivals(seed).ft_delay_ns
+    return Arrivals(delays(joints), np.array(missed), ft, f"joints: {path}; F/T: ESTIMATE")
 
 
 def corrections_for(scene: Scene, world_scene: Scene, identify_s: float, seed: int) -> Corrections:
@@ -224,7 +227,7 @@ def chunk_arrivals(base: Arrivals | None, seed: int, k: int) -> Arrivals:
     """The ``k``-th chunk's arrivals: a recording's taken from another place in turn, or drawn anew."""
     if base is None:
         return default_arrivals(seed + k)
-    shift = 7919 * k
+    shift = 7919 * k  # a splice of the delays: a few frames there arrive out of their order, as none do live
     return Arrivals(np.roll(base.joint_delay_ns, shift), np.roll(base.joint_missed, shift),
                     np.roll(base.ft_delay_ns, shift), base.source)
 

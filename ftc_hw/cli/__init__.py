@@ -504,8 +504,8 @@ def bench_provisional(
     reality: Annotated[RealityChoice, reality_option(RealityChoice.typical)] = RealityChoice.typical,
     minutes: Annotated[float, typer.Option(min=0.1, help="Simulated minutes of the collision sweep.")] = 10.0,
     seed: Annotated[int, typer.Option(help="The world's draw.")] = 0,
-    recording: Annotated[Optional[Path], typer.Option(help="Take the arrival pattern from this recording "  # noqa: UP045
-                                                      "(ftc monitor --record).")] = None,
+    recording: Annotated[Optional[Path], typer.Option(help="Take the joint stream's arrival pattern from this "  # noqa: UP045
+                                                      "recording (ftc monitor --record).")] = None,
 ) -> None:
     """The provisional onset offline: its false alarms and decision delay over long runs (docs/monitor.md)."""
     from ftc_hw.bench.provisional import run  # lazy: CLI start-up

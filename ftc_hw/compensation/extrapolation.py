@@ -13,7 +13,9 @@ sensitivities taken at the state (:func:`wrench_sensitivities`).
 ``s`` is identified from the joint stream itself (:class:`AccelerationSpread`): at each joint sample, the
 velocity the previous two samples foretold against the one measured, per second of the span, is how far
 the acceleration strayed from constant over one joint period; a peak of it that fades slowly (the arm's
-program comes back to its reversals and stops) is the spread, times a margin.
+program comes back to its reversals and stops) is the spread, times a margin. It is identified once the arm
+has been seen moving for a while (``ready``): a still arm's first acceleration, its start, would read as a
+contact (measured: ur5e-netft at 7 kHz, the sweep's start 18 ms in, one provisional onset unconfirmed).
 """
 from __future__ import annotations
 
@@ -81,15 +83,19 @@ def wrench_sensitivities(model: ArmModel, level: CompensationLevel, q: np.ndarra
     return Sensitivities(dq, dqd, g)
 
 
-def extrapolation_rows(sens: Sensitivities, spread: np.ndarray, ahead_s: float) -> np.ndarray:
+def extrapolation_rows(sens: Sensitivities, spread: np.ndarray, ahead_s: float, period_s: float) -> np.ndarray:
     """Covariance rows (n or 3n, 6) of the wrench error of a state extrapolated ``ahead_s`` past the newest joint
-    sample with a per-joint acceleration error ``spread`` (n,) rad/s^2: per joint its qdd error's row and, ahead
-    of the sample, its q and qd errors' rows. Apart, not added in one row: the acceleration does not stray by one
-    constant over the span, so the three need not cancel (one row would let dW/dqd h cancel dW/dqdd)."""
+    sample with a per-joint acceleration error ``spread`` (n,) rad/s^2 (over one joint period, ``period_s``): per
+    joint its qdd error's row and, ahead of the sample, its q and qd errors' rows. Apart, not added in one row:
+    the acceleration does not stray by one constant over the span, so the three need not cancel (one row would
+    let dW/dqd h cancel dW/dqdd). Past half a period the error grows on as the acceleration's drift does (the
+    samples' acceleration is their span's middle's; a drift's innovation is one period's worth of it):
+    ``spread * max(1, 1/2 + h / period)``."""
     h = max(float(ahead_s), 0.0)
-    rows = (sens.qdd * spread).T
+    s = spread * max(1.0, 0.5 + h / period_s) if period_s > 0.0 else spread
+    rows = (sens.qdd * s).T
     if h > 0.0:
-        rows = np.vstack([rows, (sens.qd * (spread * h)).T, (sens.q * (spread * (0.5 * h * h))).T])
+        rows = np.vstack([rows, (sens.qd * (s * h)).T, (sens.q * (s * (0.5 * h * h))).T])
     return np.ascontiguousarray(rows)
 
 
@@ -99,9 +105,11 @@ class AccelerationSpread:
     rad/s^2: ``margin`` times the peak innovation, fading with time constant ``memory_s``, never below ``floor``.
     Samples out of order are ignored; a span over ``max_span_s`` (a loss) restarts the prediction."""
 
-    def __init__(self, n: int, *, margin: float = 2.0, floor: float = 0.05, memory_s: float = 60.0,
-                 max_span_s: float = 0.05) -> None:
+    def __init__(self, n: int, *, margin: float = 2.0, floor: float = 0.05, memory_s: float = 300.0,
+                 max_span_s: float = 0.05, moving_s: float = 1.0, moving_qd: float = 0.05) -> None:
         self.margin, self.floor, self.memory_s, self.max_span_s = margin, floor, memory_s, max_span_s
+        self.moving_s, self.moving_qd = moving_s, moving_qd
+        self.moved_s = 0.0  # how long the arm has been seen moving (any joint over moving_qd rad/s)
         self._peak = np.zeros(n)
         self._t_peak: int | None = None
         self._last: tuple[int, np.ndarray] | None = None
@@ -125,6 +133,8 @@ class AccelerationSpread:
         if a_prev is None:
             return
         innovation = np.abs(qd - last[1] - a_prev * dt) / dt
+        if np.abs(qd).max() > self.moving_qd:
+            self.moved_s += dt
         self._fade(t_ns)
         self._peak = np.maximum(self._peak, innovation)  # a new array: a reader never sees a half-made one
         self.samples += 1
@@ -133,6 +143,12 @@ class AccelerationSpread:
         if self._t_peak is not None:
             self._peak = self._peak * math.exp(-(t_ns - self._t_peak) * 1e-9 / self.memory_s)
         self._t_peak = t_ns
+
+    @property
+    def ready(self) -> bool:
+        """The spread is identified: the arm was seen moving for ``moving_s`` (its start among it). Before, a
+        still arm's spread (the floor) would take its first acceleration for a contact."""
+        return self.moved_s >= self.moving_s
 
     @property
     def spread(self) -> np.ndarray:

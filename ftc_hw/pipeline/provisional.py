@@ -67,7 +67,7 @@ class ProvisionalJudge:
         h = (t_ns - newest[0]) * 1e-9
         loads = self._anchor_loads + sens.q @ (anchor.qd * h + anchor.qdd * (0.5 * h * h)) + sens.qd @ (anchor.qdd * h)
         external = comp.contact_wrench(comp.unbiased(raw), loads if comp.gain is None else comp.gain @ loads)
-        rows = extrapolation_rows(sens, self.spread.spread, h)
+        rows = extrapolation_rows(sens, self.spread.spread, h, (newest[0] - previous[0]) * 1e-9)
         identified = self.pipeline.motion.identified_error
         if identified is not None:  # the rows the pipeline last computed (asking anew would move its cache)
             rows = np.vstack([rows, identified._rows])
