@@ -56,7 +56,9 @@ from .bus import (
     wrench_topic,
 )
 from .pipeline import FrameResult, PipelineSettings, pipeline_for
+from .pipeline.contact import ContactPipeline
 from .pipeline.limits import LimitAssessor
+from .pipeline.provisional import ProvisionalJudge, ProvisionalLedger
 from .scene import Scene
 from .scene.limits import CellLimits
 
@@ -126,8 +128,10 @@ class LiveMonitor:
                  tare_s: float | None = 0.1, keep_frames: bool = False, max_gap_ms: float = 20.0,
                  max_extrapolate_ms: float = 5.0, publish_inputs: bool = True, ft_lost_s: float = LOST_S,
                  arm_lost_s: float = LOST_S, settings: PipelineSettings | None = None,
-                 publish_judged: bool = False, limits: CellLimits | None = None) -> None:
-        """``limits``: judge every contact event against the cell's body limits (None: not judged)."""
+                 publish_judged: bool = False, limits: CellLimits | None = None, provisional: bool = True) -> None:
+        """``limits``: judge every contact event against the cell's body limits (None: not judged).
+        ``provisional``: F/T-driven, judge each frame at once on the extrapolated joint state too (the
+        provisional onset, for the reflex; module docstring)."""
         self.bus = bus
         self.scene = scene
         self.pipeline = pipeline_for(scene, settings)
@@ -178,6 +182,10 @@ class LiveMonitor:
         self.lost: set[str] = set()
         self.losses: list[list] = []  # [stream, t_lost_ns, t_back_ns or None]
         self._source = {"sensor": ft_source, "arm": arm_source}
+        # the provisional judgement (F/T-driven, the pipeline's model): beside the pipeline, never changing it
+        self.provisional = (ProvisionalJudge(self.pipeline) if provisional and self.driver == "ft"
+                            and isinstance(self.pipeline, ContactPipeline) else None)
+        self.ledger = ProvisionalLedger() if self.provisional is not None else None
 
     def backlog(self) -> int: return self._sub.pending if self._sub is not None else 0  # driving frames to take
 
@@ -236,10 +244,6 @@ class LiveMonitor:
         # are paid per batch, not per frame.
         pending: deque = deque()
         self._waiting = pending
-        clock = self._ft_clock if self.driver == "ft" else self._arm_clock
-        late = "ft_frames_late" if self.driver == "ft" else "joint_frames_late"
-        backlog = "ft_frames_backlog" if self.driver == "ft" else "joint_frames_backlog"
-        side = self.side
         while not self._stop.is_set():
             try:
                 batch = [self._sub.get(timeout=0.001 if pending else 0.01)]
@@ -249,31 +253,43 @@ class LiveMonitor:
             except Exception:  # noqa: BLE001 - the subscription was closed: we are stopping
                 break
             if batch:
-                arrived = time.monotonic()
-                for frame in batch:
-                    t_frame = self._aligned(clock, frame)
-                    if frame.t_host_ns - t_frame > LATE_NS:  # a backlog between the device and us
-                        self.counters[late] += 1
-                    pending.append((arrived, t_frame, frame))
-                self._received(self._driving, pending[-len(batch)][1])  # back (after a loss) from the first
+                self.take(pending, batch, time.monotonic())
             self._check_streams()
-            now = time.monotonic()
-            while pending:
-                arrived, t, frame = pending[0]
-                newest = side.newest() if side is not None and self._side not in self.lost else None
-                if newest is not None and newest < t and now - arrived < self.wait_s:
-                    break
-                pending.popleft()
-                lag = time.monotonic_ns() - frame.t_host_ns
-                self._lags.append(lag)
-                self.lag_ns = lag
-                if lag > BACKLOG_NS:  # we fell behind our own reader
-                    self.counters[backlog] += 1
-                try:
-                    self.handle(frame, t)
-                except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor
-                    self.counters["errors"] += 1
-                    self.counters[f"error:{type(exc).__name__}"] += 1
+            self.judge_ready(pending, time.monotonic())
+
+    def take(self, pending: deque, batch: list, arrived: float) -> None:
+        """Driving frames received at ``arrived`` (monotonic s) into ``pending``, each judged provisionally at once."""
+        clock = self._ft_clock if self.driver == "ft" else self._arm_clock
+        late = "ft_frames_late" if self.driver == "ft" else "joint_frames_late"
+        for frame in batch:
+            t_frame = self._aligned(clock, frame)
+            if frame.t_host_ns - t_frame > LATE_NS:  # a backlog between the device and us
+                self.counters[late] += 1
+            pending.append((arrived, t_frame, frame))
+            if self.provisional is not None:
+                self._judge_provisional(frame, t_frame)
+        self._received(self._driving, pending[-len(batch)][1])  # back (after a loss) from the first
+
+    def judge_ready(self, pending: deque, now: float) -> None:
+        """Every pending frame whose side state is there (or that waited ``wait_s`` by ``now``, monotonic s)."""
+        side = self.side
+        backlog = "ft_frames_backlog" if self.driver == "ft" else "joint_frames_backlog"
+        while pending:
+            arrived, t, frame = pending[0]
+            newest = side.newest() if side is not None and self._side not in self.lost else None
+            if newest is not None and newest < t and now - arrived < self.wait_s:
+                break
+            pending.popleft()
+            lag = time.monotonic_ns() - frame.t_host_ns
+            self._lags.append(lag)
+            self.lag_ns = lag
+            if lag > BACKLOG_NS:  # we fell behind our own reader
+                self.counters[backlog] += 1
+            try:
+                self.handle(frame, t)
+            except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor
+                self.counters["errors"] += 1
+                self.counters[f"error:{type(exc).__name__}"] += 1
 
     # -- lost streams (the worker's thread; the side stream's callback only notes the time) --------------
     def _received(self, stream: str, t_frame: int) -> None:
@@ -329,6 +345,8 @@ class LiveMonitor:
         """What a lost or returned stream does to the pipeline, live or replayed from a recording: a
         loss closes the open contact (an offset flagged ``lost``, at the loss's time); the joint
         stream's return restarts the acceleration estimate."""
+        if ev.kind in ("sensor_lost", "arm_lost") and self.provisional is not None:
+            self.provisional.reset()
         if ev.kind in ("sensor_lost", "arm_lost") and self.pipeline.in_contact:
             self.counters["contacts_lost"] += 1
             event = self.pipeline.close_contact(ev.t_host_ns, lost=True)
@@ -351,7 +369,8 @@ class LiveMonitor:
         t = self._aligned(self._arm_clock, frame)
         if "arm" in self.lost and self._side_back_t is None:
             self._side_back_t = t  # back from this sample's time: F/T frames after it are judged with it
-        self.joints.add(t, np.concatenate([frame.q, frame.qd, frame.current]))  # out of order: dropped
+        if self.joints.add(t, np.concatenate([frame.q, frame.qd, frame.current])) and self.provisional is not None:
+            self.provisional.spread.observe(t, frame.qd)  # out of order: dropped (above), not observed
 
     def on_wrench(self, frame) -> None:
         """A WrenchFrame (joint-driven): kept with its aligned time for interpolation at the joint samples."""
@@ -361,6 +380,53 @@ class LiveMonitor:
             self._side_back_t = t
         saturated = 1.0 if frame.flags & WrenchFlag.SATURATED else 0.0
         self.wrenches.add(t, np.append(frame.wrench, saturated))
+
+    # -- the provisional onset (the worker's thread) ---------------------------------------------------------
+    def _judge_provisional(self, frame, t: int) -> None:
+        """One F/T frame judged at once on the joint state extrapolated to its time (at most ``wait_s`` past the
+        newest joint sample); its provisional onset goes out on ``events/device`` before anything else."""
+        ready = self.tared and "arm" not in self.lost and self.provisional.spread.ready
+        newest = self.joints.newest_two() if ready else None
+        if newest is None or t < newest[1][0] or t - newest[0][0] > self.wait_s * 1e9:
+            self.counters["provisional_skipped"] += 1  # not yet ready, no joint state to extrapolate, too far past it
+            return
+        n = self.scene.n_joints
+        (t0, x0), (t1, x1) = newest
+        try:
+            det, _ = self.provisional.judge(t, frame.wrench, (t0, x0[:n], x0[n:2 * n]), (t1, x1[:n], x1[n:2 * n]))
+        except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor
+            self.counters["provisional_errors"] += 1
+            self.counters[f"provisional_error:{type(exc).__name__}"] += 1
+            return
+        self.counters["provisional_frames"] += 1
+        if det.change != "onset":
+            return
+        onset = det.onset_t_ns if det.onset_t_ns is not None else t
+        self.counters["provisional_onsets"] += 1
+        self._monitor_event(onset, "provisional_onset",
+                            f"judged at once on the joint state {(t - t0) / 1e6:.2f} ms past the newest joint "
+                            f"sample (d2 {det.d2:.1f}); the confirmed judgement follows",
+                            {"d2": det.d2, "ahead_ms": (t - t0) / 1e6, "frame_t_host_ns": t})
+        if self.ledger.provisional(onset):
+            self.counters["provisional_confirmed"] += 1
+
+    def _settle_provisional(self, t: int, result: FrameResult) -> None:
+        """The confirmed judgement of the frame at ``t``: the provisional onsets it confirms or leaves unconfirmed."""
+        confirmed, unconfirmed = self.ledger.judged(t, result.detection.active)
+        self.counters["provisional_confirmed"] += confirmed
+        for onset in unconfirmed:
+            self.counters["provisional_unconfirmed"] += 1
+            self._monitor_event(onset, "provisional_unconfirmed",
+                                f"the provisional onset was not confirmed: no contact judged on the interpolated "
+                                f"joint state within {self.ledger.window_ns / 1e6:.0f} ms of it",
+                                {"window_ms": self.ledger.window_ns / 1e6})
+        if result.detection.change == "onset" and self.counters["provisional_frames"]:
+            onset = result.detection.onset_t_ns if result.detection.onset_t_ns is not None else t
+            if not self.ledger.had_provisional(onset):
+                self.counters["onsets_without_provisional"] += 1
+
+    def _monitor_event(self, t_ns: int, kind: str, message: str, figures: dict[str, float]) -> None:
+        self.bus.publish(EVENTS_DEVICE, DeviceEvent.make(t_ns, self._source["sensor"], kind, message, figures))
 
     def _gap(self, span_ns: int) -> int:
         """``span_ns`` when it is more than 1.5 joint periods (missed samples), else 0."""
@@ -445,6 +511,8 @@ class LiveMonitor:
             self.counters[f"error:{type(exc).__name__}"] += 1
             return None
         self.counters["frames"] += 1
+        if self.ledger is not None and self.ledger.waiting + self.counters["provisional_frames"]:
+            self._settle_provisional(inp.t_host_ns, result)
         if self.publish_judged:  # before its events: a subscriber has the frame's wrench when they come
             det = result.detection
             self.bus.publish(MONITOR_JUDGED, JudgedFrame(inp.t_host_ns, inp.t_device_ns, inp.seq, inp.source,

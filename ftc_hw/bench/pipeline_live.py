@@ -119,6 +119,11 @@ def _figures(scene: str, seconds: float, load: float, out, cpu: CpuSampler) -> d
         "stop_after_onset_ms_median": float(np.median(stops)) if stops else float("nan"),
         "stop_after_onset_ms_p99": float(np.percentile(stops, 99)) if stops else float("nan"),
         "stop_after_onset_ms_max": float(np.max(stops)) if stops else float("nan"), "stops": len(stops),
+        # the provisional onset (docs/monitor.md): stops sent on one, and those the pipeline did not confirm
+        "stops_provisional": sum(bool(s.get("provisional")) for s in out.reflex.get("stops", [])),
+        "provisional_onsets": int(c.get("provisional_onsets", 0)),
+        "provisional_unconfirmed": int(c.get("provisional_unconfirmed", 0)),
+        "onsets_without_provisional": int(c.get("onsets_without_provisional", 0)),
         "reflex_errors": list(out.reflex.get("errors", [])),
         "cpu_share": cpu.busy_share(),
         "degraded": list(out.degraded), "problems": list(out.problems), "device_counters": out.device_counters,

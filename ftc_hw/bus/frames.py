@@ -83,12 +83,16 @@ INTENTS: frozenset[str] = frozenset({"", "impact", "guidance", "unknown"})
 # counters: a reader process's adapter counters (ftc serve: every second, and a final one flagged "final")
 # retreat_short: a retreat (--reflex retreat) that moves some point the contact may be at less than its
 # distance (cut to its time limit, its length cap or a joint range): what it does instead, in the message
+# provisional_onset: the monitor judged a contact at once, on the joint state extrapolated past the newest joint
+# sample (t_host_ns: its first frame's time; the stop reflex acts on it); provisional_unconfirmed: the confirmed
+# judgement (on the interpolated joint state) found no contact near such an onset (docs/monitor.md)
 DeviceEventKind = Literal["connect", "disconnect", "error", "stale", "recovered", "reconnecting",
                           "sensor_lost", "sensor_back", "arm_lost", "arm_back", "stopped", "counters",
-                          "retreat_short"]
+                          "retreat_short", "provisional_onset", "provisional_unconfirmed"]
 CONTACT_KINDS: frozenset[str] = frozenset(get_args(ContactKind))
 DEVICE_EVENT_KINDS: frozenset[str] = frozenset(get_args(DeviceEventKind))
 STREAM_EVENT_KINDS: frozenset[str] = frozenset({"sensor_lost", "sensor_back", "arm_lost", "arm_back"})
+PROVISIONAL_EVENT_KINDS: frozenset[str] = frozenset({"provisional_onset", "provisional_unconfirmed"})
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -100,6 +100,13 @@ class StateHistory:
         with self._lock:
             return self._t[-1] if self._t else None
 
+    def newest_two(self) -> tuple[tuple[int, np.ndarray], tuple[int, np.ndarray]] | None:
+        """The newest sample and the one before it, each (time ns, state); None with fewer than two."""
+        with self._lock:
+            if len(self._t) < 2:
+                return None
+            return (self._t[-1], self._x[-1]), (self._t[-2], self._x[-2])
+
     def at(self, t: int) -> tuple[np.ndarray, int] | Miss:
         """The state at ``t`` and the span, ns, between the samples it was made from; or why there is none."""
         with self._lock:

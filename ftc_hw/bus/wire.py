@@ -17,7 +17,8 @@ little-endian, fields in the order below. Times are int64 ns, ``t_device_ns`` ab
   its class: ``contact_class``, ``intent`` (strings), ``p_quasi_static, p_guidance`` (f64), the class's
   features (u8 count, then each a name and an f64);
 - device event: ``t_host_ns``, ``source``, ``kind``, ``message`` (u16 length), the counters (u8
-  count, then each a name and an f64);
+  count, then each a name and an f64); ``kind`` a string of ``DEVICE_EVENT_KINDS`` (the monitor's
+  ``provisional_onset`` and ``provisional_unconfirmed`` among them: docs/monitor.md);
 - batch (kind 5): ``count`` (u16), then each message (u32 length, then the message, header and all):
   frames of one topic sent together when they come faster than they can be sent one by one.
 

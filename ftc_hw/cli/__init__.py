@@ -497,6 +497,22 @@ def bench_pipeline(
     run(json_path=json_path, scenes=scene, rate_hz=rate, seconds=seconds, realtime_s=realtime, seed=seed)
 
 
+@bench_app.command("provisional")
+def bench_provisional(
+    json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
+    scene: Annotated[str, typer.Option(help="Scene (a base F/T sensor).")] = "ur5e",
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.typical)] = RealityChoice.typical,
+    minutes: Annotated[float, typer.Option(min=0.1, help="Simulated minutes of the collision sweep.")] = 10.0,
+    seed: Annotated[int, typer.Option(help="The world's draw.")] = 0,
+    recording: Annotated[Optional[Path], typer.Option(help="Take the joint stream's arrival pattern from this "  # noqa: UP045
+                                                      "recording (ftc monitor --record).")] = None,
+) -> None:
+    """The provisional onset offline: its false alarms and decision delay over long runs (docs/monitor.md)."""
+    from ftc_hw.bench.provisional import run  # lazy: CLI start-up
+
+    run(scene, reality=reality.value, minutes=minutes, seed=seed, recording=recording, json_path=json_path)
+
+
 @bench_app.command("reality")
 def bench_reality(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045

@@ -5,6 +5,7 @@ Frames (docs/conventions.md): ``base`` is the model's world frame; ``sensor`` is
 """
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -187,6 +188,16 @@ class ArmModel:
         """``mj_setConst`` after a change of the model's parameters (it poses the data at qpos0)."""
         mujoco.mj_setConst(self.model, self.data)
         self._posed = b""
+
+    def twin(self) -> ArmModel:
+        """This model with MjData of its own: a stage may compute on it (another state, another thread) without
+        moving this one's data or its caches. The compiled model is shared: what changes it changes both."""
+        out = copy.copy(self)
+        out.data = mujoco.MjData(self.model)
+        out._posed = out._sensor_q = b""
+        out._sensor_T = np.eye(4)
+        out._forces_applied = False
+        return out
 
     def _require_ft(self) -> None:
         if self.site_id is None:

@@ -188,6 +188,7 @@ class MonitorOutcome:
     t_closed_ns: int = 0  # when the adapters were closed
     drift: Drift | None = None  # with refine: how far the refined model moved from the calibration's
     stream_events: list[dict[str, Any]] = field(default_factory=list)  # sensor_lost, arm_back, ...
+    provisional_events: list[dict[str, Any]] = field(default_factory=list)  # provisional_onset, _unconfirmed
     faults: list[tuple[str, float]] = field(default_factory=list)  # (fault, scenario time s when done)
     vendor_lines: Counter[str] = field(default_factory=Counter)  # vendor library lines, as rewritten
     degraded: list[str] = field(default_factory=list)  # why the run cannot be read as clean

@@ -11,6 +11,7 @@ import numpy as np
 
 from ftc_hw.bus import EVENTS_CONTACT, EVENTS_DEVICE, Bus, ContactEvent, DeviceEvent, StaleDataError
 from ftc_hw.model import ArmModel
+from ftc_hw.pipeline.provisional import CONFIRM_WINDOW_NS
 
 from .config import RetreatSettings
 from .retreat import RetreatError, RetreatPath, plan_retreat, retreat_direction
@@ -22,10 +23,16 @@ class StopReflex:
     (it waits for the device: never in the pipeline's thread), or, ``inline``, a command to the arm's
     reader process (:meth:`~ftc_hw.app.serving.remote_rig.RemoteRig.stop_arm`: a Zenoh put that does not wait)
     at once in the thread that published the onset (a hand-over cost 0.2-0.3 ms, ftc bench reflex).
-    It gets the onset before any other subscriber of the monitor's bus."""
+    It gets the onset before any other subscriber of the monitor's bus.
+
+    The onset it acts on is the first of a contact's provisional onset (a ``provisional_onset`` device event:
+    judged at once on the extrapolated joint state) and its confirmed one (a ContactEvent): the other, within
+    ``CONFIRM_WINDOW_NS`` of it, stops nothing again (counted in ``followed``). ``stops`` say which it was."""
 
     def __init__(self, bus: Bus, stop: Callable[[ContactEvent], None], inline: bool = False) -> None:
         self.stop, self.inline = stop, inline
+        self.followed = 0  # onsets within the window of one acted on (a provisional one's confirmation)
+        self._acted_ns: int | None = None  # the onset time of the last one acted on
         self.stops: list[dict[str, Any]] = []
         self.errors: list[str] = []
         self._pending: list[ContactEvent] = []
@@ -33,12 +40,20 @@ class StopReflex:
         self._quit = False
         # first: the onset must not wait for the event's recording or its forwarding to Zenoh
         self._sub = bus.subscribe(EVENTS_CONTACT, callback=self._on_event, first=True)
+        self._device_sub = bus.subscribe(EVENTS_DEVICE, callback=self._on_event, first=True)
         self._thread = threading.Thread(target=self._run, name="stop-reflex", daemon=True)
         self._thread.start()
 
-    def _on_event(self, ev: ContactEvent) -> None:
-        if ev.kind != "onset":
+    def _on_event(self, ev: ContactEvent | DeviceEvent) -> None:
+        if ev.kind not in ("onset", "provisional_onset"):
             return
+        if self._acted_ns is not None and abs(ev.t_host_ns - self._acted_ns) <= CONFIRM_WINDOW_NS:
+            self.followed += 1
+            return
+        self._acted_ns = ev.t_host_ns
+        if isinstance(ev, DeviceEvent):  # the stop command carries an onset: the provisional one, where unknown
+            ev = ContactEvent.make(ev.t_host_ns, "onset", "provisional", np.zeros(3), np.zeros(3),
+                                   flags=("provisional",))
         if self.inline:
             self._send(ev)
         else:
@@ -50,7 +65,8 @@ class StopReflex:
         try:
             self.stop(ev)
             self.stops.append({"onset_t_host_ns": ev.t_host_ns, "sent_after_onset_ms": (t0 - ev.t_host_ns) / 1e6,
-                               "stop_call_ms": (time.monotonic_ns() - t0) / 1e6})
+                               "stop_call_ms": (time.monotonic_ns() - t0) / 1e6,
+                               "provisional": "provisional" in ev.flags})
         except Exception as exc:  # noqa: BLE001 - reported, the monitor goes on
             self.errors.append(f"{type(exc).__name__}: {exc}")
 
@@ -63,6 +79,7 @@ class StopReflex:
 
     def close(self) -> None:
         self._sub.close()
+        self._device_sub.close()
         self._quit = True
         self._wake.set()
         self._thread.join(5.0)

@@ -26,6 +26,7 @@ from ftc_hw.app.setup.vendor_output import vendor_stderr
 from ftc_hw.app.web.feed import WebFeed, WebViewError
 from ftc_hw.bus import (
     EVENTS_DEVICE,
+    PROVISIONAL_EVENT_KINDS,
     STREAM_EVENT_KINDS,
     Bus,
     ContactEvent,
@@ -319,9 +320,12 @@ class _EventPump:
                 continue  # a reader's counters, each second: the summary's
             self._view.add(ev)
             stream = isinstance(ev, DeviceEvent) and ev.kind in STREAM_EVENT_KINDS
-            if isinstance(ev, ContactEvent) or stream:
-                (self._out.stream_events if stream else self._out.events).append(event_record(ev))
-            if (isinstance(ev, ContactEvent) or stream or ev.kind == "retreat_short") and self._writer is not None:
+            provisional = isinstance(ev, DeviceEvent) and ev.kind in PROVISIONAL_EVENT_KINDS
+            if isinstance(ev, ContactEvent) or stream or provisional:
+                (self._out.stream_events if stream else self._out.provisional_events if provisional
+                 else self._out.events).append(event_record(ev))
+            if (isinstance(ev, ContactEvent) or stream or provisional or ev.kind == "retreat_short") \
+                    and self._writer is not None:
                 self._writer.write(ev)
 
 
@@ -584,7 +588,7 @@ def _finish(cfg: MonitorOptions, scene: Scene, live: _Live, out: MonitorOutcome)
         if world is not None:  # when the arm's interface took the first setpoint of each retreat
             out.reflex["at_interface"] = _setpoints_at_interface(reflex.retreats, world.applied())
     elif reflex is not None:
-        out.reflex = {"stops": reflex.stops, "errors": reflex.errors}
+        out.reflex = {"stops": reflex.stops, "errors": reflex.errors, "followed": reflex.followed}
         if _served(cfg):  # the arm's reader process says when it stopped the arm
             out.reflex["stopped_by_reader"] = [dict(e.counters) for e in monitor.bus.history(EVENTS_DEVICE)
                                                if e.kind == "stopped"]
