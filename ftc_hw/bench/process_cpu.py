@@ -38,46 +38,45 @@ def _host_busy_s() -> float | None:
 
 class ProcessCpu:
     """CPU seconds per process of this run, sampled every ``period_s``: ``samples`` of (monotonic ns,
-    {name: CPU s}), this process as ``SELF``, the host's busy seconds as ``HOST``; a process that ended keeps
-    its last figure (its name with its pid where two share one)."""
+    {key: CPU s}), this process as ``SELF``, the host's busy seconds as ``HOST``, every process started from
+    this one by its pid (named by :meth:`shares` with the name it gave itself last); a process that ended
+    keeps its last figure."""
 
     def __init__(self, period_s: float = 0.5) -> None:
         self.period_s = period_s
-        self.samples: list[tuple[int, dict[str, float]]] = []
-        self._known: dict[int, str] = {}  # pid -> its name in the shares
-        self._last: dict[str, float] = {}
+        self.samples: list[tuple[int, dict[str | int, float]]] = []
+        self.names: dict[int, str] = {}  # pid -> its newest name (a spawned process names itself after a while)
+        self._last: dict[int, float] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="bench-cpu", daemon=True)
 
     def _children(self) -> None:
         """Find the processes started from this one since the last look (a scan of ``/proc``)."""
         parents: dict[int, int] = {}
-        names: dict[int, str] = {}
         for entry in os.scandir("/proc"):
             if entry.name.isdigit():
                 st = _stat(int(entry.name))
                 if st is not None:
-                    names[int(entry.name)], parents[int(entry.name)] = st[0], st[1]
+                    parents[int(entry.name)] = st[1]
         ours = {os.getpid()}
         grew = True
         while grew:
             new = {p for p, pp in parents.items() if pp in ours and p not in ours}
             ours |= new
             grew = bool(new)
-        for pid in ours - {os.getpid()} - set(self._known):
-            name = names[pid]
-            self._known[pid] = name if name not in self._known.values() else f"{name}[{pid}]"
+        for pid in ours - {os.getpid()}:
+            self.names.setdefault(pid, "?")
 
     def _sample(self) -> None:
         t = os.times()
-        now = {SELF: t.user + t.system}
+        now: dict[str | int, float] = {SELF: t.user + t.system}
         if os.path.isdir("/proc"):
             with contextlib.suppress(OSError):
                 self._children()
-            for pid, name in self._known.items():
+            for pid in self.names:
                 st = _stat(pid)
                 if st is not None:
-                    self._last[name] = st[2]
+                    self.names[pid], self._last[pid] = st[0], st[2]
             busy = _host_busy_s()
             if busy is not None:
                 now[HOST] = busy
@@ -99,10 +98,16 @@ class ProcessCpu:
 
     def shares(self, t0_ns: int, t1_ns: int) -> dict[str, float]:
         """CPU seconds per wall second (1.0: one core) of each process between the first sample at or after
-        ``t0_ns`` and the last at or before ``t1_ns`` (host monotonic ns); empty when fewer than two fall there."""
+        ``t0_ns`` and the last at or before ``t1_ns`` (host monotonic ns), by name (two of one name: with
+        their pids); empty when fewer than two samples fall there."""
         inside = [s for s in self.samples if t0_ns <= s[0] <= t1_ns]
         if len(inside) < 2:
             return {}
         (a_t, a), (b_t, b) = inside[0], inside[-1]
         span = (b_t - a_t) / 1e9
-        return {name: round((b[name] - a.get(name, 0.0)) / span, 3) for name in b if name in a}
+        named = [self.names.get(k, "?") if isinstance(k, int) else k for k in b]
+        out = {}
+        for key, name in zip(b, named, strict=True):
+            if key in a:
+                out[name if named.count(name) == 1 else f"{name}[{key}]"] = round((b[key] - a[key]) / span, 3)
+        return out
