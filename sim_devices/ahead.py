@@ -7,10 +7,11 @@ records), storing every joint sample and F/T reading (:mod:`ftc_hw.sim_devices.p
 private directory, on ``/dev/shm`` where there is one) and the truth lines. Its phases are the live host's:
 
 * pre-roll (with ``preroll``): ``PREROLL_S`` of the arm holding the scenario's start pose, nothing scripted;
-  played as stored, then its last ``PREROLL_S - LOOP_FROM_S`` (the arm settled) over and over until ``go``;
+  played as stored, then its last ``PREROLL_S - LOOP_FROM_S`` (the arm settled) over and over until ``go``
+  (the lengths: :class:`AheadSpan`);
 * the scenario, ``duration`` simulated seconds, its truth lines stored;
 * post-roll: ``POSTROLL_S`` more (the scenario going on without truth); then the streams end and the
-  devices fall silent (a monitor closes its adapters within a second or two of the scenario's end).
+  devices fall silent (a monitor closes its adapters within 5 s of the scenario's end).
 
 Then the emulators start and serve the stored run from it (:class:`AheadRunner`); the world's process only
 waits on its pipe and on the emulators' commands, and writes the truth lines as they fall due (their
@@ -47,11 +48,26 @@ from .world.truth import truth_line
 
 PREROLL_S = 3.0  # the stored pre-roll (ESTIMATE: the arm settles from its posed start within 0.5 s, SETTLE_S)
 LOOP_FROM_S = 1.0  # from here on the pre-roll is played over and over until go (the arm still)
-POSTROLL_S = 3.0  # after the scenario (a monitor ends within a second or two of it: its backlog, then the adapters)
+# after the scenario: a monitor waits up to 5 s for its backlog before it closes the adapters (a device that
+# falls silent before is a dropped device in its summary)
+POSTROLL_S = 6.0
 GO_MARGIN_S = 0.02  # the scenario starts this far ahead of the clock when go comes (no record is read twice)
 PROGRESS_EVERY_S = 1.0
 
 Progress = Callable[[float, float], None]  # (simulated seconds computed, of how many)
+
+
+@dataclass(frozen=True)
+class AheadSpan:
+    """How much is computed around the scenario (s): the pre-roll, where its loop window starts, the post-roll."""
+
+    preroll_s: float = PREROLL_S
+    loop_from_s: float = LOOP_FROM_S
+    postroll_s: float = POSTROLL_S
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.loop_from_s < self.preroll_s or self.postroll_s < 0.0:
+            raise AheadError(f"{self}: expected 0 < loop_from_s < preroll_s and postroll_s >= 0")
 
 
 class AheadError(RuntimeError):
@@ -121,15 +137,17 @@ def _sample_s(runner: SimRunner, seconds: float) -> float:
     return max(1, round(seconds * rate)) / rate
 
 
-def compute_run(runner: SimRunner, directory: Path, *, preroll: bool, progress: Progress | None = None
-                ) -> StoredRun:
+def compute_run(runner: SimRunner, directory: Path, *, preroll: bool, span: AheadSpan = AheadSpan(),
+                progress: Progress | None = None) -> StoredRun:
     """Step ``runner``'s world through the pre-roll (``preroll``), its ``duration`` and the post-roll as
-    fast as it goes, storing its samples and truth in ``directory``. The runner's emulators are not started."""
+    fast as it goes (their lengths: ``span``), storing its samples and truth in ``directory``. The runner's
+    emulators are not started."""
     t_start = time.monotonic()
     w = runner.world
     duration = runner.duration
-    pre = (_sample_s(runner, LOOP_FROM_S), _sample_s(runner, PREROLL_S - LOOP_FROM_S)) if preroll else (0.0, 0.0)
-    post = _sample_s(runner, POSTROLL_S)
+    pre = ((_sample_s(runner, span.loop_from_s), _sample_s(runner, span.preroll_s - span.loop_from_s))
+           if preroll else (0.0, 0.0))
+    post = _sample_s(runner, span.postroll_s) if span.postroll_s > 0 else 0.0
     total = sum(pre) + duration + post
     store = _Store(runner.scene.n_joints, w.sensor is not None, math.ceil(total / w.dt) + 4,
                    math.ceil(total * w.sample_rate_hz) + 4)
@@ -205,9 +223,9 @@ class AheadRunner(SimRunner):
     (:meth:`play`, :meth:`go`): they read the stored run (``link.info.played``), nothing steps. Commands
     are recorded (:attr:`applied`, at the played world time) and change nothing: the played run goes on."""
 
-    def __init__(self, *args: Any, preroll: bool, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, preroll: bool, span: AheadSpan = AheadSpan(), **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.preroll = preroll
+        self.preroll, self.span = preroll, span
         self.stored: StoredRun | None = None
         self.directory: Path | None = None
         self.control: PlayControl | None = None
@@ -216,7 +234,7 @@ class AheadRunner(SimRunner):
 
     def compute(self, progress: Progress | None = None) -> StoredRun:
         self.directory = store_directory()
-        self.stored = compute_run(self, self.directory, preroll=self.preroll, progress=progress)
+        self.stored = compute_run(self, self.directory, preroll=self.preroll, span=self.span, progress=progress)
         info = self.stored.info
         self.link.info = dataclasses.replace(self.link.info, played=info)
         self.control = PlayControl(info.control, write=True)

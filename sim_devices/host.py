@@ -53,7 +53,7 @@ from ftc_hw.model.true_arm import true_arm_spec
 from ftc_hw.priority import name_process
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
-from .ahead import AheadError, AheadRunner, TruthPlayer
+from .ahead import AheadError, AheadRunner, AheadSpan, TruthPlayer
 from .link import FT_WIDTH, Command, JointRecord, NoFTRingError, Ring, RingReader
 from .played import PlayedRing
 from .runner import AppliedCommand, SimRunner
@@ -104,7 +104,7 @@ class _Plan:
     realtime: bool
     truth: str | None
     payload: Payload | None
-    ahead: bool = False  # the run computed first, then played to the emulators (ahead.py)
+    ahead: AheadSpan | None = None  # the run computed first (this much around it), then played (ahead.py)
 
 
 class _Quit(Exception):
@@ -292,8 +292,8 @@ def _main(conn: Any, plan: _Plan) -> None:
         t0 = time.monotonic()
         kwargs = dict(duration=plan.duration or 1e12, seed=plan.seed, noise=plan.noise, devices=plan.devices,
                       options=plan.options, payload=plan.payload)
-        runner = (AheadRunner(plan.scene, plan.scenario, preroll=plan.preroll, **kwargs) if plan.ahead
-                  else SimRunner(plan.scene, plan.scenario, **kwargs))
+        runner = (AheadRunner(plan.scene, plan.scenario, preroll=plan.preroll, span=plan.ahead, **kwargs)
+                  if plan.ahead is not None else SimRunner(plan.scene, plan.scenario, **kwargs))
         world_s = time.monotonic() - t0
         ahead_s = {}
         if isinstance(runner, AheadRunner):
@@ -347,14 +347,15 @@ class WorldHost:
     (faults, seed, paths...); a UR arm gets a free loopback address unless one is given.
     ``payload``: a payload the devices' clients are not told about (calibration). ``ahead``: the run
     (pre-roll, ``duration``, post-roll) is computed first, as fast as it goes, then played to the emulators
-    on the wall clock (:mod:`ftc_hw.sim_devices.ahead`: commands are recorded and the played run goes on).
+    on the wall clock (:mod:`ftc_hw.sim_devices.ahead`: commands are recorded and the played run goes on);
+    an :class:`AheadSpan` says how long the pre-roll and post-roll computed around the scenario are.
     """
 
     def __init__(self, scene: Scene | str, scenario: str = "hold", *, devices: Iterable[str | DeviceSpec] | None = None,
                  options: dict[str, dict] | None = None, duration: float | None = None, seed: int = 0,
                  noise: bool = True, preroll: bool = False, realtime: bool = True, truth: Path | None = None,
                  payload: Payload | None = None, reality: Reality | str = Reality.IDEAL,
-                 reality_seed: int | None = None, ahead: bool = False) -> None:
+                 reality_seed: int | None = None, ahead: bool | AheadSpan = False) -> None:
         if ahead and (duration is None or not realtime):
             raise AheadError("a world computed ahead needs a duration, and plays in real time")
         scene = load_scene(scene) if isinstance(scene, str) else scene
@@ -369,7 +370,8 @@ class WorldHost:
                 options.setdefault(d.name, {}).setdefault("address", free_loopback())
         self.scene = scene
         self._plan = _Plan(true_scene, scenario, specs, options, duration, seed, noise, preroll, realtime,
-                           str(truth) if truth else None, payload, ahead)
+                           str(truth) if truth else None, payload,
+                           (ahead if isinstance(ahead, AheadSpan) else AheadSpan()) if ahead else None)
         self.on_progress: Any = None  # with ahead: called with (simulated s computed, of how many) while it computes
         self._proc: Any = None
         self._conn: Any = None

@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 
 from ftc_hw.scene import load_scene
-from ftc_hw.sim_devices.ahead import POSTROLL_S, AheadRunner
+from ftc_hw.sim_devices.ahead import AheadRunner, AheadSpan
 from ftc_hw.sim_devices.link import RingReader
 from ftc_hw.sim_devices.played import PlayControl, PlayedInfo, PlayedRing, StreamInfo, cut_at
 from ftc_hw.sim_devices.runner import SimRunner
 from ftc_hw.sim_devices.world.truth import truth_line
 
 pytestmark = pytest.mark.compute
+SPAN = AheadSpan(postroll_s=1.0)  # the post-roll computed after the scenario (short: CPU time)
 
 
 def _live(scene, seconds: float, seed: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -29,7 +30,7 @@ def _live(scene, seconds: float, seed: int) -> tuple[np.ndarray, np.ndarray, lis
             if state.t < seconds - 1e-9:
                 lines.append(truth_line(state, {"t": round(state.t, 9)}))
 
-        runner.duration = seconds + POSTROLL_S
+        runner.duration = seconds + SPAN.postroll_s
         runner.run(realtime=False, on_sample=on_sample)
         got_j.extend(joints.new())
         got_f.extend(ft.new())
@@ -46,7 +47,7 @@ def test_the_computed_run_holds_the_live_worlds_readings_for_the_same_seed():
     scene = load_scene("ur5e")  # a 2 kHz world with a 1 kHz sensor: an F/T reading every other step
     seconds, seed = 2.0, 7
     live_j, live_f, live_lines = _live(scene, seconds, seed)
-    runner = AheadRunner(scene, "sweep-with-collision", duration=seconds, seed=seed, preroll=False)
+    runner = AheadRunner(scene, "sweep-with-collision", duration=seconds, seed=seed, preroll=False, span=SPAN)
     try:
         stored = runner.compute()
         played_j, played_f = (np.load(s.path) for s in (stored.info.joints, stored.info.ft))
@@ -54,7 +55,7 @@ def test_the_computed_run_holds_the_live_worlds_readings_for_the_same_seed():
         assert np.array_equal(played_j, live_j) and np.array_equal(played_f, live_f)
         assert stored.truth_lines.read_text().splitlines(keepends=True) == live_lines
         assert stored.samples == len(live_lines) == round(seconds * 1000) and stored.contact > 0
-        assert runner.world.t == pytest.approx(seconds + POSTROLL_S, abs=1e-3)
+        assert runner.world.t == pytest.approx(seconds + SPAN.postroll_s, abs=1e-3)
     finally:
         runner.stop()
     _, other_f, _ = _live(scene, 0.2, seed + 1)

@@ -10,6 +10,7 @@ import pytest
 from ftc_hw.bus import Bus
 from ftc_hw.devices.registry import make_adapter
 from ftc_hw.scene import load_scene
+from ftc_hw.sim_devices.ahead import AheadSpan
 from ftc_hw.sim_devices.host import WorldHost
 from ftc_hw.sim_devices.link import JointRecord
 
@@ -23,7 +24,8 @@ def test_the_emulators_serve_the_computed_run_and_record_a_stop_without_obeying_
     scene = load_scene("ur5e-netft")
     ft_spec, arm_spec = (next(d for d in scene.devices if d.name == n) for n in ("ft", "arm"))
     # with the pre-roll, played over and over until go: the clients connect however long it takes
-    with WorldHost(scene, "sweep", duration=1.0, preroll=True, ahead=True) as world:
+    span = AheadSpan(preroll_s=1.0, loop_from_s=0.5, postroll_s=2.0)  # short: what is computed takes CPU time
+    with WorldHost(scene, "sweep", duration=1.0, preroll=True, ahead=span) as world:
         played_ft, played_j = world.ft_reader(from_start=True), world.joint_reader(from_start=True)
         bus = Bus()
         wrenches, joints = bus.subscribe("wrench/ft", maxsize=None), bus.subscribe("joints/arm", maxsize=None)
