@@ -115,7 +115,7 @@ def _figures(scene: str, seconds: float, load: float, out) -> dict[str, Any]:
         "backlog_frames": int(c.get("ft_frames_backlog", 0)), "judge_lag_ms_p99": c.get("judge_lag_ms_p99"),
         "arm_missed": sum(v.get("missed_packets", 0) for v in out.device_counters.values()),
         "evaluated": ev is not None, "contacts": len(ev.contacts) if ev else 0, "detected": ev.detected if ev else 0,
-        "false_alarms": len(ev.false_alarms) if ev else 0,
+        "false_alarms": len(ev.false_alarms) if ev else 0, "false_alarm_s": list(ev.false_alarms) if ev else [],
         "onset_delay_ms_median": float(np.median(delays)) if delays else float("nan"),
         "stop_after_onset_ms_median": float(np.median(stops)) if stops else float("nan"),
         "stop_after_onset_ms_p99": float(np.percentile(stops, 99)) if stops else float("nan"),
