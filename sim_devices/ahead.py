@@ -8,7 +8,8 @@ private directory, on ``/dev/shm`` where there is one) and the truth lines. Its 
 
 * pre-roll (with ``preroll``): ``PREROLL_S`` of the arm holding the scenario's start pose, nothing scripted;
   played as stored, then its last ``PREROLL_S - LOOP_FROM_S`` (the arm settled) over and over until ``go``
-  (the lengths: :class:`AheadSpan`);
+  (the lengths: :class:`AheadSpan`; at each seam a drifting sensor's bias steps back by its drift over the
+  window, ur5e's 1-2 mN against its 0.3 N noise);
 * the scenario, ``duration`` simulated seconds, its truth lines stored;
 * post-roll: ``POSTROLL_S`` more (the scenario going on without truth); then the streams end and the
   devices fall silent (a monitor closes its adapters within 5 s of the scenario's end).
