@@ -19,6 +19,11 @@ records with ``t`` the scenario time, ``t_world`` the world's and, in real time,
 host ``time.monotonic_ns()`` (one clock for all processes) at which the world published the sample to
 its emulators and ``t_due_ns`` the host time at which it was due (the same, unless the world ran late).
 
+Computed ahead (``ahead``, ``ftc sim --world-ahead``): the world's process computes the whole run before
+its emulators start (``start()`` waits for it; ``on_progress`` hears how far it got) and then only plays
+it: the emulators read the stored run on the wall clock, commands are recorded and change nothing (the
+arm goes on as computed: :mod:`ftc_hw.sim_devices.ahead`).
+
 Steering: halt the arm, set its joint targets, kill, restart, suspend (SIGSTOP: a hung device) and
 resume an emulator, the commands the world applied (with host and world times), the world's time,
 and its joint and F/T samples from the shared-memory rings (no F/T ring when the scene has no F/T
@@ -34,6 +39,7 @@ import random
 import select
 import signal
 import socket
+import sys
 import threading
 import time
 from collections.abc import Iterable
@@ -47,7 +53,9 @@ from ftc_hw.model.true_arm import true_arm_spec
 from ftc_hw.priority import name_process
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
+from .ahead import AheadError, AheadRunner, AheadSpan, TruthPlayer
 from .link import FT_WIDTH, Command, JointRecord, NoFTRingError, Ring, RingReader
+from .played import PlayedRing
 from .runner import AppliedCommand, SimRunner
 from .world import Hold, Reality, with_reality
 from .world.truth import truth_line
@@ -96,6 +104,7 @@ class _Plan:
     realtime: bool
     truth: str | None
     payload: Payload | None
+    ahead: AheadSpan | None = None  # the run computed first (this much around it), then played (ahead.py)
 
 
 class _Quit(Exception):
@@ -212,6 +221,66 @@ class _Child:
             self.runner.run(realtime=self.plan.realtime, on_sample=on_sample)
 
 
+class _AheadChild(_Child):
+    """The world process when the run was computed ahead (:class:`AheadRunner`): nothing steps; it waits on
+    the pipe and the emulators' commands (recorded: the played run goes on), writes the truth lines as
+    they fall due, and says when the scenario has played."""
+
+    runner: AheadRunner
+
+    def __init__(self, conn: Any, plan: _Plan, runner: AheadRunner) -> None:
+        super().__init__(conn, plan, runner)
+        self._both = select.poll()  # the pipe and the command socket: what wakes this process
+        self._both.register(conn.fileno(), select.POLLIN)
+        self._both.register(runner.link.fileno(), select.POLLIN)
+
+    def handle(self, msg: tuple, go_ok: bool) -> None:
+        if msg[0] == "halt":  # the world cannot halt a played run: recorded as a stop
+            self.runner.apply(Command("world-host", "stop"))
+            return
+        super().handle(msg, go_ok)
+
+    def _answer(self, op: str, arg: Any) -> Any:
+        if op == "time":
+            return self.runner.now()
+        if op == "scenario_time":
+            return None if self.t_go is None else self.runner.now() - self.t_go
+        return super()._answer(op, arg)
+
+    def _wait(self, timeout_s: float, go_ok: bool = False) -> None:
+        self._both.poll(timeout_s * 1e3)
+        self.runner.apply_pending()
+        self.poll(go_ok)
+
+    def serve(self) -> None:
+        runner = self.runner
+        t_go = runner.play()
+        if self.plan.preroll:
+            with contextlib.suppress(_Go):
+                while True:
+                    self._wait(0.05, go_ok=True)
+            try:
+                t_go = runner.go()
+            except AheadError as exc:
+                self.counts["late_go"] = 1
+                print(f"ftc-world: {exc}", file=sys.stderr, flush=True)
+                t_go = runner.stored.info.t_go + runner.scenario_shift
+        self.t_go = t_go
+        with contextlib.ExitStack() as stack:
+            out = stack.enter_context(open(self.plan.truth, "w", encoding="utf-8")) if self.plan.truth else None
+            truth = TruthPlayer(runner, out)
+            stack.callback(truth.close)
+            while not truth.done:
+                self._wait(0.05)
+                truth.write_due()
+        stored = runner.stored
+        self.reply("done", {**self.counts, "samples": stored.samples, "contact": stored.contact,
+                            "t": runner.now() - t_go, "preroll_s": t_go - runner.streams["joints"].t0,
+                            "ahead_s": stored.compute_s})
+        while True:
+            self._wait(0.5)
+
+
 def _main(conn: Any, plan: _Plan) -> None:
     """Entry point of the world process."""
     # Ctrl-C is its host's, which closes the world (quit on the pipe, or the pipe's end); the emulators
@@ -221,20 +290,30 @@ def _main(conn: Any, plan: _Plan) -> None:
     name_process("ftc-world")
     try:
         t0 = time.monotonic()
-        runner = SimRunner(plan.scene, plan.scenario, duration=plan.duration or 1e12, seed=plan.seed,
-                           noise=plan.noise, devices=plan.devices, options=plan.options, payload=plan.payload)
+        kwargs = dict(duration=plan.duration or 1e12, seed=plan.seed, noise=plan.noise, devices=plan.devices,
+                      options=plan.options, payload=plan.payload)
+        runner = (AheadRunner(plan.scene, plan.scenario, preroll=plan.preroll, span=plan.ahead, **kwargs)
+                  if plan.ahead is not None else SimRunner(plan.scene, plan.scenario, **kwargs))
         world_s = time.monotonic() - t0
+        ahead_s = {}
+        if isinstance(runner, AheadRunner):
+            try:
+                ahead_s["ahead"] = runner.compute(lambda done, of: conn.send(("progress", (done, of)))).compute_s
+            except BaseException:
+                runner.stop()
+                raise
         endpoints = runner.start()
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which raises; start() cleaned up
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
-    child = _Child(conn, plan, runner)
+    child = _AheadChild(conn, plan, runner) if isinstance(runner, AheadRunner) else _Child(conn, plan, runner)
     try:
         child.reply("ready", {"endpoints": endpoints, "joint_ring": runner.link.joints.name,
                               "ft_ring": runner.link.info.ft_ring, "n_joints": plan.scene.n_joints,
+                              "played": runner.link.info.played,
                               "sample_period_s": 1.0 / runner.world.sample_rate_hz,
-                              "startup_s": {"world": world_s, **{e.device.name: e.started_s
-                                                                  for e in runner.emulators}}})
+                              "startup_s": {"world": world_s, **ahead_s, **{e.device.name: e.started_s
+                                                                           for e in runner.emulators}}})
         child.serve()
     except (_Quit, EOFError, BrokenPipeError, KeyboardInterrupt):
         pass
@@ -266,14 +345,19 @@ class WorldHost:
     device the scene declares; else device names of the scene or :class:`DeviceSpec` s of one's own
     (another transport, a second sensor). ``options``: per device name, the emulator's options
     (faults, seed, paths...); a UR arm gets a free loopback address unless one is given.
-    ``payload``: a payload the devices' clients are not told about (calibration).
+    ``payload``: a payload the devices' clients are not told about (calibration). ``ahead``: the run
+    (pre-roll, ``duration``, post-roll) is computed first, as fast as it goes, then played to the emulators
+    on the wall clock (:mod:`ftc_hw.sim_devices.ahead`: commands are recorded and the played run goes on);
+    an :class:`AheadSpan` says how long the pre-roll and post-roll computed around the scenario are.
     """
 
     def __init__(self, scene: Scene | str, scenario: str = "hold", *, devices: Iterable[str | DeviceSpec] | None = None,
                  options: dict[str, dict] | None = None, duration: float | None = None, seed: int = 0,
                  noise: bool = True, preroll: bool = False, realtime: bool = True, truth: Path | None = None,
                  payload: Payload | None = None, reality: Reality | str = Reality.IDEAL,
-                 reality_seed: int | None = None) -> None:
+                 reality_seed: int | None = None, ahead: bool | AheadSpan = False) -> None:
+        if ahead and (duration is None or not realtime):
+            raise AheadError("a world computed ahead needs a duration, and plays in real time")
         scene = load_scene(scene) if isinstance(scene, str) else scene
         specs = _device_specs(scene, devices)
         # the world's arm: the scene's [world] and a draw of the reality (seeded by the run's seed unless
@@ -286,10 +370,12 @@ class WorldHost:
                 options.setdefault(d.name, {}).setdefault("address", free_loopback())
         self.scene = scene
         self._plan = _Plan(true_scene, scenario, specs, options, duration, seed, noise, preroll, realtime,
-                           str(truth) if truth else None, payload)
+                           str(truth) if truth else None, payload,
+                           (ahead if isinstance(ahead, AheadSpan) else AheadSpan()) if ahead else None)
+        self.on_progress: Any = None  # with ahead: called with (simulated s computed, of how many) while it computes
         self._proc: Any = None
         self._conn: Any = None
-        self._rings: dict[str, Ring] = {}
+        self._rings: dict[str, Ring | PlayedRing] = {}
         self.endpoints: dict[str, dict[str, Any]] = {}
         self.sample_period_s = 1.0 / sample_rate_hz(scene)
         self.result: dict[str, Any] | None = None
@@ -307,6 +393,10 @@ class WorldHost:
         child.close()
         try:
             kind, info = self._recv(timeout)
+            while kind == "progress":  # a world computed ahead: the timeout runs from its last word
+                if self.on_progress is not None:
+                    self.on_progress(*info)
+                kind, info = self._recv(timeout)
         except WorldHostError as exc:
             self.close()
             raise WorldHostError(f"the simulated world did not start: {exc}") from None
@@ -314,10 +404,15 @@ class WorldHost:
             self.close()
             raise WorldHostError(f"the simulated world failed to start: {info}")
         self.endpoints = {e["name"]: e for e in info["endpoints"]}
-        n = info["n_joints"]
-        self._rings = {"joints": Ring(JointRecord.width(n), name=info["joint_ring"], create=False)}
-        if info["ft_ring"] is not None:  # None: the scene has no F/T sensor
-            self._rings["ft"] = Ring(FT_WIDTH, name=info["ft_ring"], create=False)
+        n, played = info["n_joints"], info["played"]
+        if played is not None:  # the stored run, as the emulators read it
+            self._rings = {"joints": PlayedRing(played, ft=False)}
+            if played.ft is not None:
+                self._rings["ft"] = PlayedRing(played, ft=True)
+        else:
+            self._rings = {"joints": Ring(JointRecord.width(n), name=info["joint_ring"], create=False)}
+            if info["ft_ring"] is not None:  # None: the scene has no F/T sensor
+                self._rings["ft"] = Ring(FT_WIDTH, name=info["ft_ring"], create=False)
         self.sample_period_s = info["sample_period_s"]
         self.startup_s = info["startup_s"]
         return self.endpoints

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from .played import PlayedInfo, PlayedRing
+
 RING_SLOTS = 4096  # about 4 s of 1 kHz samples
 
 
@@ -146,9 +148,10 @@ class Ring:
 
 
 class RingReader:
-    """Reads a ring in order from where it attaches; counts records lost by falling behind."""
+    """Reads a ring (or a stored run's :class:`PlayedRing`) in order from where it attaches; counts records
+    lost by falling behind."""
 
-    def __init__(self, ring: Ring, from_start: bool = False) -> None:
+    def __init__(self, ring: Ring | PlayedRing, from_start: bool = False) -> None:
         self.ring = ring
         self.next = 0 if from_start else ring.written
         self.lost = 0
@@ -182,6 +185,7 @@ class LinkInfo:
     joint_ring: str
     n_joints: int
     commands: str  # the world's command socket (AF_UNIX, SOCK_DGRAM)
+    played: PlayedInfo | None = None  # a run computed ahead: its stored streams replace the rings (played.py)
 
 
 FT_WIDTH = 12  # wrench (6, sensor frame, scene convention, as the device reports it), saturated (6, 0/1)
@@ -264,6 +268,10 @@ class WorldLink:
                 self.bad_commands += 1
         return out
 
+    def fileno(self) -> int:
+        """The command socket's descriptor (readable when a command waits)."""
+        return self._commands.fileno()
+
     def wait_commands(self, timeout: float) -> bool:
         """Block up to ``timeout`` s; True as soon as a command is waiting."""
         ready, _, _ = select.select([self._commands], [], [], max(0.0, timeout))
@@ -282,8 +290,14 @@ class EmulatorSide:
 
     def __init__(self, info: LinkInfo) -> None:
         self.info = info
-        self.ft = None if info.ft_ring is None else Ring(FT_WIDTH, name=info.ft_ring, create=False)
-        self.joints = Ring(JointRecord.width(info.n_joints), name=info.joint_ring, create=False)
+        self.ft: Ring | PlayedRing | None
+        self.joints: Ring | PlayedRing
+        if info.played is not None:  # the run computed ahead, played on the wall clock
+            self.ft = None if info.played.ft is None else PlayedRing(info.played, ft=True)
+            self.joints = PlayedRing(info.played, ft=False)
+        else:
+            self.ft = None if info.ft_ring is None else Ring(FT_WIDTH, name=info.ft_ring, create=False)
+            self.joints = Ring(JointRecord.width(info.n_joints), name=info.joint_ring, create=False)
         self._commands = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self._commands.settimeout(SEND_TIMEOUT_S)
 

@@ -59,6 +59,7 @@ class SimRunner:
             setup = dataclasses.replace(setup, payload=payload)
         self.world = World(scene, setup, seed=seed, noise=noise)
         self.link = WorldLink(scene.n_joints, ft=scene.sensor is not None)
+        self.out: Any = self.link  # where the samples go: the link's rings (a run computed ahead: its store)
         self.devices = tuple(devices)
         self.options = options or {}
         self.emulators: list[EmulatorProcess] = []
@@ -67,7 +68,7 @@ class SimRunner:
 
     def start(self) -> list[dict[str, Any]]:
         # joint state first, so emulators that answer at once have something to serve
-        self._publish(self.world.state, with_ft=True)
+        self.publish_state()
         # launched together, waited for together: their start-ups (imports, binding) overlap
         launched = []
         try:
@@ -85,13 +86,17 @@ class SimRunner:
         prefer_cpu(WORLD_NICE)
         return [e.endpoint for e in self.emulators]
 
+    def publish_state(self) -> None:
+        """The world's current state, its joint sample and F/T reading: what comes before its first step."""
+        self._publish(self.world.state, with_ft=True)
+
     def _publish(self, state: WorldState, with_ft: bool) -> None:
         """The joint sample (every step) and, ``with_ft`` and where the scene has an F/T sensor, its reading."""
-        w = self.world
+        w, out = self.world, self.out
         if with_ft and w.sensor is not None:
             reading = w.read_sensor(state)
-            self.link.publish_ft(state.t, reading.wrench, reading.saturated)
-        self.link.publish_joints(state.t, state.q, state.qd, state.qdd, w.read_current(state), state.tau,
+            out.publish_ft(state.t, reading.wrench, reading.saturated)
+        out.publish_joints(state.t, state.q, state.qd, state.qdd, w.read_current(state), state.tau,
                                  w.read_joint_torques(state))
 
     def emulator(self, name: str) -> EmulatorProcess:
@@ -110,10 +115,13 @@ class SimRunner:
         self.emulators[self.emulators.index(old)] = new
         return new.endpoint
 
-    def apply(self, cmd: Command) -> None:
-        t = self.world.t
+    def record(self, cmd: Command, t: float) -> None:
+        """Keep ``cmd`` among the commands applied, at world time ``t``."""
         self.applied.append(AppliedCommand(time.monotonic_ns(), t, cmd.kind, cmd.q, cmd.on, cmd.t_sent_ns,
                                            self.due_ns(t) or 0, int(cmd.extra.get("t_rx_ns", 0))))
+
+    def apply(self, cmd: Command) -> None:
+        self.record(cmd, self.world.t)
         if cmd.kind == "goal" and cmd.q is not None:
             qd = _velocity(cmd.extra.get("qd"), len(cmd.q))  # a servo stream's feed-forward (the UR program's servoj)
             self.world.set_goal(np.asarray(cmd.q, dtype=float), qd, float(cmd.extra.get("horizon_s", 0.0)))

@@ -44,6 +44,7 @@ from rich.table import Table
 
 from ftc_hw.bench.compensation import Recording, _episodes, arm_rate, record
 from ftc_hw.bench.pipeline_stages import FrameClock, StageTimer, summarize_us
+from ftc_hw.bench.process_cpu import HOST, SELF
 from ftc_hw.bench.report import table_console
 from ftc_hw.bus import Bus, JointFrame, WrenchFlag, WrenchFrame, wrench_topic
 from ftc_hw.codecs.netft_rdt import RdtRecord, encode_records
@@ -227,10 +228,12 @@ ROWS = ("reader", "monitor", *STAGES, "pipeline", "pipeline cpu", "total", "cpu"
 
 
 def run(json_path: Path | None = None, scenes: list[str] | None = None, rate_hz: float | None = None,
-        seconds: float = 20.0, realtime_s: float = 10.0, seed: int = 0, speed: float = 1.0) -> dict:
+        seconds: float = 20.0, realtime_s: float = 10.0, seed: int = 0, speed: float = 1.0,
+        ahead: bool = True) -> dict:
     """``rate_hz``: every scene's sensor at this rate (None: each its own; the world must step at a
     divisor of its period). ``realtime_s`` 0: the offline leg only (the real-time leg runs each scene at
-    its own rate, and only when ``rate_hz`` is that rate)."""
+    its own rate, and only when ``rate_hz`` is that rate; ``ahead``: with the world computed ahead, else
+    the live world)."""
     console = table_console()
     results: dict[str, Any] = {}
     for name in scenes or DEFAULT_SCENES:
@@ -241,9 +244,9 @@ def run(json_path: Path | None = None, scenes: list[str] | None = None, rate_hz:
         if realtime_s > 0 and scene.sensor.rate_hz == load_scene(name).sensor.rate_hz:
             from ftc_hw.bench.pipeline_live import live  # lazy: the world and its emulators
 
-            entry["realtime"] = live(name, realtime_s, seed)
+            entry["realtime"] = live(name, realtime_s, seed, ahead=ahead)
         results[f"{name}@{scene.sensor.rate_hz:g}"] = entry
-    results["meta"] = {"seconds": seconds, "realtime_s": realtime_s, "seed": seed, "speed": speed,
+    results["meta"] = {"seconds": seconds, "realtime_s": realtime_s, "seed": seed, "speed": speed, "ahead": ahead,
                        "python": platform.python_version(), "cpus": os.cpu_count()}
     console.print(_stage_table(results))
     console.print(_summary_table(results))
@@ -276,10 +279,12 @@ def _stage_table(results: dict) -> Table:
 
 def _summary_table(results: dict) -> Table:
     table = Table(title="ftc bench pipeline: keeping up (offline: capacity and detection; real time: ftc monitor "
-                        "--sim with the stop reflex)")
+                        "--sim with the stop reflex; world: computed ahead or live; stops: sent after the onset, "
+                        "and at the arm's interface after the contact's first sample; CPU: cores per process)")
     for c in ("scene@Hz", "capacity Hz", "core share", "detected", "false alarms", "detect ms (med)",
-              "rt load", "rt sent", "rt received", "rt lost", "rt judged", "rt not judged", "rt detected",
-              "rt onset ms", "rt stops: ms med/p99/max", "rt CPU share", "rt arm missed", "rt recorded, replay"):
+              "rt world, load", "rt sent", "rt received", "rt lost", "rt judged", "rt not judged", "rt detected",
+              "rt onset ms", "rt stops: ms med/p99/max", "rt at arm: ms med/p99/max", "rt CPU", "rt arm missed",
+              "rt recorded, replay"):
         table.add_column(c, justify="left" if c == "scene@Hz" else "right")
     for k, r in results.items():
         if k == "meta":
@@ -289,18 +294,28 @@ def _summary_table(results: dict) -> Table:
                  f"{d['false_alarms']}", f"{d['detect_ms_median']:.2f}"]
         rt = r.get("realtime")
         if rt is None:
-            cells += ["-"] * 12
+            cells += ["-"] * 13
         else:
             lost = (rt["sent"] - rt["received"]) if rt["sent"] is not None else rt["seq_lost"]
-            cells += [f"{rt['load_1min']:.1f}", f"{rt['sent'] if rt['sent'] is not None else '-'}",
+            cells += [f"{rt['world']}, {rt['load_1min']:.1f}", f"{rt['sent'] if rt['sent'] is not None else '-'}",
                       f"{rt['received']}", f"{lost}", f"{rt['judged']}",
                       f"{rt['not_judged']} ({100 * rt['not_judged_share']:.0f} %)",
                       f"{rt['detected']}/{rt['contacts']} ({rt['false_alarms']} false)" if rt["evaluated"] else "-",
                       f"{rt['onset_delay_ms_median']:.2f}",
                       f"{rt['stops']}: {rt['stop_after_onset_ms_median']:.2f} / {rt['stop_after_onset_ms_p99']:.2f}"
                       f" / {rt['stop_after_onset_ms_max']:.2f}",
-                      f"{rt['cpu_share']:.2f}", f"{rt['arm_missed']}",
+                      f"{rt['stops_at_arm']}: {rt['stop_at_arm_ms_median']:.2f} / {rt['stop_at_arm_ms_p99']:.2f}"
+                      f" / {rt['stop_at_arm_ms_max']:.2f}",
+                      _cpu_cell(rt["cpu_by_process"]), f"{rt['arm_missed']}",
                       f"{rt['recorded_inputs']} inputs, {rt['recorder_drops']} dropped; "
                       + ("identical" if rt["replay_identical"] else "DIFFERS")]
         table.add_row(*cells)
     return table
+
+
+def _cpu_cell(shares: dict[str, float]) -> str:
+    """Cores per process over the scenario, this one (the monitor) first, the host's busy cores last."""
+    host = shares.get(HOST)
+    rest = sorted((k, v) for k, v in shares.items() if k not in (SELF, HOST))
+    parts = [f"{SELF} {shares.get(SELF, float('nan')):.2f}"] + [f"{k} {v:.2f}" for k, v in rest]
+    return "; ".join(parts + ([f"host {host:.2f}"] if host is not None else []))

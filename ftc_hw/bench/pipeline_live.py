@@ -1,15 +1,20 @@
-"""The real-time leg of ``ftc bench pipeline``: ``ftc monitor --scene S --sim --duration D --reflex stop
---resume-after 0.5 --record F`` (readers in threads, no live view), and what it kept up with. The
-emulated UR controller's operator plays again half a second after each stop, so every contact of the
-sweep meets a stop (a UR arm's scenes; with another arm the sweep stops at its first contact).
+"""The real-time leg of ``ftc bench pipeline``: ``ftc monitor --scene S --sim --world-ahead --duration D
+--reflex stop --resume-after 0.5 --record F --truth T`` (readers in threads, no live view), and what it kept
+up with. With the world computed ahead (the default; ``ahead=False``: the live world) the emulators serve
+the stored run and the simulated cell costs only their sockets; a stop changes nothing in the played run
+(it goes on through each contact). The emulated UR controller's operator plays again half a second after
+each stop, so every contact of the sweep meets a stop (a UR arm's scenes; with another arm in the live
+world the sweep stops at its first contact).
 
 Figures: the F/T adapter's counters (for RDT ``box_packets``, the box's own count of what it sent,
 against ``packets`` received and ``kernel_drops``, the socket's overflows; for every kind ``lost``,
 the samples its sequence says are missing), the monitor's frames judged and not judged (dropped behind
 its queue, no joint state, unjudged at the end), contacts detected and false alarms against the world's
-truth, onset delay (from the first contact sample's publication) and the stop reflex's latency (sent
-after the onset's time), and this process's CPU share (readers, monitor, pipeline: the world and the
-emulators run in processes of their own) while it streamed. The recording, afterwards: its messages
+truth, onset delay (from the first contact sample's publication; computed ahead: from when it was due),
+the stop reflex's latency (sent after the onset's time) and, per contact, the stop command's arrival at
+the arm's interface (the UR emulator read it) after the contact's first sample, and each process's CPU
+share over the scenario (:mod:`.process_cpu`: this one, the monitor with its readers and pipeline; the
+world's, the emulators', the recorder's; the host's busy cores). The recording, afterwards: its messages
 against what the monitor judged, the recorder's drops, and a replay of it (``ftc replay --check``):
 whether it gives the run's events bit for bit.
 """
@@ -18,8 +23,6 @@ from __future__ import annotations
 import io
 import os
 import tempfile
-import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -27,64 +30,62 @@ import numpy as np
 from rich.console import Console
 
 from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, SimOptions, ViewOptions
+from ftc_hw.app.monitor.evaluate import _episodes
 from ftc_hw.app.monitor.session import resumable, run_monitor
+from ftc_hw.bench.process_cpu import SELF, ProcessCpu
 from ftc_hw.monitor import MONITOR_INPUT
+from ftc_hw.record.events import read_truth
 from ftc_hw.record.reader import read_recording
 from ftc_hw.record.replay import replay
 from ftc_hw.scene import load_scene
 
 RESUME_AFTER_S = 0.5
+MERGE_GAP_S = 0.05  # contact runs closer than this are one contact (the evaluation's default)
+LATE_NS = 50_000_000  # a stop this long after a contact's end is still its (the evaluation's onset window)
 
 NOT_JUDGED = ("ft_frames_dropped", "no_joint_state", "blind_frames", "ft_frames_unjudged_at_stop")
 
 
-class CpuSampler:
-    """This process's CPU seconds (user + system) sampled every ``period_s`` in a thread."""
-
-    def __init__(self, period_s: float = 0.25) -> None:
-        self.period_s = period_s
-        self.samples: list[tuple[float, float]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="bench-cpu", daemon=True)
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            t = os.times()
-            self.samples.append((time.monotonic(), t.user + t.system))
-            self._stop.wait(self.period_s)
-
-    def __enter__(self) -> CpuSampler:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
-
-    def busy_share(self, floor: float = 0.05) -> float:
-        """CPU seconds per wall second (1.0: one core) from the first to the last sampling interval above
-        ``floor`` (the streaming: before it the world starts, after it the run's summary)."""
-        busy = [i for i in range(1, len(self.samples)) if _share(self.samples[i - 1], self.samples[i]) > floor]
-        if not busy:
-            return float("nan")
-        return _share(self.samples[busy[0] - 1], self.samples[busy[-1]])
-
-
-def _share(a: tuple[float, float], b: tuple[float, float]) -> float:
-    return (b[1] - a[1]) / (b[0] - a[0]) if b[0] > a[0] else 0.0
-
-
-def live(scene: str, seconds: float, seed: int) -> dict[str, Any]:
+def live(scene: str, seconds: float, seed: int, ahead: bool = True) -> dict[str, Any]:
+    """``ahead``: the world computed first and played to the emulators (``--world-ahead``), else the live world."""
     ur = resumable(load_scene(scene))
     with tempfile.TemporaryDirectory(prefix="ftc-bench-") as tmp:
-        path = Path(tmp) / "run.mcap"
-        world = SimOptions(seed=seed, resume_after_s=RESUME_AFTER_S if ur else None)
+        path, truth = Path(tmp) / "run.mcap", Path(tmp) / "truth.jsonl"
+        world = SimOptions(seed=seed, resume_after_s=RESUME_AFTER_S if ur else None, truth=truth, ahead=ahead)
         cfg = MonitorOptions(scene, sim=True, world=world, duration=seconds, view=ViewOptions("none"), reflex="stop",
                              devices=DeviceOptions(readers="thread"), title="ftc bench pipeline", record=path)
         load = os.getloadavg()[0]
-        with CpuSampler() as cpu:
+        with ProcessCpu() as cpu:
             out = run_monitor(cfg, Console(file=io.StringIO(), width=200))
-        return {**_figures(scene, seconds, load, out, cpu), **_replayed(path)}
+        rows = read_truth(truth) if truth.exists() else []
+        return {**_figures(scene, seconds, load, out), "world": "ahead" if ahead else "live",
+                **_cpu(cpu, rows), **_stops_at_arm(rows, out.reflex.get("stops_at_arm_ns", [])), **_replayed(path)}
+
+
+def _cpu(cpu: ProcessCpu, truth: list[dict[str, Any]]) -> dict[str, Any]:
+    """Each process's CPU share over the scenario (from its first truth sample's host time to its last)."""
+    if not truth:
+        return {"cpu_share": float("nan"), "cpu_by_process": {}}
+    shares = cpu.shares(int(truth[0]["t_host_ns"]), int(truth[-1]["t_host_ns"]))
+    return {"cpu_share": shares.get(SELF, float("nan")), "cpu_by_process": shares}
+
+
+def _stops_at_arm(truth: list[dict[str, Any]], stops_ns: list[int]) -> dict[str, Any]:
+    """Per true contact (runs of contact samples, as the evaluation merges them), ms from its first sample's
+    host time to the first stop command the arm's emulator read after it (its ``t_rx_ns``): the reflex at the
+    arm's interface, whatever the world then does."""
+    th = np.array([r["t_host_ns"] for r in truth], dtype=np.int64)
+    ts = np.array([r["t"] for r in truth], dtype=float)
+    stops = np.sort(np.array(stops_ns, dtype=np.int64))
+    ms = []
+    for a, b in _episodes(ts, np.array([bool(r["contact"]) for r in truth]), MERGE_GAP_S) if len(truth) else []:
+        later = stops[(stops >= th[a]) & (stops <= th[b] + LATE_NS)]
+        if later.size:
+            ms.append((int(later[0]) - int(th[a])) / 1e6)
+    return {"stops_at_arm": len(ms),
+            "stop_at_arm_ms_median": float(np.median(ms)) if ms else float("nan"),
+            "stop_at_arm_ms_p99": float(np.percentile(ms, 99)) if ms else float("nan"),
+            "stop_at_arm_ms_max": float(np.max(ms)) if ms else float("nan")}
 
 
 def _replayed(path: Path) -> dict[str, Any]:
@@ -97,7 +98,7 @@ def _replayed(path: Path) -> dict[str, Any]:
             "replayed_events": len(result.events), "replay_identical": result.identical}
 
 
-def _figures(scene: str, seconds: float, load: float, out, cpu: CpuSampler) -> dict[str, Any]:
+def _figures(scene: str, seconds: float, load: float, out) -> dict[str, Any]:
     c = out.counters
     ft = next((v for v in out.device_counters.values() if "records" in v or "frames" in v), {})
     judged = int(c.get("frames", 0))
@@ -114,7 +115,7 @@ def _figures(scene: str, seconds: float, load: float, out, cpu: CpuSampler) -> d
         "backlog_frames": int(c.get("ft_frames_backlog", 0)), "judge_lag_ms_p99": c.get("judge_lag_ms_p99"),
         "arm_missed": sum(v.get("missed_packets", 0) for v in out.device_counters.values()),
         "evaluated": ev is not None, "contacts": len(ev.contacts) if ev else 0, "detected": ev.detected if ev else 0,
-        "false_alarms": len(ev.false_alarms) if ev else 0,
+        "false_alarms": len(ev.false_alarms) if ev else 0, "false_alarm_s": list(ev.false_alarms) if ev else [],
         "onset_delay_ms_median": float(np.median(delays)) if delays else float("nan"),
         "stop_after_onset_ms_median": float(np.median(stops)) if stops else float("nan"),
         "stop_after_onset_ms_p99": float(np.percentile(stops, 99)) if stops else float("nan"),
@@ -125,6 +126,5 @@ def _figures(scene: str, seconds: float, load: float, out, cpu: CpuSampler) -> d
         "provisional_unconfirmed": int(c.get("provisional_unconfirmed", 0)),
         "onsets_without_provisional": int(c.get("onsets_without_provisional", 0)),
         "reflex_errors": list(out.reflex.get("errors", [])),
-        "cpu_share": cpu.busy_share(),
         "degraded": list(out.degraded), "problems": list(out.problems), "device_counters": out.device_counters,
     }

@@ -93,6 +93,13 @@ class BusTransport(StrEnum):
     zenoh = "zenoh"
 
 
+class BenchWorld(StrEnum):
+    """A bench's simulated world: computed ahead and played from memory, or stepped live."""
+
+    ahead = "ahead"
+    live = "live"
+
+
 def reality_option(default: RealityChoice, what: str = "") -> Any:
     return typer.Option(help=f"{what}The simulated world: ideal (the model itself), typical or harsh (seeded draws "
                              "of a real arm's, sensor's and shell's differences from the model; docs/reality.md).")
@@ -197,6 +204,10 @@ def sim(
         "--device", metavar="NAME.KEY=VALUE", help="A scene device's param for its emulator, e.g. "
         "arm.baudrate=57600, arm.bus_time=false (a DYNAMIXEL chain answers without the bus's time: speed "
         "tests only); repeatable.")] = None,
+    world_ahead: Annotated[bool, typer.Option(
+        "--world-ahead", help="Compute the whole run first (as fast as it goes), then serve it from memory on the "
+        "wall clock: the emulators cost only their sockets. Commands (a stop) are recorded, not obeyed: the arm "
+        "goes on as computed (docs/monitor.md).")] = False,
 ) -> None:
     """Run the physics world of a scene: device signals and ground truth. Ctrl-C stops it (exit code 130)."""
     from ftc_hw.cli.sim import list_scenarios, run_sim  # lazy: CLI start-up
@@ -206,8 +217,11 @@ def sim(
         return
     if scene is None:
         raise typer.BadParameter("give a scene (ftc scenes lists them) or --list", param_hint="SCENE")
+    if world_ahead and not realtime:
+        raise typer.BadParameter("a world computed ahead is played in real time: not with --fast",
+                                 param_hint="--world-ahead")
     run_sim(scene, scenario, duration, seed, truth, realtime, noise, devices, address or [], reality.value,
-            device or [])
+            device or [], world_ahead)
 
 
 @app.command()
@@ -313,6 +327,10 @@ def monitor(
         min=0.0, metavar="S", help="With --sim and a UR arm: the emulated controller's operator presses play S s "
         "after each stop, and the arm goes on with the scenario where it stopped (with --reflex stop, every "
         "contact of a sweep meets a stop).")] = None,
+    world_ahead: Annotated[bool, typer.Option(
+        "--world-ahead", metavar="", help="With --sim and --duration: compute the world's run first, then serve it "
+        "to the emulators from memory on the wall clock (the simulated cell costs only its sockets). A stop is "
+        "recorded at the arm's interface and not obeyed: the arm goes on as computed.")] = False,
     events: Annotated[Optional[Path], typer.Option(help="Write contact events, one JSON line each.")] = None,  # noqa: UP045
     limits: LimitsOption = None,
     truth: Annotated[Optional[Path], typer.Option(help="With --sim: write the world's ground truth.")] = None,  # noqa: UP045
@@ -355,7 +373,7 @@ def monitor(
     from ftc_hw.cli.monitor import check_monitor, outcome_or_exit, view_options  # lazy: CLI start-up
 
     world = SimOptions(scenario=scenario, seed=seed, reality=reality.value, noise=noise, truth=truth,
-                       faults=tuple(fault or ()), resume_after_s=resume_after)
+                       faults=tuple(fault or ()), resume_after_s=resume_after, ahead=world_ahead)
     devices = DeviceOptions(overrides=tuple(device or ()), rig=rig, remote=remote, remote_rig=remote_name,
                             zenoh_config=zenoh_config, readers=readers.value)
     from ftc_hw.cli.common import sensing_kinds  # lazy: CLI start-up
@@ -490,11 +508,16 @@ def bench_pipeline(
     seconds: Annotated[float, typer.Option(min=1.0, help="Simulated seconds of the collision sweep, offline.")] = 20.0,
     realtime: Annotated[float, typer.Option(min=0.0, help="Seconds of ftc monitor --sim per scene (0: none).")] = 10.0,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    world: Annotated[BenchWorld, typer.Option(
+        help="The real-time leg's world: ahead, computed first and served from memory (the emulators cost only "
+             "their sockets; a stop is measured at the arm's interface and not obeyed); live, stepped in real "
+             "time beside the monitor.")] = BenchWorld.ahead,
 ) -> None:
     """The pipeline's cost per frame by stage at a sensor rate, and whether it keeps up in real time."""
     from ftc_hw.bench.pipeline import run  # lazy: CLI start-up
 
-    run(json_path=json_path, scenes=scene, rate_hz=rate, seconds=seconds, realtime_s=realtime, seed=seed)
+    run(json_path=json_path, scenes=scene, rate_hz=rate, seconds=seconds, realtime_s=realtime, seed=seed,
+        ahead=world is BenchWorld.ahead)
 
 
 @bench_app.command("provisional")

@@ -27,7 +27,7 @@ def list_scenarios() -> None:
 
 def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: Path | None,
             realtime: bool, noise: bool, devices: bool = True, addresses: list[str] | None = None,
-            reality: str = "ideal", device_overrides: list[str] | None = None) -> None:
+            reality: str = "ideal", device_overrides: list[str] | None = None, ahead: bool = False) -> None:
     scene = scene_or_exit(scene_name, device_overrides or ())
     if scenario not in SCENARIOS:
         typer.echo(f"error: unknown scenario {scenario!r} (known: {', '.join(SCENARIOS)})", err=True)
@@ -49,10 +49,13 @@ def run_sim(scene_name: str, scenario: str, duration: float, seed: int, truth: P
     signal.signal(signal.SIGTERM, stop)
     try:
         world = WorldHost(scene, scenario, devices=None if devices else [], options=options, duration=duration,
-                          seed=seed, noise=noise, realtime=realtime, truth=truth, reality=reality)
+                          seed=seed, noise=noise, realtime=realtime, truth=truth, reality=reality, ahead=ahead)
     except SceneError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
+    if ahead:
+        world.on_progress = lambda done, of: print(f"computing ahead: {done:.1f} of {of:.1f} simulated s",
+                                                   file=sys.stderr, flush=True)
     started, ran_s = False, None
     try:
         endpoints = world.start()

@@ -198,6 +198,16 @@ def test_resume_after_needs_the_simulated_world_and_a_ur_controller():
     assert r.exit_code == 1 and "only an emulated UR controller resumes" in r.output, r.output
 
 
+def test_the_world_ahead_needs_a_simulated_run_of_a_given_length_and_no_retreat():
+    base = ["monitor", "--scene", "ur5e", "--world-ahead", "--view", "none"]
+    for extra, said in (([], "--world-ahead needs --sim"), (["--sim"], "--world-ahead needs --duration"),
+                        (["--sim", "--duration", "1", "--reflex", "retreat"], "the arm cannot retreat in it")):
+        r = runner.invoke(app, [*base, *extra])
+        assert r.exit_code == 2 and said in r.output, r.output
+    r = runner.invoke(app, ["sim", "ur5e", "--world-ahead", "--fast"])
+    assert r.exit_code == 2 and "computed ahead is played" in r.output, r.output
+
+
 @pytest.mark.parametrize("command", [[], ["monitor"], ["calibrate"], ["identify"], ["sim"], ["serve"],
                                      ["bench", "reality"]])
 def test_help_shows_no_type_after_a_flag(command):

@@ -56,6 +56,7 @@ class SimOptions:
     truth: Path | None = None  # the world's ground truth written here (else to a temporary file)
     faults: tuple[str, ...] = ()  # a fault plan (ftc_hw.app.monitor.faults), e.g. ("ft:kill@onset+0.1",)
     resume_after_s: float | None = None  # with a UR arm: its emulated operator plays again after a stop
+    ahead: bool = False  # the world's run computed first, then played to the emulators (commands change nothing)
 
 
 RETREAT_TRIGGERS = ("onset", "exceedance")  # the contact events a retreat starts on

@@ -45,6 +45,7 @@ from ftc_hw.record.events import EventWriter, event_record, read_truth
 from ftc_hw.record.writer_process import RecorderProcess, Sink
 from ftc_hw.scene import DeviceSpec, Scene, SceneError, load_rig_scene
 from ftc_hw.scene.limits import CellLimits, LimitsError, builtin_limits, load_limits
+from ftc_hw.sim_devices.ahead import AheadError
 from ftc_hw.sim_devices.host import WorldHost
 
 from .config import MonitorOptions, MonitorOutcome, MonitorSetupError
@@ -225,9 +226,11 @@ def _start_world(cfg: MonitorOptions, console: Console, scene: Scene, stack: con
     try:
         world = WorldHost(scene, world_options.scenario, duration=cfg.duration, seed=world_options.seed,
                           noise=world_options.noise, preroll=True, truth=truth_path, reality=world_options.reality,
-                          options=_resume_options(cfg, scene))
-    except SceneError as exc:
+                          options=_resume_options(cfg, scene), ahead=world_options.ahead)
+    except (SceneError, AheadError) as exc:
         raise MonitorSetupError(str(exc)) from None
+    if world_options.ahead:
+        world.on_progress = _progress(console)
     console.print(f"starting the world (MuJoCo, reality [cyan]{world_options.reality}[/]) and the emulated devices of "
                   f"[cyan]{scene.name}[/] "
                   f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)}) ...")
@@ -238,9 +241,22 @@ def _start_world(cfg: MonitorOptions, console: Console, scene: Scene, stack: con
         raise MonitorSetupError(str(exc)) from None
     stack.callback(world.close)
     took = world.startup_s
-    console.print(f"world up in {time.monotonic() - t0:.1f} s (built in {took.get('world', 0.0):.1f} s); emulators up: "
+    ahead = f", computed ahead in {took['ahead']:.1f} s" if "ahead" in took else ""
+    console.print(f"world up in {time.monotonic() - t0:.1f} s (built in {took.get('world', 0.0):.1f} s{ahead}); "
+                  "emulators up: "
                   + ", ".join(f"{n} ({e['kind']}) {took.get(n, 0.0):.1f} s" for n, e in world.endpoints.items()))
     return world, truth_path
+
+
+def _progress(console: Console, every_s: float = 5.0):
+    """What a world computed ahead says while it computes, at most every ``every_s``."""
+    last = [time.monotonic()]
+
+    def said(done: float, of: float) -> None:
+        if time.monotonic() - last[0] >= every_s:
+            last[0] = time.monotonic()
+            console.print(f"computing the world ahead: {done:.0f} of {of:.0f} simulated s", highlight=False)
+    return said
 
 
 def _arms(scene: Scene) -> list[DeviceSpec]:
@@ -589,6 +605,8 @@ def _finish(cfg: MonitorOptions, scene: Scene, live: _Live, out: MonitorOutcome)
             out.reflex["at_interface"] = _setpoints_at_interface(reflex.retreats, world.applied())
     elif reflex is not None:
         out.reflex = {"stops": reflex.stops, "errors": reflex.errors, "followed": reflex.followed}
+        if world is not None:  # when each stop reached the arm's interface (the emulator read it), host ns
+            out.reflex["stops_at_arm_ns"] = [a.t_rx_ns or a.t_sent_ns for a in world.applied() if a.kind == "stop"]
         if _served(cfg):  # the arm's reader process says when it stopped the arm
             out.reflex["stopped_by_reader"] = [dict(e.counters) for e in monitor.bus.history(EVENTS_DEVICE)
                                                if e.kind == "stopped"]

@@ -1,0 +1,52 @@
+"""The real-time leg's own figures (ftc bench pipeline): the stop's arrival at the arm per true contact, and the
+CPU of each process of the run."""
+from __future__ import annotations
+
+import multiprocessing as mp
+import time
+
+import pytest
+
+from ftc_hw.bench.pipeline_live import _stops_at_arm
+from ftc_hw.bench.process_cpu import HOST, SELF, ProcessCpu
+
+
+def _truth(contact_ms: list[tuple[int, int]], end_ms: int) -> list[dict]:
+    """A truth record every ms (scenario time t, host time t_host_ns = 10 s + t), in contact in the given spans."""
+    return [{"t": k / 1e3, "t_host_ns": 10**10 + k * 10**6, "contact": any(a <= k < b for a, b in contact_ms)}
+            for k in range(end_ms)]
+
+
+def test_each_contact_takes_the_first_stop_the_arm_read_after_its_first_sample():
+    truth = _truth([(100, 300), (1000, 1200), (2000, 2100)], 3000)
+    stops = [10**10 + 50 * 10**6,  # before any contact: nobody's
+             10**10 + 102_500_000, 10**10 + 150 * 10**6,  # the first contact's (its first stop counts)
+             10**10 + 1_240 * 10**6]  # after the second's end, within the 50 ms the evaluation allows
+    out = _stops_at_arm(truth, stops)  # the third contact met no stop
+    assert out["stops_at_arm"] == 2
+    assert out["stop_at_arm_ms_median"] == pytest.approx((2.5 + 240.0) / 2)
+    assert out["stop_at_arm_ms_max"] == pytest.approx(240.0)
+    assert _stops_at_arm(truth, [])["stops_at_arm"] == 0
+
+
+def _spin(seconds: float) -> None:
+    with open("/proc/self/comm", "w") as f:
+        f.write("spinner")
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        pass
+
+
+def test_the_cpu_of_a_child_process_is_told_apart_by_its_name():
+    with ProcessCpu(period_s=0.1) as cpu:
+        child = mp.get_context("spawn").Process(target=_spin, args=(1.2,))
+        child.start()
+        time.sleep(0.5)  # started and named
+        t0 = time.monotonic_ns()
+        time.sleep(0.6)
+        t1 = time.monotonic_ns()
+        child.join()
+    shares = cpu.shares(t0, t1)
+    assert 0.05 < shares["spinner"] <= 1.05  # a spinning process: up to a core, less on a loaded host
+    assert shares[SELF] < 0.3 and 0.0 < shares[HOST] <= 2.0 * (mp.cpu_count() or 1)
+    assert cpu.shares(t1 + 100 * 10**9, t1 + 200 * 10**9) == {}  # no samples there
