@@ -106,3 +106,17 @@ def test_replay_reproduces_the_classes_a_recording_holds():
     assert again.identical, again.first_difference()
     assert [e.contact_class for e in again.recorded if isinstance(e, ContactEvent)] == \
         [e.contact_class for e in classified]
+
+
+def test_a_hand_leads_the_arm_only_where_its_joints_can_move_the_point_along_the_push():
+    """A push the joints cannot yield to (radially on leng2016's first link, along a joint's axis) holds the arm
+    still like a clamp: the scripted guidance is planned only where the planned joint motion moves the touched
+    point along the push (at least 90 % of it)."""
+    scene = load_scene("leng2016")
+    model = ArmModel(scene)
+    setup, plan = plan_contacts(scene, model, np.random.default_rng(3), ("guidance",), 6)
+    home = np.asarray(scene.robot.home, dtype=float)
+    for probe, dq in zip(setup.probes, setup.trajectory.dq, strict=True):
+        b_T_l = model.kinematics(home)[probe.link]
+        point = b_T_l[:3, :3] @ probe.point_link + b_T_l[:3, 3]
+        assert probe.direction @ model.jacobian(home, probe.link, point) @ dq >= 0.9
