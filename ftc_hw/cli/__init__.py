@@ -589,15 +589,19 @@ def bench_proprio(
 @bench_app.command("classify")
 def bench_classify(
     json_path: Annotated[Optional[Path], typer.Option("--json", help="Write the figures to this JSON file.")] = None,  # noqa: UP045
-    draws: Annotated[int, typer.Option(min=1, help="Seeded draws of the typical world per scene.")] = 2,
-    count: Annotated[int, typer.Option(min=1, help="Scripted contacts of each kind per draw.")] = 10,
+    draws: Annotated[int, typer.Option(min=1, help="Seeded draws of the typical world per scene.")] = 1,
+    count: Annotated[int, typer.Option(min=1, help="Scripted contacts of each kind per draw.")] = 20,
     scene: Annotated[Optional[list[str]], typer.Option(help="Scene(s) to run (default: every arm scene).")] = None,  # noqa: UP045
     workers: Annotated[Optional[int], typer.Option(min=1, help="Processes (default: one per CPU).")] = None,  # noqa: UP045
+    identify_s: Annotated[float, typer.Option(min=0.0, help="s of planned excitation the arm is identified from "
+                                                            "first (0: tared only).")] = 60.0,
 ) -> None:
-    """Contact classification (clamping, guidance, impacts) on every arm scene, typical world."""
+    """Contact classification (clamping, guidance, impacts) and the events' effective mass on every arm scene,
+    typical world."""
     from ftc_hw.bench.classify import SCENES, run  # lazy: CLI start-up
 
-    run(json_path, scenes=tuple(scene) if scene else SCENES, draws=draws, count=count, workers=workers)
+    run(json_path, scenes=tuple(scene) if scene else SCENES, draws=draws, count=count, workers=workers,
+        identify_s=identify_s)
 
 
 @bench_app.command("isolation")

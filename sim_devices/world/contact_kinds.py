@@ -57,6 +57,10 @@ CLAMPED_N_PER_M = 5000.0  # ESTIMATE: a clamped hand or forearm with the fixture
 # regions are stiffer, 10-75 N/mm: a softer spring keeps the force near the plan when the true shell is off the model's)
 GUIDE_DAMPING = (150.0, 400.0)  # N s/m, ESTIMATE: an admittance's damping for hand guiding: 20 N moves 0.05-0.13 m/s
 GUIDE_MIN_MPS = 0.04  # the slowest guided speed planned (a small arm's, whose joints a longer path takes too far)
+# a hand leads the arm only where its joints can move the point along the push: at least this share of the
+# planned motion along it (a push along a link's own joint axis, or radially on the first link of leng2016's
+# 3-joint arm, holds the arm still: it cannot be told from a clamp, and a person would not lead it so)
+YIELDS_ALONG = 0.9
 
 
 @dataclass(frozen=True)
@@ -282,6 +286,8 @@ def _guidance(site: _Site, scene: Scene, kp, rng, t0: float, i: int, clearance: 
     damping = float(rng.uniform(*GUIDE_DAMPING)) * force / 20.0  # the same speeds whatever the force
     direction = site.push
     dq = site.joint_move(direction)
+    if float(direction @ site.jac @ dq) < YIELDS_ALONG:  # the joints cannot move the point along the push
+        return None
     travel = force * (ramp + hold) / damping  # the point's path along the force: the integral of |F| / D
     # a small arm is led more slowly (a longer path would take its joints far): down to GUIDE_MIN_MPS
     damping *= max(1.0, float(np.abs(dq).max()) * travel / MAX_JOINT_MOVE)

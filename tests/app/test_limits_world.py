@@ -13,6 +13,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from ftc_hw.bench.true_mass import true_mass, true_normal
 from ftc_hw.bus import Bus
 from ftc_hw.model import ArmModel
 from ftc_hw.model.effective_mass import effective_mass, point_speed, pose_for_inertia
@@ -22,7 +23,6 @@ from ftc_hw.pipeline.limits import permissible_speed
 from ftc_hw.scene import load_scene
 from ftc_hw.scene.limits import builtin_limits, load_limits
 from ftc_hw.sim_devices.world import World, build_scenario, with_reality
-from ftc_hw.sim_devices.world.true_shell import mesh_hit
 
 pytestmark = pytest.mark.compute  # the world stepped as fast as it goes: nothing against the wall clock
 
@@ -39,39 +39,13 @@ def _run(scenario: str, seconds: float, limits, seed: int = 3):
     states, out = {}, []
     for seq, (state, reading) in enumerate(world.run(seconds)):
         t_ns = int(round(state.t * 1e9))
-        states[t_ns] = (state, _true_normal(world, state.contacts[0]) if state.contacts else None)
+        states[t_ns] = (state, true_normal(world, state.contacts[0], LINKS) if state.contacts else None)
         frame = monitor.consume(PipelineInput(t_ns, t_ns, seq, "ft", reading.wrench, state.q, state.qd,
                                               world.read_current(state), bool(np.any(reading.saturated)),
                                               tare=not monitor.tared))
         if frame is not None:
             out += [(e, *states[e.t_host_ns]) for e in frame.result.events]
     return out, world
-
-
-def _true_normal(world: World, contact) -> np.ndarray:
-    """The true arm's outward unit normal (base frame) at ``contact``, as the world posed it at this step: a
-    probe's mesh shell triangle's (or its primitive's, the shell offset along it), an obstacle's contact frame."""
-    m, d = world.model, world.data
-    if contact.source == "obstacle":
-        for i in range(d.ncon):
-            c = d.contact[i]
-            arm = [m.body(int(m.geom_bodyid[g])).name in LINKS for g in (c.geom1, c.geom2)]
-            if arm[0] != arm[1]:  # the frame's normal points from geom1 to geom2
-                return c.frame[:3] * (1.0 if arm[0] else -1.0)
-        raise AssertionError("an obstacle contact without a MuJoCo contact")
-    body = m.body(contact.link).id
-    rot, pos = d.xmat[body].reshape(3, 3), d.xpos[body]
-    probe = min((p for p in world.setup.probes if p.link == contact.link),
-                key=lambda p: np.linalg.norm(rot @ p.point_link + pos - contact.point))
-    if probe.on_true_shell:
-        return rot @ mesh_hit(m, d, body, probe.point_link, probe.normal_link)[1]
-    return rot @ probe.normal_link
-
-
-def _true_mass(world: World, state, contact, normal: np.ndarray) -> float:
-    d = mujoco.MjData(world.model)
-    pose_for_inertia(world.model, d, world.joints, state.q)
-    return effective_mass(world.model, d, world.joints, world.model.body(contact.link).id, contact.point, normal)
 
 
 LOW_CELL = ('[limits]\ndefault_region = "low"\n\n[regions.low]\nquasi_static_n = 20.0\ntransient_n = 40.0\n'
@@ -107,7 +81,7 @@ def _mass_errors(seed: int) -> dict[str, np.ndarray]:
         true_force = float(np.linalg.norm(c.force))
         if c.link != ev.link or abs(np.linalg.norm(ev.force) - true_force) > 0.1 * true_force or true_force < 10:
             continue
-        truth = _true_mass(world, state, c, normal)
+        truth = true_mass(world, state, c, normal)
         if not np.isfinite(truth):
             assert ev.limits.effective_mass_kg == pytest.approx(1e9)
             continue
@@ -116,7 +90,7 @@ def _mass_errors(seed: int) -> dict[str, np.ndarray]:
         pose_for_inertia(arm.model, d, arm.joints, state.q)
         out["model"].append(effective_mass(arm.model, d, arm.joints, arm.model.body(c.link).id, c.point, normal)
                             / truth - 1)
-        out["force_line"].append(_true_mass(world, state, c, c.force) / truth - 1)
+        out["force_line"].append(true_mass(world, state, c, c.force) / truth - 1)
         out["event"].append(ev.limits.effective_mass_kg / truth - 1)
         region = limits.regions[ev.limits.region]
         out["speed"].append(ev.limits.permissible_speed_mps / permissible_speed(region, truth) - 1)

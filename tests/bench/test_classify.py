@@ -31,7 +31,8 @@ RECORDING = Path(__file__).parent.parent / "data" / "recordings" / "dxl-arm-idea
 @pytest.mark.parametrize("name", ["dxl-arm", "ur10e"])  # a base F/T sensor's pipeline; currents + a flange F/T
 def test_each_scripted_kind_is_classified_right_in_a_typical_world(name):
     scene = load_scene(name)
-    plan, events = run_world(scene, with_reality(scene, "typical", seed=3), 7, 1)
+    run = run_world(scene, with_reality(scene, "typical", seed=3), 7, 1)
+    plan, events = run.plan, run.events
     rows = judge(plan, events)
     assert [r["kind"] for r in rows] == list(CONTACT_KINDS)
     for r in rows:
@@ -40,6 +41,9 @@ def test_each_scripted_kind_is_classified_right_in_a_typical_world(name):
         p = r["p_quasi_static"] if r["kind"] == "clamping" else 1.0 - r["p_quasi_static"]
         assert p >= 0.8, r
         assert {"held_s", "rise_s", "v_onset_mps"} <= set(r["features"]), r
+    # every settled update judged against the body limits, its effective mass beside the true arm's
+    assert {m["kind"] for m in run.masses} == set(CONTACT_KINDS)
+    assert all(m["mass"] > 0 and m["true"] > 0 for m in run.masses)
     onsets = [e for e in events if e.kind == "onset"]
     # a contact of the arm at rest cannot be told a clamp from a hand at its onset: it says so
     guided = next(e for e in onsets if plan[1].t_start <= e.t_host_ns * 1e-9 <= plan[1].t_end)
@@ -102,3 +106,17 @@ def test_replay_reproduces_the_classes_a_recording_holds():
     assert again.identical, again.first_difference()
     assert [e.contact_class for e in again.recorded if isinstance(e, ContactEvent)] == \
         [e.contact_class for e in classified]
+
+
+def test_a_hand_leads_the_arm_only_where_its_joints_can_move_the_point_along_the_push():
+    """A push the joints cannot yield to (radially on leng2016's first link, along a joint's axis) holds the arm
+    still like a clamp: the scripted guidance is planned only where the planned joint motion moves the touched
+    point along the push (at least 90 % of it)."""
+    scene = load_scene("leng2016")
+    model = ArmModel(scene)
+    setup, plan = plan_contacts(scene, model, np.random.default_rng(3), ("guidance",), 6)
+    home = np.asarray(scene.robot.home, dtype=float)
+    for probe, dq in zip(setup.probes, setup.trajectory.dq, strict=True):
+        b_T_l = model.kinematics(home)[probe.link]
+        point = b_T_l[:3, :3] @ probe.point_link + b_T_l[:3, 3]
+        assert probe.direction @ model.jacobian(home, probe.link, point) @ dq >= 0.9

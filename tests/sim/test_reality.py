@@ -5,11 +5,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import mujoco
 import numpy as np
 import pytest
 
 from ftc_hw.model import ArmModel
-from ftc_hw.scene import SceneError, load_scene
+from ftc_hw.scene import SceneError, builtin_names, load_scene
 from ftc_hw.scene.loader import builtin_dir
 from ftc_hw.scene.world_spec import InertialError, WorldSpec
 from ftc_hw.sim_devices.world import (
@@ -217,3 +218,27 @@ def test_a_true_model_file_is_the_world(tmp_path):
 def test_every_difference_is_drawn():
     assert set(DIFFERENCES) == {"inertials", "friction", "torque_constant", "mount", "gain", "coloured_noise",
                                 "thermal", "shell"}
+
+
+@pytest.mark.parametrize("name", builtin_names())
+def test_the_joint_controller_s_damping_is_stable_in_typical_draws(name):
+    """The world applies its joint PD torque explicitly each step (Euler), so its damping is stable only while
+    ``dt * max eig(M^-1 K_d) < 2``; over poses within the joint ranges a typical draw's lighter inertias must
+    keep a margin (leng2016's kd of 60 reached 3.4, and its arm blew up at its first moves)."""
+    scene = load_scene(name)
+    lo, hi = ArmModel(scene).joint_limits()
+    rng = np.random.default_rng(0)
+    kd = np.diag(np.asarray(scene.robot.kd, dtype=float))
+    worst = 0.0
+    for seed in (0, 2):
+        world = World(with_reality(scene, Reality.TYPICAL, seed=seed), ScenarioSetup(Hold(np.array(scene.robot.home))),
+                      seed=1)
+        m, d, c = world.model, world.data, world.joints.matrix
+        full = np.zeros((m.nv, m.nv))
+        for q in rng.uniform(lo, hi, size=(100, len(lo))):
+            world.joints.set_qpos(q, d.qpos)
+            mujoco.mj_forward(m, d)
+            mujoco.mj_fullM(m, d, full)
+            gain = np.linalg.solve(c.T @ full @ c, kd)
+            worst = max(worst, m.opt.timestep * float(np.max(np.real(np.linalg.eigvals(gain)))))
+    assert worst < 1.8
