@@ -52,8 +52,9 @@ def test_an_impact_is_flagged_and_the_reweighed_fit_is_closer():
     plain = first_collision(noise=True, impact_window_s=None)
     assert not any("impact" in e.flags for _, e, _, _ in plain)
     err, err_plain = point_errors(frames, WINDOW_S), point_errors(plain, WINDOW_S)
-    # measured: 2-12 mm against 35-70 mm for the first samples of this collision
-    assert np.median(err) < 0.5 * np.median(err_plain)
+    # measured: median 5.3 mm against 7.2 mm for the first samples of this collision (35-70 mm before the
+    # world's joint damping was made stable for leng2016's light arm: the plain fit met an oscillating arm)
+    assert np.median(err) < 0.85 * np.median(err_plain)
 
 
 def test_the_track_fuses_no_impact_estimate():

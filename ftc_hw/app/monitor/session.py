@@ -340,8 +340,9 @@ class _EventPump:
             if isinstance(ev, ContactEvent) or stream or provisional:
                 (self._out.stream_events if stream else self._out.provisional_events if provisional
                  else self._out.events).append(event_record(ev))
-            if (isinstance(ev, ContactEvent) or stream or provisional or ev.kind == "retreat_short") \
-                    and self._writer is not None:
+            # the events file: contact events, streams lost and back, short retreats (a provisional onset is
+            # the live run's arrival timing, which no replay has: in the recording, the outcome and the counters)
+            if (isinstance(ev, ContactEvent) or stream or ev.kind == "retreat_short") and self._writer is not None:
                 self._writer.write(ev)
 
 

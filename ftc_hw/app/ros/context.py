@@ -22,6 +22,7 @@ import rclpy  # noqa: E402 - after the check that names what to install
 from rclpy.context import Context  # noqa: E402
 from rclpy.experimental import EventsExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
 _lock = threading.Lock()
 _state: dict[str, Any] = {}  # context, node, executor, thread, users
@@ -43,7 +44,9 @@ def acquire(name: str = "ftc_hw", *, unique: bool = True) -> Node:
     with _lock:
         if not _state:
             context = Context()
-            rclpy.init(context=context)
+            # no signal handlers of rclpy's: ftc's commands handle Ctrl-C and SIGTERM (closing adapters, writing
+            # the summary); rclpy's would shut the context down under them and pass the signal on at its time
+            rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
             node = Node(f"{name}_{os.getpid()}" if unique else name, context=context)
             executor = EventsExecutor(context=context)
             executor.add_node(node)

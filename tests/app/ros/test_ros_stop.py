@@ -6,6 +6,7 @@ dashboard's ``stop`` stops a real one's program); each node in its own process, 
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -40,8 +41,11 @@ def test_the_stop_reflex_calls_the_drivers_stop_service_and_the_arm_stops(tmp_pa
         pub.kill()
         mon.send_signal(signal.SIGTERM)
         mon_out = " ".join(mon.communicate(timeout=60)[0].split())
-    assert pub.returncode == 0 and "/dashboard_client/stop: 1 calls, 0 failed" in pub_err, pub_err
-    assert "reflex stop: 1 sent" in mon_out and "'stops': 1" in mon_out, mon_out[-3000:]
+    # one stop a contact; a provisional onset the pipeline did not confirm would stop it once more (counted)
+    calls = re.search(r"/dashboard_client/stop: (\d+) calls, 0 failed", pub_err)
+    assert pub.returncode == 0 and calls and int(calls.group(1)) >= 1, pub_err
+    n = int(calls.group(1))
+    assert f"reflex stop: {n} sent" in mon_out and f"'stops': {n}" in mon_out, mon_out[-3000:]
     (onset,) = [e for e in read_events(events) if e["kind"] == "onset"]
     rows = read_truth(truth)
     t = np.array([r["t_host_ns"] for r in rows])
