@@ -22,11 +22,17 @@ READER_NICE = -5
 
 def prefer_cpu(nice: int = DEVICE_NICE, *, exact: bool = False) -> bool:
     """Raise this process's priority to ``nice`` if allowed and not already higher; True if it is.
-    ``exact``: also lower it to ``nice`` (a tier's own processes started by a higher tier)."""
+    ``exact``: also lower it to ``nice`` (a tier's own processes started by a higher tier). A process someone
+    put in the background (a positive nice: ``nice -n 19``, as run-tests runs its computing tests) stays there:
+    False, unchanged (a background job's world must not take the cores from a foreground one's)."""
     if not hasattr(os, "setpriority"):
         return False
     try:
         now = os.getpriority(os.PRIO_PROCESS, 0)
+        if now <= nice and not exact:
+            return True
+        if now > 0:
+            return False
         if now > nice or (exact and now != nice):
             os.setpriority(os.PRIO_PROCESS, 0, nice)
         return True
