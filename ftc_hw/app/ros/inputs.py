@@ -181,6 +181,8 @@ class RosJointStateArm(_Subscribed, ArmAdapter):
     def _connect(self) -> None:
         self._wait_for_publisher()
         self._last_new = time.monotonic()
+        if self.stop_service is not None and self._stopper is None:  # discovered before the first stop needs it
+            self._stopper = StopClient(context.acquire(), self.stop_service)
 
     def _disconnect(self) -> None:
         pass  # the subscription stays: its discovery finds the publisher again

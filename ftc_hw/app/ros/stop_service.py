@@ -36,7 +36,8 @@ class StopClient:
         return bool(self._client.service_is_ready())
 
     def call(self) -> str:
-        if not self.ready():
+        # discovery may still be under way (up to ~2 s): wait for the server within the call's time
+        if not self.ready() and not self._client.wait_for_service(timeout_sec=self.timeout_s):
             raise DeviceIOError(f"no server of {self.service} (std_srvs/Trigger): is the arm's driver running, "
                                 "on this ROS_DOMAIN_ID?")
         done = threading.Event()
