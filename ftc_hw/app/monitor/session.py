@@ -520,7 +520,9 @@ def _conclude(cfg: MonitorOptions, console: Console, scene: Scene, live: _Live, 
         console.print(f"ROS 2: published {sum(published.values())} messages ("
                       + ", ".join(f"{k} {v}" for k, v in sorted(published.items()))
                       + f"); failed {sum(out.ros['failed'].values())}, frames dropped {out.ros['dropped']}"
-                      + f", not published {_skips(out.ros['skipped'])}", highlight=False)
+                      + f", not published {_skips(out.ros['skipped'])}"
+                      + (f"; not acknowledged by a subscriber at the stop: {', '.join(out.ros['unacked'])}"
+                         if out.ros.get("unacked") else ""), highlight=False)
     print_summary(console, cfg, _served(cfg), live.bus, live.topics, out, rig.adapters, live.recorder)
 
 

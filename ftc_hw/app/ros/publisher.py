@@ -16,6 +16,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ftc_hw.bus import Bus
@@ -26,6 +27,7 @@ from . import layout as L
 from .view import RosMessage, RosView
 
 NODE_NAME = "ftc_monitor"
+ACK_WAIT_S = 2.0  # at the stop: how long the subscribers get to acknowledge what was published
 
 
 def qos(topic: L.Topic) -> QoSProfile:
@@ -54,6 +56,7 @@ class RosPublisher:
         self.failed: Counter[str] = Counter()
         self.error = ""  # the first failure's message
         self.dropped = 0
+        self.unacked: list[str] = []  # topics a subscriber had not acknowledged everything of at the stop
         self._node: Any = None
         self._pubs: dict[str, Any] = {}
         self._sub: Any = None
@@ -128,6 +131,11 @@ class RosPublisher:
         self._pass()
         self.dropped = self._sub.drops
         self._sub = None
+        deadline = time.monotonic() + ACK_WAIT_S
+        for name, pub in self._pubs.items():  # reliable: what was published reaches its subscribers first
+            left = max(0.0, deadline - time.monotonic())
+            if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                self.unacked.append(name)
         for pub in self._pubs.values():
             self._node.destroy_publisher(pub)
         self._pubs.clear()
@@ -135,4 +143,4 @@ class RosPublisher:
 
     def summary(self) -> dict[str, Any]:
         return {"published": dict(self.counts), "failed": dict(self.failed), "dropped": self.dropped,
-                "skipped": dict(self.view.skipped), "error": self.error}
+                "skipped": dict(self.view.skipped), "unacked": list(self.unacked), "error": self.error}
