@@ -128,7 +128,7 @@ def plan_retreat(model: ArmModel, q0, *, link: str, point, direction, settings: 
     touched = region.at(model, q_touch)
     retrace = qd_touch is not None
     if retrace:  # each point back the way it came
-        direction = _ways_back(model, q_touch, np.asarray(qd_touch, dtype=float), region, touched, direction)
+        direction, speed = _ways_back(model, q_touch, np.asarray(qd_touch, dtype=float), region, touched, direction)
     # from where each point was touched, or from where it is now if it was pushed back meanwhile: it ends at
     # least distance_m from both (one that went on deeper before the retreat began comes back further)
     now = region.at(model, q0)
@@ -137,8 +137,7 @@ def plan_retreat(model: ArmModel, q0, *, link: str, point, direction, settings: 
     # the joints go straight from q0 through the fit's end (a short path: the points stay near their lines,
     # and no corner between waypoints asks a joint for an acceleration step), as far as the least point needs
     if retrace:
-        delta, clipped = _reversed_joints(model, q_touch, np.asarray(qd_touch, dtype=float), region, touched,
-                                          direction, need[0]), False
+        delta, clipped = _reversed_joints(np.asarray(qd_touch, dtype=float), float(speed[0]), need[0]), False
     else:
         delta, clipped = _joint_motion(model, q0, region=region, now=now, need=need, direction=direction,
                                        settings=settings)
@@ -166,24 +165,22 @@ def plan_retreat(model: ArmModel, q0, *, link: str, point, direction, settings: 
 
 
 def _ways_back(model: ArmModel, q_touch: np.ndarray, qd: np.ndarray, region: Region, touched: np.ndarray,
-               fallback: np.ndarray) -> np.ndarray:
+               fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each region point's way back (k, 3, unit, base): the reverse of its velocity at the touch (``fallback``
-    for a point that was not moving, e.g. on the axis of the only moving joint)."""
+    for a point that was not moving, e.g. on the axis of the only moving joint); and each one's speed (k, m/s)."""
     v = region_jacobian(model, q_touch, region, touched) @ qd
-    speed = np.linalg.norm(v, axis=1, keepdims=True)
-    return np.where(speed > 1e-6, -v / np.maximum(speed, 1e-12), fallback)
+    speed = np.linalg.norm(v, axis=1)
+    return np.where(speed[:, None] > 1e-6, -v / np.maximum(speed, 1e-12)[:, None], fallback), speed
 
 
-def _reversed_joints(model: ArmModel, q_touch: np.ndarray, qd: np.ndarray, region: Region, touched: np.ndarray,
-                     ways: np.ndarray, need: float) -> np.ndarray:
-    """The joints' motion (n, rad) along ``-qd`` that moves the estimate (the region's first point) ``need``
-    back along its way to first order (:func:`~.retreat_fit.cover_scale` then finds how far every point needs)."""
-    jac0 = region_jacobian(model, q_touch, region.take(np.array([0])), touched[:1])[0]
-    back = -qd / float(np.linalg.norm(qd))
-    rate = float(ways[0] @ (jac0 @ back))  # m per rad along the reversed joints: |v| / |qd| > 0
+def _reversed_joints(qd: np.ndarray, speed: float, need: float) -> np.ndarray:
+    """The joints' motion (n, rad) along ``-qd`` that moves the estimate (moving at ``speed`` m/s at the touch)
+    ``need`` back along its way to first order (:func:`~.retreat_fit.cover_scale` then finds how far every
+    point needs)."""
+    rate = speed / float(np.linalg.norm(qd))  # m per rad along the reversed joints
     if not rate > 1e-9:
         raise RetreatError("the touched point does not move with the joints' motion: no way back to retrace")
-    return back * (need / rate)
+    return -qd / float(np.linalg.norm(qd)) * (need / rate)
 
 
 def _joint_motion(model: ArmModel, q0: np.ndarray, *, region: Region, now: np.ndarray, need: np.ndarray,
