@@ -39,11 +39,19 @@ def settings(**values) -> PipelineSettings:
     return PipelineSettings(**{name: SECTION_TYPES[name](**kw) for name, kw in sections.items()})
 
 
+# Real-time tests run last from these folders: ``./run-tests`` starts the computing leg beside the real-time
+# one, and its first minutes (workers importing, numba compiling) are the host's busiest. A ROS node's
+# executor is Python on the monitor's own core; run first, the ROS cell's monitor fell 50 ms behind its
+# 1 kHz topic for seconds (CI, stop 44). Last, they run after the computing leg has ended.
+RUN_LAST = ("tests/app/ros/",)
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         # a test fed by a real-time world is real-time wherever it is (tests/core/conftest.py's fixture)
         if "world_feeder" in getattr(item, "fixturenames", ()) and not item.get_closest_marker("realtime"):
             item.add_marker(pytest.mark.realtime)
+    items.sort(key=lambda item: bool(item.get_closest_marker("realtime")) and item.nodeid.startswith(RUN_LAST))
 
 
 SCENE = """schema = 1

@@ -47,6 +47,8 @@ def test_the_cpu_of_a_child_process_is_told_apart_by_its_name():
         t1 = time.monotonic_ns()
         child.join()
     shares = cpu.shares(t0, t1)
-    assert 0.05 < shares["spinner"] <= 1.05  # a spinning process: up to a core, less on a loaded host
+    # a spinning process: some of a core, up to one (./run-tests runs this at nice 19 beside the real-time
+    # tests: there a spinner got 0.034 core, so the test asks for its name and a share, not for an amount)
+    assert 0.0 < shares["spinner"] <= 1.05
     assert shares[SELF] < 0.3 and 0.0 < shares[HOST] <= 2.0 * (mp.cpu_count() or 1)
     assert cpu.shares(t1 + 100 * 10**9, t1 + 200 * 10**9) == {}  # no samples there
