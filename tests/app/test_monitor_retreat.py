@@ -94,8 +94,15 @@ def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, cl
     print(report)
     assert freed_ms <= WITHIN_MS and ended_ms <= 1e3 * TIME_LIMIT_S, report
     # every point the contact may be at goes back DISTANCE_M (the model's figure), so the true one does, within
-    # the emulated arm's tracking of the last setpoint (ESTIMATE: 0.5 mm)
-    assert float(m.group(6)) >= DISTANCE_M * 1e3 - 0.5, report
+    # the emulated arm's tracking of the last setpoint (ESTIMATE: 0.5 mm); or the plan was cut to the time limit
+    # and said so before the retreat began (retracing, a point of the region near the moving joints' axes comes
+    # back slowly: dxl-arm's region, when it reaches around the gripper, needs 0.57 s of the 0.5)
+    short = [e for e in events if e["kind"] == "retreat_short"]
+    if float(m.group(6)) < DISTANCE_M * 1e3 - 0.5:
+        assert len(short) == 1 and "cut to the 0.5 s limit" in short[0]["message"], (short, report)
+        assert f"at least {m.group(6)} mm of {DISTANCE_M * 1e3:.1f}" in short[0]["message"], (short, report)
+    else:
+        assert not short, (short, report)
     assert moved >= DISTANCE_M - 5e-4, report
     assert moved_true >= 0.7 * DISTANCE_M, report  # along the true force: the retreat's direction is an estimate
     # one contact, ended well before the run's end, and none after it (the retreat caused none)
