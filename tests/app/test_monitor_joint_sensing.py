@@ -22,7 +22,11 @@ def test_a_panda_is_monitored_from_its_joint_torques_recorded_and_replayed_ident
     report = proc.stdout[-3000:]
     assert "panda" in report and "franka" in report  # the arm's reader: the libfranka client
     lines = read_events(events)
-    ev = evaluate(lines, read_truth(truth), 1e-3)
+    # the onset needs 2 states above the threshold (2 periods + 1 ms at 1 kHz); on this host panda-py's
+    # libfranka takes about every other state of the controller's 1 kHz (its missed_states: 1868 of 4684
+    # quiet, 1392 of 4689 beside the computing tests, where one onset came 3.4 ms after the contact): the two
+    # it needs come up to two periods later, so 4 periods + 1 ms
+    ev = evaluate(lines, read_truth(truth), 1e-3, delay_samples=4)
     assert len(ev.contacts) == 1, report  # the sweep's first collision, on link 7, at 1.8 s
     c = ev.contacts[0]
     assert c.detected and (c.delay_ok or loaded), report
