@@ -177,10 +177,11 @@ def _reversed_joints(qd: np.ndarray, speed: float, need: float) -> np.ndarray:
     """The joints' motion (n, rad) along ``-qd`` that moves the estimate (moving at ``speed`` m/s at the touch)
     ``need`` back along its way to first order (:func:`~.retreat_fit.cover_scale` then finds how far every
     point needs)."""
-    rate = speed / float(np.linalg.norm(qd))  # m per rad along the reversed joints
+    norm = float(np.linalg.norm(qd))
+    rate = speed / norm  # m per rad along the reversed joints
     if not rate > 1e-9:
         raise RetreatError("the touched point does not move with the joints' motion: no way back to retrace")
-    return -qd / float(np.linalg.norm(qd)) * (need / rate)
+    return -qd / norm * (need / rate)
 
 
 def _joint_motion(model: ArmModel, q0: np.ndarray, *, region: Region, now: np.ndarray, need: np.ndarray,
