@@ -142,6 +142,24 @@ def test_an_undecided_onset_retreats_at_the_deadline_or_from_the_update_that_nam
     assert (end - moved) @ np.array([0.0, 0.0, 1.0]) >= 0.03 - 1e-4  # the update's point went back the distance
 
 
+def test_the_path_starts_at_the_hold_though_the_arm_braked_past_it_meanwhile(rig):
+    """Braking, the arm goes on past the hold and comes back to it: a path that started from a joint state
+    taken while undecided would send it forward first, towards what it touched."""
+    bus, arm, reflex = rig
+    onset = _unknown(_onset(8))
+    bus.publish(EVENTS_CONTACT, onset)
+    time.sleep(0.02)  # held by now; the arm is reported 0.02 rad on past the hold before the retreat is decided
+    past = Q0 + np.array([0.02, 0.0, 0.0, 0.0, 0.0, 0.0])
+    bus.publish(TOPIC, JointFrame.make(time.monotonic_ns(), past, np.zeros(6), np.zeros(6), None, source="arm", seq=9))
+    bus.publish(EVENTS_CONTACT, _unknown(onset, "update", 0.05))
+    _settle(reflex)
+    assert not reflex.errors and len(reflex.retreats) == 1, reflex.errors
+    sent = np.array(arm.setpoints)
+    assert np.allclose(sent[0], Q0) and np.abs(sent[1] - Q0).max() < 0.01  # continuous from the hold
+    steps = np.abs(np.diff(sent, axis=0)).max(axis=0)
+    assert np.all(steps <= SCENE.robot.max_speed * arm.servo_period_s * 1.01)
+
+
 def test_other_triggers_come_in_through_trigger(rig):
     """An update is no trigger by default; ``trigger(event)`` retreats from it (a limit's exceedance would)."""
     bus, arm, reflex = rig

@@ -208,8 +208,10 @@ class RetreatReflex:
             self.not_fought.append({"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id,
                                     "guidance": self.guidance(decided), "held_ms": (time.monotonic_ns() - t0) / 1e6})
             return None
-        if decided.kind != "offset":
-            frame = self.bus.latest(self.joints_topic) or frame
+        # the path starts at the setpoint that holds the arm, not where the arm is now: braking, it goes on past
+        # that setpoint and comes back to it meanwhile, and a path from a measured position it has already
+        # left behind would first send it forward again, into what it touched (seen on a loaded host: 70 ms
+        # from the hold to the path, the contact made again)
         t_decided = time.monotonic_ns()
         try:
             direction, why, path = self._plan(ev, frame, decided if decided.kind != "offset" else ev)
@@ -266,8 +268,8 @@ class RetreatReflex:
         return newest
 
     def _plan(self, ev: ContactEvent, frame: Any, at: ContactEvent) -> tuple[np.ndarray, str, RetreatPath]:
-        """The direction, why that one, and the path, from the arm's joints now (``frame``) and at the onset
-        ``ev``; the contact where its newest estimate ``at`` (the onset, or an update) puts it."""
+        """The direction, why that one, and the path, from the setpoint holding the arm (``frame``) and the
+        joints at the onset ``ev``; the contact where its newest estimate ``at`` (the onset, or an update) puts it."""
         try:  # where the arm was at the onset: the point moves back from there
             touch = self.bus.sample_at(self.joints_topic, ev.t_host_ns)
         except StaleDataError:
