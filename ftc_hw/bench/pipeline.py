@@ -35,7 +35,7 @@ import os
 import platform
 import socket
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -227,13 +227,26 @@ DEFAULT_SCENES = ("ur5e", "ur5e-netft")
 ROWS = ("reader", "monitor", *STAGES, "pipeline", "pipeline cpu", "total", "cpu")
 
 
+@dataclass(frozen=True)
+class RealtimeLeg:
+    """The real-time leg's run: ``seconds`` of the sweep; ``ahead``: the world computed first and played to the
+    emulators (``--world-ahead``), else the live world; ``reality``: the world's arm, sensor and shell against
+    the model (docs/reality.md); ``calibration``: the monitor's (``ftc identify``'s of that world; None: the
+    scene's nominal model)."""
+
+    seconds: float = 10.0
+    ahead: bool = True
+    reality: str = "ideal"
+    calibration: Path | None = None
+
+
 def run(json_path: Path | None = None, scenes: list[str] | None = None, rate_hz: float | None = None,
-        seconds: float = 20.0, realtime_s: float = 10.0, seed: int = 0, speed: float = 1.0,
-        ahead: bool = True) -> dict:
+        seconds: float = 20.0, seed: int = 0, speed: float = 1.0, realtime: RealtimeLeg | None = None) -> dict:
     """``rate_hz``: every scene's sensor at this rate (None: each its own; the world must step at a
-    divisor of its period). ``realtime_s`` 0: the offline leg only (the real-time leg runs each scene at
-    its own rate, and only when ``rate_hz`` is that rate; ``ahead``: with the world computed ahead, else
-    the live world)."""
+    divisor of its period). ``realtime``: the real-time leg (None: the default :class:`RealtimeLeg`; its
+    ``seconds`` 0: the offline leg only). It runs each scene at its own rate, and only when ``rate_hz`` is
+    that rate. The offline leg is always the ideal world."""
+    realtime = realtime or RealtimeLeg()
     console = table_console()
     results: dict[str, Any] = {}
     for name in scenes or DEFAULT_SCENES:
@@ -241,12 +254,14 @@ def run(json_path: Path | None = None, scenes: list[str] | None = None, rate_hz:
         entry: dict[str, Any] = {"load_1min_before": os.getloadavg()[0]}
         entry["offline"] = offline(scene, seconds, seed, speed)
         entry["load_1min_after"] = os.getloadavg()[0]
-        if realtime_s > 0 and scene.sensor.rate_hz == load_scene(name).sensor.rate_hz:
+        if realtime.seconds > 0 and scene.sensor.rate_hz == load_scene(name).sensor.rate_hz:
             from ftc_hw.bench.pipeline_live import live  # lazy: the world and its emulators
 
-            entry["realtime"] = live(name, realtime_s, seed, ahead=ahead)
+            entry["realtime"] = live(name, realtime, seed)
         results[f"{name}@{scene.sensor.rate_hz:g}"] = entry
-    results["meta"] = {"seconds": seconds, "realtime_s": realtime_s, "seed": seed, "speed": speed, "ahead": ahead,
+    results["meta"] = {"seconds": seconds, "realtime_s": realtime.seconds, "seed": seed, "speed": speed,
+                       "ahead": realtime.ahead, "reality": realtime.reality,
+                       "calibration": str(realtime.calibration) if realtime.calibration else None,
                        "python": platform.python_version(), "cpus": os.cpu_count()}
     console.print(_stage_table(results))
     console.print(_summary_table(results))
@@ -297,7 +312,8 @@ def _summary_table(results: dict) -> Table:
             cells += ["-"] * 13
         else:
             lost = (rt["sent"] - rt["received"]) if rt["sent"] is not None else rt["seq_lost"]
-            cells += [f"{rt['world']}, {rt['load_1min']:.1f}", f"{rt['sent'] if rt['sent'] is not None else '-'}",
+            cells += [f"{rt['world']} {rt['reality']}, {rt['load_1min']:.1f}",
+                      f"{rt['sent'] if rt['sent'] is not None else '-'}",
                       f"{rt['received']}", f"{lost}", f"{rt['judged']}",
                       f"{rt['not_judged']} ({100 * rt['not_judged_share']:.0f} %)",
                       f"{rt['detected']}/{rt['contacts']} ({rt['false_alarms']} false)" if rt["evaluated"] else "-",

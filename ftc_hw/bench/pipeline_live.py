@@ -1,23 +1,21 @@
-"""The real-time leg of ``ftc bench pipeline``: ``ftc monitor --scene S --sim --world-ahead --duration D
---reflex stop --resume-after 0.5 --record F --truth T`` (readers in threads, no live view), and what it kept
-up with. With the world computed ahead (the default; ``ahead=False``: the live world) the emulators serve
-the stored run and the simulated cell costs only their sockets; a stop changes nothing in the played run
-(it goes on through each contact). The emulated UR controller's operator plays again half a second after
-each stop, so every contact of the sweep meets a stop (a UR arm's scenes; with another arm in the live
-world the sweep stops at its first contact).
+"""The real-time leg of ``ftc bench pipeline``: ``ftc monitor --scene S --sim --world-ahead --duration D --reflex
+stop --resume-after 0.5 --record F --truth T`` (readers in threads, no live view), and what it kept up with
+(:class:`~ftc_hw.bench.pipeline.RealtimeLeg`: its world and calibration). With the world computed ahead (the
+default; ``ahead=False``: the live world) the emulators serve the stored run and the simulated cell costs only
+their sockets; a stop changes nothing in the played run (it goes on through each contact). The emulated UR
+controller's operator plays again half a second after each stop, so every contact of the sweep meets a stop (a
+UR arm's scenes; with another arm in the live world the sweep stops at its first contact).
 
-Figures: the F/T adapter's counters (for RDT ``box_packets``, the box's own count of what it sent,
-against ``packets`` received and ``kernel_drops``, the socket's overflows; for every kind ``lost``,
-the samples its sequence says are missing), the monitor's frames judged and not judged (dropped behind
-its queue, no joint state, unjudged at the end), contacts detected and false alarms against the world's
-truth, onset delay (from the first contact sample's publication; computed ahead: from when it was due),
-the stop reflex's latency (sent after the onset's time) and, per contact, the stop command's arrival at
-the arm's interface (the UR emulator read it) after the contact's first sample, and each process's CPU
-share over the scenario (:mod:`.process_cpu`: this one, the monitor with its readers and pipeline; the
-world's, the emulators', the recorder's; the host's busy cores). The recording, afterwards: its messages
-against what the monitor judged, the recorder's drops, and a replay of it (``ftc replay --check``):
-whether it gives the run's events bit for bit.
-"""
+Figures: the F/T adapter's counters (for RDT ``box_packets``, the box's own count of what it sent, against
+``packets`` received and ``kernel_drops``, the socket's overflows; for every kind ``lost``, the samples its
+sequence says are missing), the monitor's frames judged and not judged (dropped behind its queue, no joint
+state, unjudged at the end), contacts detected and false alarms against the world's truth, onset delay (from
+the first contact sample's publication; computed ahead: from when it was due), the stop reflex's latency (sent
+after the onset's time) and, per contact, the stop command's arrival at the arm's interface (the UR emulator
+read it) after the contact's first sample, and each process's CPU share over the scenario (:mod:`.process_cpu`:
+this one, the monitor with its readers and pipeline; the world's, the emulators', the recorder's; the host's
+busy cores). The recording, afterwards: its messages against what the monitor judged, the recorder's drops, and
+a replay of it (``ftc replay --check``): whether it gives the run's events bit for bit."""
 from __future__ import annotations
 
 import io
@@ -32,6 +30,7 @@ from rich.console import Console
 from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, SimOptions, ViewOptions
 from ftc_hw.app.monitor.evaluate import _episodes
 from ftc_hw.app.monitor.session import resumable, run_monitor
+from ftc_hw.bench.pipeline import RealtimeLeg
 from ftc_hw.bench.process_cpu import SELF, ProcessCpu
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import read_truth
@@ -46,19 +45,22 @@ LATE_NS = 50_000_000  # a stop this long after a contact's end is still its (the
 NOT_JUDGED = ("ft_frames_dropped", "no_joint_state", "blind_frames", "ft_frames_unjudged_at_stop")
 
 
-def live(scene: str, seconds: float, seed: int, ahead: bool = True) -> dict[str, Any]:
-    """``ahead``: the world computed first and played to the emulators (``--world-ahead``), else the live world."""
+def live(scene: str, leg: RealtimeLeg, seed: int) -> dict[str, Any]:
+    """One real-time run of ``scene`` and its figures (module docstring)."""
     ur = resumable(load_scene(scene))
     with tempfile.TemporaryDirectory(prefix="ftc-bench-") as tmp:
         path, truth = Path(tmp) / "run.mcap", Path(tmp) / "truth.jsonl"
-        world = SimOptions(seed=seed, resume_after_s=RESUME_AFTER_S if ur else None, truth=truth, ahead=ahead)
-        cfg = MonitorOptions(scene, sim=True, world=world, duration=seconds, view=ViewOptions("none"), reflex="stop",
-                             devices=DeviceOptions(readers="thread"), title="ftc bench pipeline", record=path)
+        world = SimOptions(seed=seed, reality=leg.reality, resume_after_s=RESUME_AFTER_S if ur else None, truth=truth,
+                           ahead=leg.ahead)
+        cfg = MonitorOptions(scene, sim=True, world=world, duration=leg.seconds, view=ViewOptions("none"),
+                             reflex="stop", devices=DeviceOptions(readers="thread"), title="ftc bench pipeline",
+                             record=path, calibration=leg.calibration)
         load = os.getloadavg()[0]
         with ProcessCpu() as cpu:
             out = run_monitor(cfg, Console(file=io.StringIO(), width=200))
         rows = read_truth(truth) if truth.exists() else []
-        return {**_figures(scene, seconds, load, out), "world": "ahead" if ahead else "live",
+        return {**_figures(scene, leg.seconds, load, out), "world": "ahead" if leg.ahead else "live",
+                "reality": leg.reality, "calibration": str(leg.calibration) if leg.calibration else None,
                 **_cpu(cpu, rows), **_stops_at_arm(rows, out.reflex.get("stops_at_arm_ns", [])), **_replayed(path)}
 
 

@@ -512,12 +512,17 @@ def bench_pipeline(
         help="The real-time leg's world: ahead, computed first and served from memory (the emulators cost only "
              "their sockets; a stop is measured at the arm's interface and not obeyed); live, stepped in real "
              "time beside the monitor.")] = BenchWorld.ahead,
+    reality: Annotated[RealityChoice, reality_option(RealityChoice.ideal, "The real-time leg's world: ")
+                       ] = RealityChoice.ideal,
+    calibration: Annotated[Optional[Path], typer.Option(  # noqa: UP045
+        exists=True, dir_okay=False, help="The real-time leg's monitor uses this calibration (ftc identify's of "
+                                          "that world; default: the scene's nominal model).")] = None,
 ) -> None:
     """The pipeline's cost per frame by stage at a sensor rate, and whether it keeps up in real time."""
-    from ftc_hw.bench.pipeline import run  # lazy: CLI start-up
+    from ftc_hw.bench.pipeline import RealtimeLeg, run  # lazy: CLI start-up
 
-    run(json_path=json_path, scenes=scene, rate_hz=rate, seconds=seconds, realtime_s=realtime, seed=seed,
-        ahead=world is BenchWorld.ahead)
+    leg = RealtimeLeg(realtime, world is BenchWorld.ahead, reality.value, calibration)
+    run(json_path=json_path, scenes=scene, rate_hz=rate, seconds=seconds, seed=seed, realtime=leg)
 
 
 @bench_app.command("provisional")
