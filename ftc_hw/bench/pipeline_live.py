@@ -32,6 +32,7 @@ from ftc_hw.app.monitor.evaluate import _episodes
 from ftc_hw.app.monitor.session import resumable, run_monitor
 from ftc_hw.bench.pipeline import RealtimeLeg
 from ftc_hw.bench.process_cpu import SELF, ProcessCpu
+from ftc_hw.bus import EVENTS_DEVICE
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import read_truth
 from ftc_hw.record.reader import read_recording
@@ -61,7 +62,8 @@ def live(scene: str, leg: RealtimeLeg, seed: int) -> dict[str, Any]:
         rows = read_truth(truth) if truth.exists() else []
         return {**_figures(scene, leg.seconds, load, out), "world": "ahead" if leg.ahead else "live",
                 "reality": leg.reality, "calibration": str(leg.calibration) if leg.calibration else None,
-                **_cpu(cpu, rows), **_stops_at_arm(rows, out.reflex.get("stops_at_arm_ns", [])), **_replayed(path)}
+                **_cpu(cpu, rows), **_stops_at_arm(rows, out.reflex.get("stops_at_arm_ns", [])),
+                **_replayed(path, out.reflex.get("stops", []))}
 
 
 def _cpu(cpu: ProcessCpu, truth: list[dict[str, Any]]) -> dict[str, Any]:
@@ -90,12 +92,13 @@ def _stops_at_arm(truth: list[dict[str, Any]], stops_ns: list[int]) -> dict[str,
             "stop_at_arm_ms_max": float(np.max(ms)) if ms else float("nan")}
 
 
-def _replayed(path: Path) -> dict[str, Any]:
-    """The recording against the run: inputs recorded and judged, and its replay's events."""
+def _replayed(path: Path, stops: list[dict[str, Any]]) -> dict[str, Any]:
+    """The recording against the run: inputs recorded and judged, and its replay's events; the stops' time
+    after the arrival of the frame that decided them (:func:`_after_arrival`)."""
     rec = read_recording(path)
     result = replay(rec)
     recorder = rec.metadata.get("recorder", {})
-    return {"recorded_inputs": sum(m.topic == MONITOR_INPUT for m in rec.messages),
+    return {**_after_arrival(rec, stops), "recorded_inputs": sum(m.topic == MONITOR_INPUT for m in rec.messages),
             "recorder_drops": int(recorder.get("drops", -1)), "recording_complete": rec.complete,
             "replayed_events": len(result.events), "replay_identical": result.identical}
 
@@ -130,3 +133,17 @@ def _figures(scene: str, seconds: float, load: float, out) -> dict[str, Any]:
         "reflex_errors": list(out.reflex.get("errors", [])),
         "degraded": list(out.degraded), "problems": list(out.problems), "device_counters": out.device_counters,
     }
+
+
+def _after_arrival(rec: Any, stops: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per stop on a provisional onset, ms from the arrival of the F/T frame that decided it (the onset's
+    ``frame_received_ns``, in the recording) to the stop command's sending: the monitor's own share of the
+    stop's latency, without the emulated device's delivery and the detector's debounce (``n_on`` periods)."""
+    received = {m.frame.t_host_ns: m.frame.counters.get("frame_received_ns") for m in rec.messages
+                if m.topic == EVENTS_DEVICE and getattr(m.frame, "kind", "") == "provisional_onset"}
+    ms = [s["sent_after_onset_ms"] - (received[s["onset_t_host_ns"]] - s["onset_t_host_ns"]) / 1e6
+          for s in stops if s.get("provisional") and received.get(s["onset_t_host_ns"]) is not None]
+    return {"stops_timed_from_arrival": len(ms),
+            "stop_after_arrival_ms_median": float(np.median(ms)) if ms else float("nan"),
+            "stop_after_arrival_ms_p99": float(np.percentile(ms, 99)) if ms else float("nan"),
+            "stop_after_arrival_ms_max": float(np.max(ms)) if ms else float("nan")}
