@@ -186,15 +186,6 @@ class LiveMonitor:
         self.provisional = (ProvisionalJudge(self.pipeline) if provisional and self.driver == "ft"
                             and isinstance(self.pipeline, ContactPipeline) else None)
         self.ledger = ProvisionalLedger() if self.provisional is not None else None
-        # live (start()), each F/T frame is judged provisionally in its reader's thread as it is published, not
-        # when the worker takes it: a worker behind its queue (a joint wait, a backlog) does not hold the reflex
-        # back. That path has its own clock aligner (the same frames in the same order: the same times) and
-        # counts; the lock keeps the judge, the ledger and those counts whole between the two threads.
-        self._at_arrival = False
-        self._arrival_clock = ClockAligner()
-        self._arrival_counts: Counter[str] = Counter()
-        self._arrival_sub = None
-        self._prov_lock = threading.Lock()
 
     def backlog(self) -> int: return self._sub.pending if self._sub is not None else 0  # driving frames to take
 
@@ -207,9 +198,6 @@ class LiveMonitor:
         if self._thread is None:
             if self.driver == "ft":
                 self._side_sub = self.bus.subscribe(self.joint_topic, callback=self.on_joints)
-                if self.provisional is not None:
-                    self._at_arrival = True
-                    self._arrival_sub = self.bus.subscribe(self.ft_topic, callback=self._on_arrival, first=True)
                 self._sub = self.bus.subscribe(self.ft_topic, maxsize=4096)
             else:
                 if self.uses_ft:
@@ -225,12 +213,10 @@ class LiveMonitor:
             return
         self._stop.set()
         self._sub.close()
-        for sub in (self._side_sub, self._arrival_sub):
-            if sub is not None:
-                sub.close()
+        if self._side_sub is not None:
+            self._side_sub.close()
         self._thread.join(timeout=5.0)
         self._thread = None
-        self._merge_arrival_counts()
         prefix = "ft" if self.driver == "ft" else "joint"
         self.counters[f"{prefix}_frames_dropped"] = self._sub.drops
         unjudged = self._sub.pending + len(self._waiting)  # a backlog the run ended with: never judged
@@ -280,11 +266,9 @@ class LiveMonitor:
             if frame.t_host_ns - t_frame > LATE_NS:  # a backlog between the device and us
                 self.counters[late] += 1
             pending.append((arrived, t_frame, frame))
-            if self.provisional is not None and not self._at_arrival:
-                with self._prov_lock:
-                    self._judge_provisional(frame, t_frame, self.counters)
+            if self.provisional is not None:
+                self._judge_provisional(frame, t_frame)
         self._received(self._driving, pending[-len(batch)][1])  # back (after a loss) from the first
-        self._merge_arrival_counts()
 
     def judge_ready(self, pending: deque, now: float) -> None:
         """Every pending frame whose side state is there (or that waited ``wait_s`` by ``now``, monotonic s)."""
@@ -362,8 +346,7 @@ class LiveMonitor:
         loss closes the open contact (an offset flagged ``lost``, at the loss's time); the joint
         stream's return restarts the acceleration estimate."""
         if ev.kind in ("sensor_lost", "arm_lost") and self.provisional is not None:
-            with self._prov_lock:
-                self.provisional.reset()
+            self.provisional.reset()
         if ev.kind in ("sensor_lost", "arm_lost") and self.pipeline.in_contact:
             self.counters["contacts_lost"] += 1
             event = self.pipeline.close_contact(ev.t_host_ns, lost=True)
@@ -398,55 +381,39 @@ class LiveMonitor:
         saturated = 1.0 if frame.flags & WrenchFlag.SATURATED else 0.0
         self.wrenches.add(t, np.append(frame.wrench, saturated))
 
-    # -- the provisional onset (live: the F/T reader's thread; frames handed in with take(): the caller's) -------
-    def _on_arrival(self, frame) -> None:
-        """Live: an F/T frame as its reader publishes it, judged provisionally there and then."""
-        t = self._aligned(self._arrival_clock, frame)
-        with self._prov_lock:
-            self._judge_provisional(frame, t, self._arrival_counts)
-
-    def _merge_arrival_counts(self) -> None:
-        """The arrival path's counts into ``counters`` (the worker's thread: only it writes ``counters``)."""
-        if self._arrival_counts:
-            with self._prov_lock:
-                counts, self._arrival_counts = self._arrival_counts, Counter()
-            self.counters.update(counts)
-
-    def _judge_provisional(self, frame, t: int, counts: Counter[str]) -> None:
+    # -- the provisional onset (the worker's thread) ---------------------------------------------------------
+    def _judge_provisional(self, frame, t: int) -> None:
         """One F/T frame judged at once on the joint state extrapolated to its time (at most ``wait_s`` past the
-        newest joint sample); its provisional onset goes out on ``events/device`` before anything else. Counted
-        in ``counts``; the caller holds ``_prov_lock``."""
+        newest joint sample); its provisional onset goes out on ``events/device`` before anything else."""
         ready = self.tared and "arm" not in self.lost and self.provisional.spread.ready
         newest = self.joints.newest_two() if ready else None
         if newest is None or t < newest[1][0] or t - newest[0][0] > self.wait_s * 1e9:
-            counts["provisional_skipped"] += 1  # not yet ready, no joint state to extrapolate, too far past it
+            self.counters["provisional_skipped"] += 1  # not yet ready, no joint state to extrapolate, too far past it
             return
         n = self.scene.n_joints
         (t0, x0), (t1, x1) = newest
         try:
             det, _ = self.provisional.judge(t, frame.wrench, (t0, x0[:n], x0[n:2 * n]), (t1, x1[:n], x1[n:2 * n]))
         except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor
-            counts["provisional_errors"] += 1
-            counts[f"provisional_error:{type(exc).__name__}"] += 1
+            self.counters["provisional_errors"] += 1
+            self.counters[f"provisional_error:{type(exc).__name__}"] += 1
             return
-        counts["provisional_frames"] += 1
+        self.counters["provisional_frames"] += 1
         if det.change != "onset":
             return
         onset = det.onset_t_ns if det.onset_t_ns is not None else t
-        counts["provisional_onsets"] += 1
+        self.counters["provisional_onsets"] += 1
         self._monitor_event(onset, "provisional_onset",
                             f"judged at once on the joint state {(t - t0) / 1e6:.2f} ms past the newest joint "
                             f"sample (d2 {det.d2:.1f}); the confirmed judgement follows",
                             {"d2": det.d2, "ahead_ms": (t - t0) / 1e6, "frame_t_host_ns": t,
                              "frame_received_ns": frame.t_host_ns})
         if self.ledger.provisional(onset):
-            counts["provisional_confirmed"] += 1
+            self.counters["provisional_confirmed"] += 1
 
     def _settle_provisional(self, t: int, result: FrameResult) -> None:
         """The confirmed judgement of the frame at ``t``: the provisional onsets it confirms or leaves unconfirmed."""
-        self._merge_arrival_counts()
-        with self._prov_lock:
-            confirmed, unconfirmed = self.ledger.judged(t, result.detection.active)
+        confirmed, unconfirmed = self.ledger.judged(t, result.detection.active)
         self.counters["provisional_confirmed"] += confirmed
         for onset in unconfirmed:
             self.counters["provisional_unconfirmed"] += 1
@@ -456,9 +423,7 @@ class LiveMonitor:
                                 {"window_ms": self.ledger.window_ns / 1e6})
         if result.detection.change == "onset" and self.counters["provisional_frames"]:
             onset = result.detection.onset_t_ns if result.detection.onset_t_ns is not None else t
-            with self._prov_lock:
-                had = self.ledger.had_provisional(onset)
-            if not had:
+            if not self.ledger.had_provisional(onset):
                 self.counters["onsets_without_provisional"] += 1
 
     def _monitor_event(self, t_ns: int, kind: str, message: str, figures: dict[str, float]) -> None:

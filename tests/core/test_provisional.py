@@ -3,7 +3,6 @@ newest joint sample, with the extrapolation's error in the detection covariance;
 follows on the interpolated state, and a provisional onset it does not confirm is an event of its own."""
 from __future__ import annotations
 
-import time
 from collections import deque
 
 import numpy as np
@@ -138,45 +137,3 @@ def test_an_unconfirmed_provisional_onset_gives_its_event():
     assert not [e for e in contact.drain() if e.kind == "onset"]  # the pipeline saw no contact
     assert monitor.counters["provisional_unconfirmed"] == monitor.counters["provisional_onsets"] >= 1
     assert monitor.counters["provisional_frames"] > 600  # from 1 s of motion on
-
-
-def test_live_the_provisional_onset_goes_out_in_the_readers_thread_while_the_worker_is_held():
-    """Started, the monitor judges each F/T frame provisionally as its reader publishes it: a worker held
-    behind its queue (here: blocked outright) does not hold the provisional onset back, and the counts and the
-    ledger come back to the worker once it runs again."""
-    import threading
-
-    model = ArmModel(SCENE)
-    bus = Bus()
-    device = bus.subscribe(EVENTS_DEVICE, maxsize=None)
-    monitor = LiveMonitor(bus, SCENE, tare_s=None, publish_inputs=False, settings=settings(level="dynamics"))
-    held, taken = threading.Event(), []
-    original = monitor.take
-    monitor.take = lambda pending, batch, arrived: (held.wait(30), taken.append(len(batch)),
-                                                    original(pending, batch, arrived))
-    step_s, jump = 1.5, np.r_[0.0, 60.0, 0.0, 0.0, 0.0, 0.0]
-    publisher = threading.get_ident()
-    seen_in: set[int] = set()
-    bus.subscribe(EVENTS_DEVICE, callback=lambda ev: seen_in.add(threading.get_ident()))
-    with monitor:
-        joints, j = [k * 0.002 for k in range(int(1.7 / 0.002))], 0
-        for i in range(1700):
-            t = i * 0.001
-            while j < len(joints) and joints[j] + 0.004 <= t:
-                q, qd, _ = _arm(joints[j], step_s, jump)
-                bus.publish("joints/arm", JointFrame.make(round(joints[j] * 1e9), q, qd, np.zeros(6), source="arm",
-                                                          seq=j))
-                j += 1
-            q, qd, qdd = _arm(t, step_s, jump)
-            bus.publish("wrench/ft", WrenchFrame.make(round(t * 1e9), model.arm_loads(q, qd, qdd, "dynamics")[0],
-                                                      source="ft", seq=i))
-        early = [e.kind for e in device.drain()]
-        assert "provisional_onset" in early and not taken  # out before the worker took a single frame
-        assert seen_in == {publisher}
-        held.set()
-        end = time.monotonic() + 30
-        while sum(taken) < 1700 and time.monotonic() < end:
-            time.sleep(0.01)
-    assert monitor.counters["provisional_onsets"] == early.count("provisional_onset") >= 1
-    assert monitor.counters["provisional_frames"] > 600
-    assert monitor.counters["provisional_unconfirmed"] == monitor.counters["provisional_onsets"]
