@@ -1,6 +1,7 @@
 """Named scenarios: what the arm does and what touches it. ``ftc sim --list`` shows them."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ from ftc_hw.scene import Scene
 from .contact_kinds import plan_within
 from .touch_points import _cone, poke_force_limit, random_pokes, sample_contacts, visible_filter
 from .trajectory import Hold, PointToPoint, Sinusoid
-from .world import Obstacle, ScenarioSetup
+from .world import Obstacle, Probe, ScenarioSetup
 
 # the touch points' helpers, where the tests and benches import them from
 __all__ = ["SCENARIOS", "ScenarioInfo", "_cone", "build_scenario", "poke_force_limit",
@@ -43,6 +44,25 @@ def build_static_pokes(scene: Scene, model: ArmModel, rng: np.random.Generator, 
     # pokes at 0.2 s + 0.5 s i, 0.3 s each: those that end within the run (at least one)
     count = max(1, math.floor((duration - WHOLE_CONTACT_MARGIN_S - 0.5) / 0.5) + 1)
     return ScenarioSetup(Hold(q), probes=random_pokes(model, q, rng, count))
+
+
+PRESS_HOLDS_S = (0.2, 2.0)  # static-presses: a poke's hold, then a press's, in turn
+PRESS_GAP_S = 0.2  # between one's end and the next's start
+
+
+def build_static_presses(scene: Scene, model: ArmModel, rng: np.random.Generator, duration: float) -> ScenarioSetup:
+    """Pokes (0.3 s) and presses (2.1 s) in turn from 0.2 s, 0.2 s apart: those that end within the run."""
+    q = np.array(scene.robot.home)
+    starts, t = [], 0.2
+    while True:
+        hold = PRESS_HOLDS_S[len(starts) % 2]
+        if starts and t + 2 * Probe.ramp_s + hold > duration - WHOLE_CONTACT_MARGIN_S:
+            break
+        starts.append((t, hold))
+        t += 2 * Probe.ramp_s + hold + PRESS_GAP_S
+    probes = random_pokes(model, q, rng, len(starts))
+    return ScenarioSetup(Hold(q), probes=tuple(dataclasses.replace(p, t_start=t0, hold_s=hold)
+                                               for p, (t0, hold) in zip(probes, starts, strict=True)))
 
 
 SWEEP_REST_S = 0.3  # the sweeps start with the arm at rest, long enough to tare the sensor
@@ -145,6 +165,9 @@ SCENARIOS: dict[str, ScenarioInfo] = {s.name: s for s in [
                  "(5 N to the scene's poke limit, within 45 degrees of the inward normal), one every 0.5 s, "
                  "each ending within the run",
                  build_static_pokes),
+    ScenarioInfo("static-presses", "as static-pokes, but a poke (0.3 s) and a press (2.1 s) in turn, 0.2 s apart: "
+                 "a contact that outlasts a loaded cell's delivery lag (a stream cut in it is cut mid-contact)",
+                 build_static_presses),
     ScenarioInfo("sweep", "sinusoidal sweep of the first two joints (0.25 Hz); no contact", build_sweep),
     ScenarioInfo("sweep-with-collision", "the sweep; the most distal link hits a compliant obstacle "
                  "(about 40 N peak) once per swing, on every swing that ends within the run",

@@ -131,8 +131,9 @@ def test_halt_stops_the_arm():
 
 
 # what each scenario puts in the world besides its motion (its description says so)
-SCRIPTED = {"hold": (), "static-pokes": ("probes",), "sweep": (), "sweep-with-collision": ("obstacles",),
-            "excitation": (), "payload-poses": ("payload",), "clamping": ("obstacles",), "guidance": ("probes",),
+SCRIPTED = {"hold": (), "static-pokes": ("probes",), "static-presses": ("probes",), "sweep": (),
+            "sweep-with-collision": ("obstacles",), "excitation": (), "payload-poses": ("payload",),
+            "clamping": ("obstacles",), "guidance": ("probes",),
             "impacts": ("obstacles",), "contact-kinds": ("probes", "obstacles")}
 LONGER = {"contact-kinds": 15.0}  # s: one contact of each kind takes longer than the others' 5 s
 
