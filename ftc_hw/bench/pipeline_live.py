@@ -35,7 +35,7 @@ from ftc_hw.bench.process_cpu import SELF, ProcessCpu
 from ftc_hw.bus import EVENTS_DEVICE
 from ftc_hw.monitor import MONITOR_INPUT
 from ftc_hw.record.events import read_truth
-from ftc_hw.record.reader import read_recording
+from ftc_hw.record.reader import Recording, read_recording
 from ftc_hw.record.replay import replay
 from ftc_hw.scene import load_scene
 
@@ -60,10 +60,11 @@ def live(scene: str, leg: RealtimeLeg, seed: int) -> dict[str, Any]:
         with ProcessCpu() as cpu:
             out = run_monitor(cfg, Console(file=io.StringIO(), width=200))
         rows = read_truth(truth) if truth.exists() else []
+        rec = read_recording(path)
         return {**_figures(scene, leg.seconds, load, out), "world": "ahead" if leg.ahead else "live",
                 "reality": leg.reality, "calibration": str(leg.calibration) if leg.calibration else None,
                 **_cpu(cpu, rows), **_stops_at_arm(rows, out.reflex.get("stops_at_arm_ns", [])),
-                **_replayed(path, out.reflex.get("stops", []))}
+                **_replayed(rec), **_after_arrival(rec, out.reflex.get("stops", []))}
 
 
 def _cpu(cpu: ProcessCpu, truth: list[dict[str, Any]]) -> dict[str, Any]:
@@ -86,19 +87,14 @@ def _stops_at_arm(truth: list[dict[str, Any]], stops_ns: list[int]) -> dict[str,
         later = stops[(stops >= th[a]) & (stops <= th[b] + LATE_NS)]
         if later.size:
             ms.append((int(later[0]) - int(th[a])) / 1e6)
-    return {"stops_at_arm": len(ms),
-            "stop_at_arm_ms_median": float(np.median(ms)) if ms else float("nan"),
-            "stop_at_arm_ms_p99": float(np.percentile(ms, 99)) if ms else float("nan"),
-            "stop_at_arm_ms_max": float(np.max(ms)) if ms else float("nan")}
+    return {"stops_at_arm": len(ms), **_spread("stop_at_arm_ms", ms)}
 
 
-def _replayed(path: Path, stops: list[dict[str, Any]]) -> dict[str, Any]:
-    """The recording against the run: inputs recorded and judged, and its replay's events; the stops' time
-    after the arrival of the frame that decided them (:func:`_after_arrival`)."""
-    rec = read_recording(path)
+def _replayed(rec: Recording) -> dict[str, Any]:
+    """The recording against the run: inputs recorded and judged, and its replay's events."""
     result = replay(rec)
     recorder = rec.metadata.get("recorder", {})
-    return {**_after_arrival(rec, stops), "recorded_inputs": sum(m.topic == MONITOR_INPUT for m in rec.messages),
+    return {"recorded_inputs": sum(m.topic == MONITOR_INPUT for m in rec.messages),
             "recorder_drops": int(recorder.get("drops", -1)), "recording_complete": rec.complete,
             "replayed_events": len(result.events), "replay_identical": result.identical}
 
@@ -122,9 +118,7 @@ def _figures(scene: str, seconds: float, load: float, out) -> dict[str, Any]:
         "evaluated": ev is not None, "contacts": len(ev.contacts) if ev else 0, "detected": ev.detected if ev else 0,
         "false_alarms": len(ev.false_alarms) if ev else 0, "false_alarm_s": list(ev.false_alarms) if ev else [],
         "onset_delay_ms_median": float(np.median(delays)) if delays else float("nan"),
-        "stop_after_onset_ms_median": float(np.median(stops)) if stops else float("nan"),
-        "stop_after_onset_ms_p99": float(np.percentile(stops, 99)) if stops else float("nan"),
-        "stop_after_onset_ms_max": float(np.max(stops)) if stops else float("nan"), "stops": len(stops),
+        **_spread("stop_after_onset_ms", stops), "stops": len(stops),
         # the provisional onset (docs/monitor.md): stops sent on one, and those the pipeline did not confirm
         "stops_provisional": sum(bool(s.get("provisional")) for s in out.reflex.get("stops", [])),
         "provisional_onsets": int(c.get("provisional_onsets", 0)),
@@ -135,7 +129,7 @@ def _figures(scene: str, seconds: float, load: float, out) -> dict[str, Any]:
     }
 
 
-def _after_arrival(rec: Any, stops: list[dict[str, Any]]) -> dict[str, Any]:
+def _after_arrival(rec: Recording, stops: list[dict[str, Any]]) -> dict[str, Any]:
     """Per stop on a provisional onset, ms from the arrival of the F/T frame that decided it (the onset's
     ``frame_received_ns``, in the recording) to the stop command's sending: the monitor's own share of the
     stop's latency, without the emulated device's delivery and the detector's debounce (``n_on`` periods)."""
@@ -143,7 +137,12 @@ def _after_arrival(rec: Any, stops: list[dict[str, Any]]) -> dict[str, Any]:
                 if m.topic == EVENTS_DEVICE and getattr(m.frame, "kind", "") == "provisional_onset"}
     ms = [s["sent_after_onset_ms"] - (received[s["onset_t_host_ns"]] - s["onset_t_host_ns"]) / 1e6
           for s in stops if s.get("provisional") and received.get(s["onset_t_host_ns"]) is not None]
-    return {"stops_timed_from_arrival": len(ms),
-            "stop_after_arrival_ms_median": float(np.median(ms)) if ms else float("nan"),
-            "stop_after_arrival_ms_p99": float(np.percentile(ms, 99)) if ms else float("nan"),
-            "stop_after_arrival_ms_max": float(np.max(ms)) if ms else float("nan")}
+    return {"stops_timed_from_arrival": len(ms), **_spread("stop_after_arrival_ms", ms)}
+
+
+def _spread(prefix: str, ms: list[float]) -> dict[str, float]:
+    """``{prefix}_median``, ``_p99`` and ``_max`` of ``ms`` (NaN when there are none)."""
+    nan = float("nan")
+    return {f"{prefix}_median": float(np.median(ms)) if ms else nan,
+            f"{prefix}_p99": float(np.percentile(ms, 99)) if ms else nan,
+            f"{prefix}_max": float(np.max(ms)) if ms else nan}
