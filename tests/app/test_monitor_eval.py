@@ -61,6 +61,28 @@ def test_a_streams_events_among_the_contacts_are_no_contact_of_their_own():
     assert [c.detected for c in ev.contacts] == [True] and not ev.false_alarms and ev.contacts[0].estimates == 1
 
 
+def test_an_onset_is_counted_in_the_samples_judged_whatever_their_gaps():
+    """A client that took every third sample (and then none for 9 ms): the onset 11 ms after the contact
+    began is on the second sample judged in it; the count errs long by the one before the contact."""
+    tr = truth(400, set(range(100, 200)) | set(range(300, 350)))
+    judged = [T0 + i * MS + MS // 3 for i in list(range(0, 100, 3)) + [102, 111] + list(range(114, 400, 3))]
+    evs = [event("onset", T0 + 111 * MS + MS // 3), event("onset", T0 + 303 * MS + MS // 3)]
+    ev = evaluate(evs, tr, 0.001, judged_ns=judged)
+    assert ev.contacts[0].onset_delay_ms == pytest.approx(11.333, abs=1e-3) and not ev.contacts[0].delay_ok
+    # judged in [99, 111.3] ms: 99.3 (before the contact), 102.3, 111.3
+    assert [c.onset_samples for c in ev.contacts] == [3, 2]
+    assert ev.all_within_samples(3) and not ev.all_within_samples(2)
+    assert evaluate(evs, tr, 0.001).contacts[0].onset_samples is None  # not counted without the times
+    text = _table_text(ev)
+    assert "samples" in text and "one before the contact can count" in " ".join(text.split())
+
+
+def _table_text(ev: Evaluation) -> str:
+    console = Console(width=200, record=True, file=io.StringIO())
+    console.print(evaluation_table(ev))
+    return console.export_text()
+
+
 def test_late_missing_false_and_split_onsets_are_reported():
     tr = truth(1000, set(range(100, 200)) | set(range(500, 600)) | set(range(800, 900)))
     evs = [event("onset", T0 + 104 * MS),  # 4 ms: detected, late

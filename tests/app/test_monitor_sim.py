@@ -17,6 +17,7 @@ from rich.console import Console
 from ftc_hw.app.monitor.evaluate import evaluate
 from ftc_hw.app.monitor.view import evaluation_table
 from ftc_hw.record.events import read_events, read_truth
+from ftc_hw.record.reader import read_recording
 from ftc_hw.scene import load_scene
 from ftc_hw.sim_devices.world.scenarios import sweep_trajectory
 
@@ -29,18 +30,31 @@ pytestmark = pytest.mark.realtime  # against the wall clock: ./run-tests runs it
 MEDIAN_ERR_MM = {"ur5e": 25.0, "dxl-arm": 8.0, "leng2016": 8.0}
 
 
+# an onset counted in the samples the monitor judged (evaluate's judged_ns): the detector needs 2 in a row
+# above the threshold, and the count errs long by one (the sample before the contact); a contact's first
+# sample can still be below the threshold (the obstacle's force ramps up from zero)
+ONSET_SAMPLES = 4
+
+
 def ftc(*args: str, timeout: float = 180) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "ftc_hw", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def judged_ns(recording) -> np.ndarray:
+    """The host times of the frames the monitor judged, from its recording (``monitor/input``)."""
+    return np.array([f.t_host_ns for f in read_recording(recording, topics={"monitor/input"}).topic("monitor/input")],
+                    dtype=np.int64)
 
 
 @pytest.fixture
 def run_monitor(clean_or_loaded):
     def run(tmp_path, scene: str, duration: float, *extra: str):
-        events, truth = tmp_path / "events.jsonl", tmp_path / "truth.jsonl"
+        events, truth, rec = tmp_path / "events.jsonl", tmp_path / "truth.jsonl", tmp_path / "run.mcap"
         proc = ftc("monitor", "--scene", scene, "--sim", "--scenario", "sweep-with-collision", "--duration",
-                   str(duration), "--events", str(events), "--truth", str(truth), "--no-view", *extra)
+                   str(duration), "--events", str(events), "--truth", str(truth), "--record", str(rec), "--no-view",
+                   *extra)
         clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
-        return proc, read_events(events), read_truth(truth)
+        return proc, read_events(events), read_truth(truth), judged_ns(rec)
 
     return run
 
@@ -49,8 +63,8 @@ def run_monitor(clean_or_loaded):
 # the built-in ur5e end to end in the demo's test
 @pytest.mark.parametrize("scene", ["dxl-arm", "leng2016"])
 def test_every_collision_is_detected_in_time_and_localized(tmp_path, scene, run_monitor):
-    proc, events, truth = run_monitor(tmp_path, scene, 8.0)
-    ev = evaluate(events, truth, 1.0 / load_scene(scene).sensor.rate_hz)
+    proc, events, truth, judged = run_monitor(tmp_path, scene, 8.0)
+    ev = evaluate(events, truth, 1.0 / load_scene(scene).sensor.rate_hz, judged_ns=judged)
     console = Console(width=160, record=True)
     console.print(evaluation_table(ev))
     lag = np.array([r["t_host_ns"] - r["t_due_ns"] for r in truth]) / 1e6
@@ -58,7 +72,10 @@ def test_every_collision_is_detected_in_time_and_localized(tmp_path, scene, run_
     report = (console.export_text() + proc.stdout[-2500:]
               + f"\nworld lag ms p50 {np.median(lag):.2f} p99 {np.percentile(lag, 99):.2f} max {lag.max():.2f}")
     assert len(ev.contacts) == 2, report
-    assert ev.all_in_time, report  # each onset within 2 sensor samples + 1 ms of the contact's first sample
+    # in time: within the first judged samples of the contact (the delay in ms is the host's share too:
+    # ftc bench pipeline --realtime measures it)
+    print([(c.onset_delay_ms, c.onset_samples) for c in ev.contacts])
+    assert ev.all_within_samples(ONSET_SAMPLES), report
     assert ev.false_alarms == [] and ev.splits == 0, report
     for c in ev.contacts:
         assert c.link_right >= 0.8 and c.est_link == c.link, report
@@ -90,7 +107,7 @@ def check_pairs(events: list[dict], report: str) -> None:
 
 
 def test_reflex_stop_halts_the_arm_at_the_onset(tmp_path, run_monitor):
-    proc, events, truth = run_monitor(tmp_path, "dxl-arm", 4.0, "--reflex", "stop")
+    proc, events, truth, _ = run_monitor(tmp_path, "dxl-arm", 4.0, "--reflex", "stop")
     onset = next(e for e in events if e["kind"] == "onset")
     sent = re.search(r"reflex stop: 1 sent, ([0-9.]+)-[0-9.]+ ms after the onset sample", proc.stdout)
     assert sent, proc.stdout[-2000:]
@@ -115,7 +132,7 @@ def test_a_calibration_file_replaces_the_tare_and_goes_into_the_recording(tmp_pa
     scene = load_scene("dxl-arm")
     cal = save_calibration(Calibration("dxl-arm", None, now_iso(), np.array(scene.sensor.bias), None),
                            tmp_path / "cal.toml")
-    proc, events, truth = run_monitor(tmp_path, "dxl-arm", 3.0, "--calibration", str(cal),
+    proc, events, truth, _ = run_monitor(tmp_path, "dxl-arm", 3.0, "--calibration", str(cal),
                                       "--record", str(tmp_path / "run.mcap"))
     ev = evaluate(events, truth, 1.0 / scene.sensor.rate_hz)
     assert ev.detected == len(ev.contacts) == 1 and not ev.false_alarms, proc.stdout[-3000:]

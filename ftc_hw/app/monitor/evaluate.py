@@ -12,6 +12,14 @@ time), truth by the ``t_host_ns`` at which the world published each sample to it
   its own clock has its frames placed on the host clock as if delivered with the least delay seen
   (the world's least lateness included), so on a late world the delay from publication can be
   slightly negative; ``onset_delay_due_ms`` (from the due time) bounds it from above.
+* Given the host times of the samples the monitor judged (``judged_ns``: its inputs' ``t_host_ns``,
+  the recording's ``monitor/input``), each onset is also counted in samples (``onset_samples``): how
+  many judged samples have times from one sample period before the contact's first sample was due to
+  the onset's (the onset's own the last). The sample before the contact can count too (its time is
+  its delivery, or its device time placed on the host clock, which falls between the two), so the
+  count errs long by at most one. A client that drops a device's samples, or a loaded host that
+  delivers them late, stretches the delay in ms, not this count: it is the detector's own figure,
+  whatever the transport did.
 * An onset that belongs to no true contact is a false alarm; a second onset within one contact is
   counted as a split. Events after the truth's last sample are not judged.
 * Localization: every onset/update event with an estimate, at a time when the truth is in contact,
@@ -80,6 +88,7 @@ class ContactResult:
     true_class: str | None = None  # the scripted contact's kind the truth says (clamping, guidance, impact)
     classified: str | None = None  # the final class of the contact reported first in it: "contact_class/intent"
     class_right: bool | None = None  # that class is the kind's (EXPECTED_CLASS); None: no kind said or not reported
+    onset_samples: int | None = None  # the onset's sample: the how-manieth judged since the contact began (judged_ns)
 
     @property
     def detected(self) -> bool:
@@ -104,6 +113,10 @@ class Evaluation:
     @property
     def all_in_time(self) -> bool:
         return all(c.detected and c.delay_ok for c in self.contacts)
+
+    def all_within_samples(self, n: int) -> bool:
+        """Every contact detected on at most its ``n``-th judged sample (evaluated with ``judged_ns``)."""
+        return all(c.onset_samples is not None and c.onset_samples <= n for c in self.contacts)
 
     def judged(self, whole: bool = False) -> list[ContactResult]:
         """The contacts, or with ``whole`` only those the run saw to their end (a contact cut by the
@@ -171,9 +184,11 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
              delay_samples: int = 2, delay_extra_s: float = 0.001, merge_gap_s: float = 0.05,
              early_s: float = 0.001, late_s: float = 0.05,
              crlb: Callable[[dict[str, Any]], float | None] | None = None,
-             solver_rms: Callable[[dict[str, Any]], float | None] | None = None) -> Evaluation:
+             solver_rms: Callable[[dict[str, Any]], float | None] | None = None,
+             judged_ns: np.ndarray | None = None) -> Evaluation:
     """``events``: event records (:func:`ftc_hw.record.events.event_record`); ``truth``: truth records
-    with ``t_host_ns``; ``crlb``: the Cramer-Rao bound (mm) of a truth record's contact
+    with ``t_host_ns``; ``judged_ns``: shape (n,), the host times (ns) of the samples the monitor judged,
+    to count each onset in samples; ``crlb``: the Cramer-Rao bound (mm) of a truth record's contact
     (:func:`crlb_of_truth`), to set each contact's error against what the sensor noise allows;
     ``solver_rms``: the solver's own RMS error (mm) there under that noise (:func:`solver_rms_of_truth`)."""
     if truth and "t_host_ns" not in truth[0]:
@@ -187,6 +202,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
     for k, (a, b) in enumerate(episodes):
         ep_of[a:b + 1] = k
     limit_ns = int(round((delay_samples * sample_period_s + delay_extra_s) * 1e9))
+    judged = None if judged_ns is None else np.sort(np.asarray(judged_ns, dtype=np.int64))
+    period_ns = int(round(sample_period_s * 1e9))
     early, late = int(early_s * 1e9), int(late_s * 1e9)
 
     def sim_time(t_ns: int) -> float:
@@ -239,6 +256,8 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
         link = max(set(true_links), key=true_links.count)
         delay = float(first_onset[k] - th[a]) / 1e6 if k in first_onset else None
         delay_due = float(first_onset[k] - due[a]) / 1e6 if k in first_onset else None
+        onset_samples = (_samples_between(judged, int(due[a]) - period_ns, first_onset[k])
+                         if judged is not None and k in first_onset else None)
         rows = errs.get(k, [])
         good = [r for r in rows if not r[3]]
         true_class, classified, class_right = _class_of(truth[a:b + 1], final.get(first_id.get(k, -1)))
@@ -267,9 +286,15 @@ def evaluate(events: list[dict[str, Any]], truth: list[dict[str, Any]], sample_p
             err_over_solver=(round(float(_rms(ref_err) / _rms(ref_rms)), 2) if len(ref) and _rms(ref_rms) > 0
                              else None),
             err_over_std_rms=stat(np.array([r[0] / r[6] for r in good if r[6] > 0]), _rms),
-            cut=bool(b == len(truth) - 1), true_class=true_class, classified=classified, class_right=class_right))
+            cut=bool(b == len(truth) - 1), true_class=true_class, classified=classified, class_right=class_right,
+            onset_samples=onset_samples))
     splits = sum(max(0, n - 1) for n in onsets_in.values())
     return Evaluation(results, false_alarms, splits, sample_period_s, limit_ns / 1e6, len(events), len(truth))
+
+
+def _samples_between(judged: np.ndarray, start_ns: int, onset_ns: int) -> int:
+    """How many judged samples fall in [start_ns, onset_ns]: the onset's own is the last of them."""
+    return int(np.searchsorted(judged, onset_ns, side="right") - np.searchsorted(judged, start_ns, side="left"))
 
 
 def _reading_of_truth(scene) -> Callable[[dict[str, Any]], tuple | None]:

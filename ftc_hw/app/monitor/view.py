@@ -183,7 +183,9 @@ def evaluation_table(ev: Evaluation, title: str = "contacts: detected against gr
     def f(x, fmt="{:.1f}"):
         return "-" if x is None else fmt.format(x)
 
-    when = table(title, ("#", "start s", "true link", "detected", "delay ms", "from due", "est. link", "link ok"))
+    counted = any(c.onset_samples is not None for c in ev.contacts)  # evaluated with the judged samples' times
+    when = table(title, ("#", "start s", "true link", "detected", "delay ms", "from due")
+                 + (("samples",) if counted else ()) + ("est. link", "link ok"))
     where = table("contacts: point errors against ground truth (mm)",
                   ("#", "err mm med", "rms", "CRLB rms", "err/CRLB", "err/solver", "err/std", "max", "rms all",
                    "|dF| N", "estimates"))
@@ -191,7 +193,7 @@ def evaluation_table(ev: Evaluation, title: str = "contacts: detected against gr
         det = ("yes" if c.delay_ok else "[yellow]late[/]") if c.detected else "[red]no[/]"
         start = f"{c.start_s:.3f}" + (" cut" if c.cut else "")
         when.add_row(str(c.index), start, c.link, det, f(c.onset_delay_ms, "{:.2f}"), f(c.onset_delay_due_ms, "{:.2f}"),
-                     c.est_link, f"{c.link_right * 100:.0f} %")
+                     *((f(c.onset_samples, "{}"),) if counted else ()), c.est_link, f"{c.link_right * 100:.0f} %")
         where.add_row(str(c.index), f(c.err_median_mm), f(c.err_rms_mm), f(c.crlb_rms_mm),
                       f(c.err_over_crlb_rms, "{:.2f}"), f(c.err_over_solver, "{:.2f}"), f(c.err_over_std_rms, "{:.2f}"),
                       f(c.err_max_mm), f(c.err_rms_all_mm), f(c.force_err_median_n, "{:.2f}"),
@@ -200,8 +202,10 @@ def evaluation_table(ev: Evaluation, title: str = "contacts: detected against gr
                     f"{sum(c.detected and c.delay_ok for c in ev.contacts)} within {ev.delay_limit_ms:g} ms "
                     f"(late: after that), false alarms {len(ev.false_alarms)}"
                     + (f" at {ev.false_alarms} s" if ev.false_alarms else "") + f", split detections {ev.splits}. "
-                    "Delay: from the first contact sample's publication (from due: from when it was due). "
-                    "Link ok: the estimates on the true link. Cut: the run ended during the contact."
+                    "Delay: from the first contact sample's publication (from due: from when it was due)"
+                    + ("; samples: the onset's among the judged samples since then (one before the contact can "
+                       "count). " if counted else ". ")
+                    + "Link ok: the estimates on the true link. Cut: the run ended during the contact."
                     + _class_caption(ev))
     where.caption = ("Over the estimates without a solver flag (rms all: with the flagged ones); "
                      "CRLB rms: the Cramer-Rao bound of the same samples (what the sensor noise allows); "
