@@ -232,12 +232,14 @@ class RealtimeLeg:
     """The real-time leg's run: ``seconds`` of the sweep; ``ahead``: the world computed first and played to the
     emulators (``--world-ahead``), else the live world; ``reality``: the world's arm, sensor and shell against
     the model (docs/reality.md); ``calibration``: the monitor's (``ftc identify``'s of that world; None: the
-    scene's nominal model)."""
+    scene's nominal model); ``split_cores``: the cell's processes on one core, the monitor on the others
+    (:mod:`ftc_hw.bench.cores`; shared where the host cannot split)."""
 
     seconds: float = 10.0
     ahead: bool = True
     reality: str = "ideal"
     calibration: Path | None = None
+    split_cores: bool = False
 
 
 def run(json_path: Path | None = None, scenes: list[str] | None = None, rate_hz: float | None = None,
@@ -262,6 +264,7 @@ def run(json_path: Path | None = None, scenes: list[str] | None = None, rate_hz:
     results["meta"] = {"seconds": seconds, "realtime_s": realtime.seconds, "seed": seed, "speed": speed,
                        "ahead": realtime.ahead, "reality": realtime.reality,
                        "calibration": str(realtime.calibration) if realtime.calibration else None,
+                       "split_cores": realtime.split_cores,
                        "python": platform.python_version(), "cpus": os.cpu_count()}
     console.print(_stage_table(results))
     console.print(_summary_table(results))

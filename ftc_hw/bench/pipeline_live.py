@@ -4,7 +4,9 @@ stop --resume-after 0.5 --record F --truth T`` (readers in threads, no live view
 default; ``ahead=False``: the live world) the emulators serve the stored run and the simulated cell costs only
 their sockets; a stop changes nothing in the played run (it goes on through each contact). The emulated UR
 controller's operator plays again half a second after each stop, so every contact of the sweep meets a stop (a
-UR arm's scenes; with another arm in the live world the sweep stops at its first contact).
+UR arm's scenes; with another arm in the live world the sweep stops at its first contact). With ``split_cores``
+the cell's processes (the world, the emulators) run on one core and the monitor with its threads and recorder on
+the others (:mod:`.cores`): a real cell's monitor host runs no simulator.
 
 Figures: the F/T adapter's counters (for RDT ``box_packets``, the box's own count of what it sent, against
 ``packets`` received and ``kernel_drops``, the socket's overflows; for every kind ``lost``, the samples its
@@ -18,6 +20,7 @@ busy cores). The recording, afterwards: its messages against what the monitor ju
 a replay of it (``ftc replay --check``): whether it gives the run's events bit for bit."""
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import tempfile
@@ -30,6 +33,7 @@ from rich.console import Console
 from ftc_hw.app.monitor.config import DeviceOptions, MonitorOptions, SimOptions, ViewOptions
 from ftc_hw.app.monitor.evaluate import _episodes
 from ftc_hw.app.monitor.session import resumable, run_monitor
+from ftc_hw.bench.cores import Pinned, core_split
 from ftc_hw.bench.pipeline import RealtimeLeg
 from ftc_hw.bench.process_cpu import SELF, ProcessCpu
 from ftc_hw.bus import EVENTS_DEVICE
@@ -57,12 +61,14 @@ def live(scene: str, leg: RealtimeLeg, seed: int) -> dict[str, Any]:
                              reflex="stop", devices=DeviceOptions(readers="thread"), title="ftc bench pipeline",
                              record=path, calibration=leg.calibration)
         load = os.getloadavg()[0]
-        with ProcessCpu() as cpu:
+        split = core_split() if leg.split_cores else None
+        with ProcessCpu() as cpu, Pinned(split) if split else contextlib.nullcontext():
             out = run_monitor(cfg, Console(file=io.StringIO(), width=200))
         rows = read_truth(truth) if truth.exists() else []
         rec = read_recording(path)
         return {**_figures(scene, leg.seconds, load, out), "world": "ahead" if leg.ahead else "live",
                 "reality": leg.reality, "calibration": str(leg.calibration) if leg.calibration else None,
+                "cores": {"cell": sorted(split.cell), "monitor": sorted(split.monitor)} if split else "shared",
                 **_cpu(cpu, rows), **_stops_at_arm(rows, out.reflex.get("stops_at_arm_ns", [])),
                 **_replayed(rec), **_after_arrival(rec, out.reflex.get("stops", []))}
 

@@ -39,11 +39,12 @@ def _host_busy_s() -> float | None:
 class ProcessCpu:
     """CPU seconds per process of this run, sampled every ``period_s``: ``samples`` of (monotonic ns,
     {key: CPU s}), this process as ``SELF``, the host's busy seconds as ``HOST``, every process started from
-    this one by its pid (named by :meth:`shares` with the name it gave itself last); a process that ended
-    keeps its last figure."""
+    this one by its pid (named by :meth:`shares` with the name it gave itself last; found by a scan of
+    ``/proc`` every ``scan_every`` samples); a process that ended keeps its last figure."""
 
-    def __init__(self, period_s: float = 0.5) -> None:
+    def __init__(self, period_s: float = 0.5, scan_every: int = 4) -> None:
         self.period_s = period_s
+        self.scan_every = scan_every  # samples between two scans of /proc for new processes (tens of ms each)
         self.samples: list[tuple[int, dict[str | int, float]]] = []
         self.names: dict[int, str] = {}  # pid -> its newest name (a spawned process names itself after a while)
         self._last: dict[int, float] = {}
@@ -71,8 +72,9 @@ class ProcessCpu:
         t = os.times()
         now: dict[str | int, float] = {SELF: t.user + t.system}
         if os.path.isdir("/proc"):
-            with contextlib.suppress(OSError):
-                self._children()
+            if len(self.samples) % self.scan_every == 0:
+                with contextlib.suppress(OSError):
+                    self._children()
             for pid in self.names:
                 st = _stat(pid)
                 if st is not None:
@@ -98,16 +100,17 @@ class ProcessCpu:
 
     def shares(self, t0_ns: int, t1_ns: int) -> dict[str, float]:
         """CPU seconds per wall second (1.0: one core) of each process between the first sample at or after
-        ``t0_ns`` and the last at or before ``t1_ns`` (host monotonic ns), by name (two of one name: with
-        their pids); empty when fewer than two samples fall there."""
+        ``t0_ns`` that has it (a process found later: from its first) and the last at or before ``t1_ns`` (host
+        monotonic ns), by name (two of one name: with their pids); empty when fewer than two samples fall there."""
         inside = [s for s in self.samples if t0_ns <= s[0] <= t1_ns]
         if len(inside) < 2:
             return {}
-        (a_t, a), (b_t, b) = inside[0], inside[-1]
-        span = (b_t - a_t) / 1e9
+        b_t, b = inside[-1]
         named = [self.names.get(k, "?") if isinstance(k, int) else k for k in b]
         out = {}
         for key, name in zip(b, named, strict=True):
-            if key in a:
-                out[name if named.count(name) == 1 else f"{name}[{key}]"] = round((b[key] - a[key]) / span, 3)
+            a_t, a = next(s for s in inside if key in s[1])
+            if a_t < b_t:
+                share = (b[key] - a[key]) / ((b_t - a_t) / 1e9)
+                out[name if named.count(name) == 1 else f"{name}[{key}]"] = round(share, 3)
         return out

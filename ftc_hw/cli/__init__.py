@@ -100,6 +100,13 @@ class BenchWorld(StrEnum):
     live = "live"
 
 
+class BenchCores(StrEnum):
+    """Where a real-time leg runs: the simulated cell and the monitor on cores apart, or all on every core."""
+
+    split = "split"
+    shared = "shared"
+
+
 def reality_option(default: RealityChoice, what: str = "") -> Any:
     return typer.Option(help=f"{what}The simulated world: ideal (the model itself), typical or harsh (seeded draws "
                              "of a real arm's, sensor's and shell's differences from the model; docs/reality.md).")
@@ -517,11 +524,15 @@ def bench_pipeline(
     calibration: Annotated[Optional[Path], typer.Option(  # noqa: UP045
         exists=True, dir_okay=False, help="The real-time leg's monitor uses this calibration (ftc identify's of "
                                           "that world; default: the scene's nominal model).")] = None,
+    cores: Annotated[BenchCores, typer.Option(
+        help="The real-time leg's cores: shared, every process on every core; split, the simulated world and its "
+             "emulators on one core and the monitor (its threads, its recorder) on the others, as on a cell whose "
+             "monitor host runs no simulator.")] = BenchCores.shared,
 ) -> None:
     """The pipeline's cost per frame by stage at a sensor rate, and whether it keeps up in real time."""
     from ftc_hw.bench.pipeline import RealtimeLeg, run  # lazy: CLI start-up
 
-    leg = RealtimeLeg(realtime, world is BenchWorld.ahead, reality.value, calibration)
+    leg = RealtimeLeg(realtime, world is BenchWorld.ahead, reality.value, calibration, cores is BenchCores.split)
     run(json_path=json_path, scenes=scene, rate_hz=rate, seconds=seconds, seed=seed, realtime=leg)
 
 

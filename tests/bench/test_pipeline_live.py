@@ -3,10 +3,13 @@ CPU of each process of the run."""
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
+import threading
 import time
 
 import pytest
 
+from ftc_hw.bench.cores import Pinned, core_split
 from ftc_hw.bench.pipeline_live import _stops_at_arm
 from ftc_hw.bench.process_cpu import HOST, SELF, ProcessCpu
 
@@ -52,3 +55,56 @@ def test_the_cpu_of_a_child_process_is_told_apart_by_its_name():
     assert 0.0 < shares["spinner"] <= 1.05
     assert shares[SELF] < 0.3 and 0.0 < shares[HOST] <= 2.0 * (mp.cpu_count() or 1)
     assert cpu.shares(t1 + 100 * 10**9, t1 + 200 * 10**9) == {}  # no samples there
+
+
+def test_a_process_found_after_the_start_has_its_share_from_its_first_sample():
+    cpu = ProcessCpu()
+    cpu.names = {11: "ftc-recorder"}
+    s = 10**9
+    cpu.samples = [(0, {SELF: 1.0}), (2 * s, {SELF: 2.0, 11: 5.0}), (4 * s, {SELF: 3.0, 11: 5.5})]
+    assert cpu.shares(0, 4 * s) == {SELF: 0.5, "ftc-recorder": 0.25}
+
+
+def _named(name: str, seconds: float) -> None:
+    with open("/proc/self/comm", "w") as f:
+        f.write(name)
+    time.sleep(seconds)
+
+
+def _cores_of(pid: int) -> set[frozenset[int]]:
+    """The affinity of each thread of a process."""
+    return {frozenset(os.sched_getaffinity(int(tid))) for tid in os.listdir(f"/proc/{pid}/task")}
+
+
+def _comm(pid: int) -> str:
+    with open(f"/proc/{pid}/comm") as f:
+        return f.read().strip()
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="a host with one core has no cores to split")
+def test_the_cell_runs_on_its_core_and_the_monitor_with_its_threads_and_recorder_on_the_others():
+    split = core_split()
+    assert split is not None and not split.cell & split.monitor
+    before = os.sched_getaffinity(0)
+    ctx = mp.get_context("spawn")
+    cell = ctx.Process(target=_named, args=("ftc-emu-ft", 60.0), daemon=True)
+    recorder = ctx.Process(target=_named, args=("ftc-recorder", 60.0), daemon=True)
+    try:
+        with Pinned(split, period_s=0.05) as pinned:
+            cell.start()
+            recorder.start()
+            late = threading.Thread(target=time.sleep, args=(0.5,))  # a thread started inside: re-pinned too
+            late.start()
+            end = time.monotonic() + 30.0  # a spawned child imports this module first: seconds on a busy host
+            while time.monotonic() < end and [_comm(cell.pid), _comm(recorder.pid)] != ["ftc-emu-ft", "ftc-recorder"]:
+                time.sleep(0.05)
+            time.sleep(0.3)  # a few of the pinning thread's rounds
+            assert _cores_of(cell.pid) == {split.cell}
+            assert _cores_of(recorder.pid) == {split.monitor} and _cores_of(os.getpid()) == {split.monitor}
+            assert pinned.moved >= 3
+            late.join()
+        assert os.sched_getaffinity(0) == before  # given back
+    finally:
+        for p in (cell, recorder):
+            p.terminate()
+            p.join()
