@@ -38,9 +38,19 @@ def translate(line: str) -> tuple[str, bool]:
     return line, False
 
 
+# written through the pipe when the block ends: what came before it has been passed on once the pump reads it
+MARK = b"\x00ftc-vendor-stderr-end\x00"
+MARK_WAIT_S = 2.0
+
+
 @contextmanager
 def vendor_stderr() -> Iterator[VendorStderr]:
-    """Rewrite the vendor lines on file descriptor 2 while the block runs (nothing else changes)."""
+    """Rewrite the vendor lines on file descriptor 2 while the block runs (nothing else changes).
+
+    The block's end does not wait for the pipe to close: the processes started in it (a world, emulators,
+    multiprocessing's resource tracker) hold its write end until they exit, some after this process's last
+    line. It writes a mark through the pipe and waits until the pump has passed on everything before it; the
+    pump then goes on passing on what those processes still write, until they are gone."""
     seen = VendorStderr()
     try:
         saved = os.dup(2)
@@ -49,27 +59,39 @@ def vendor_stderr() -> Iterator[VendorStderr]:
         yield seen
         return
     os.dup2(write_fd, 2)
-    os.close(write_fd)
-    pump = threading.Thread(target=_pump, args=(read_fd, saved, seen), name="vendor-stderr", daemon=True)
+    marked = threading.Event()
+    pump = threading.Thread(target=_pump, args=(read_fd, saved, seen, marked), name="vendor-stderr", daemon=True)
     pump.start()
     try:
         yield seen
     finally:
-        os.dup2(saved, 2)  # the pipe's last writer closes: the pump reads its end and stops
-        pump.join(2.0)
-        os.close(saved)
+        os.dup2(saved, 2)
+        os.write(write_fd, MARK)  # a write to a pipe this short is never split by another writer's
+        os.close(write_fd)
+        marked.wait(MARK_WAIT_S)
 
 
-def _pump(read_fd: int, out_fd: int, seen: VendorStderr) -> None:
+def _pump(read_fd: int, out_fd: int, seen: VendorStderr, marked: threading.Event) -> None:
+    """Pass the pipe's lines on to ``out_fd`` (the real stderr), rewritten, until every writer has closed it."""
     buf = b""
-    with os.fdopen(read_fd, "rb", buffering=0) as src:
+    with os.fdopen(read_fd, "rb", buffering=0) as src, os.fdopen(out_fd, "wb", buffering=0) as out:
         while chunk := src.read(65536):
             buf += chunk
+            if MARK in buf:
+                before, buf = buf.split(MARK, 1)
+                _pass_on(before + b"\n" if before and not before.endswith(b"\n") else before, out, seen)
+                marked.set()
             *lines, buf = buf.split(b"\n")
-            for raw in lines:
-                text, vendor = translate(raw.decode("utf-8", "replace"))
-                if vendor:
-                    seen.counts[text] += 1
-                os.write(out_fd, (text + "\n").encode())
+            _pass_on(b"".join(x + b"\n" for x in lines), out, seen)
         if buf:
-            os.write(out_fd, buf)
+            out.write(buf)
+    marked.set()
+
+
+def _pass_on(text: bytes, out, seen: VendorStderr) -> None:
+    """Whole lines (each ending in a newline), rewritten where a vendor's."""
+    for raw in text.split(b"\n")[:-1]:
+        line, vendor = translate(raw.decode("utf-8", "replace"))
+        if vendor:
+            seen.counts[line] += 1
+        out.write((line + "\n").encode())
