@@ -139,7 +139,9 @@ def test_a_cell_of_ros_drivers_is_monitored_and_a_users_node_receives_every_answ
     # every press that ended before the kill was detected
     before = [e for e in got if e["t_host_ns"] < t_kill_ns]
     ended = [r for r in read_truth(tmp_path / "truth.jsonl") if r["t_host_ns"] < t_kill_ns - 400_000_000]
-    ev = evaluate(before, ended, 1e-3)
+    # the F/T frames' times are the ROS stamps placed on this host's clock (their least delay seen): on a loaded
+    # host that placed a poke's onset 1.4 ms before its first sample was due (CI), outside evaluate's 1 ms
+    ev = evaluate(before, ended, 1e-3, early_s=0.01)
     assert len(ev.contacts) >= 1 and all(c.onsets >= 1 for c in ev.contacts if not c.cut), (ev.contacts, report)
     # the user's node: every event whole and in order, each estimate's marker on its point
     arrived = [r["data"] for r in rx.get("events", [])]
