@@ -110,3 +110,21 @@ def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, cl
     assert {c["link"] for r in truth for c in r["contacts"]} == {truth[first]["contacts"][0]["link"]}, report
     assert truth[last]["t"] < truth[-1]["t"] - 0.4, report
     assert not proc.stderr.count("Traceback"), proc.stderr[-2000:]
+
+
+def test_a_hand_guiding_the_arm_is_not_retreated_from(tmp_path, clean_or_loaded):
+    """``guidance`` (typical world): a hand leads the resting arm by a distal point and the arm yields. The reflex
+    leaves the arm free while the classifier decides, and lets the hand lead it: no retreat, the contacts named
+    guidance. (Held at the onset, the arm fought the hand: its force built as a clamp's and it was retreated from.)"""
+    events = tmp_path / "events.jsonl"
+    proc = subprocess.run([sys.executable, "-m", "ftc_hw", "monitor", "--scene", "dxl-arm", "--sim", "--scenario",
+                           "guidance", "--reality", "typical", "--duration", "6", "--events", str(events),
+                           "--no-view", "--reflex", "retreat"], capture_output=True, text=True, timeout=200)
+    clean_or_loaded(proc.returncode, proc.stdout + proc.stderr)
+    said = " ".join(proc.stdout.split())
+    got = read_events(events)
+    onsets, offsets = [e for e in got if e["kind"] == "onset"], [e for e in got if e["kind"] == "offset"]
+    assert len(onsets) == len(offsets) >= 1, said[-3000:]  # the hand at 0.5 s (the scenario spreads its hands)
+    assert "reflex retreat: contact" not in said, said[-3000:]
+    assert f"reflex retreat: {len(onsets)} guided contact(s) not retreated from" in said, said[-3000:]
+    assert all(e["intent"] == "guidance" for e in offsets), [(e["contact_class"], e["intent"]) for e in offsets]

@@ -74,10 +74,16 @@ class RetreatSettings:
     trigger: str = "onset"  # or "exceedance": a contact's force past its body region's limit (docs/limits.md)
     # a contact whose guidance probability exceeds this is not retreated from (the classifier's, if any)
     guided_above: float = 0.5
-    # at an onset the classifier may not know yet whether a hand guides the arm: the reflex then holds the arm
-    # where it is and decides at the contact's first event whose intent is known, or this long after the onset
-    # at the latest (ESTIMATE: the classifier's onset window, 60 ms; an impact is known at once, docs/contacts.md)
-    decide_s: float = 0.06
+    # at an onset the classifier may not know yet whether a hand guides the arm. An arm that moves (faster than
+    # moving_above_m_s) or pushes into the contact (faster than pushing_above_m_s against its force: a slow press,
+    # a clamp) is then held where it is, and the retreat decided once two events in a row name the intent, or
+    # this long after the onset at the latest; an arm at rest is left free (held, it would fight a hand, whose
+    # force then builds as a clamp's) and decided on the contact's newest event this long after the onset (or at
+    # its offset). ESTIMATE: a hand is told by its force's slow rise (RISE_S, 0.25 s) and the arm yielding to it
+    # (judged from 0.25 s): live, the guidance scenario's hands were named 0.38-0.44 s after their onset
+    # (docs/contacts.md); at rest the arm pushes on nothing meanwhile
+    decide_s: float = 1.0
+    pushing_above_m_s: float = 0.01  # ESTIMATE: above a DYNAMIXEL's velocity step at a 0.3 m lever (0.007 m/s)
     # a touched point faster than this (m/s) ran into what it touched and goes back the way it came
     # (ESTIMATE: ten times what the joints' holding error moves a point)
     moving_above_m_s: float = 0.05

@@ -2,6 +2,7 @@
 touched point back along the contact's force (``--reflex retreat``), unless the contact is guided."""
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -144,6 +145,8 @@ class RetreatReflex:
         self._force_sum: dict[int, np.ndarray] = {}  # per contact id: its estimates' forces added (N)
         self._planned: set[int] = set()  # contact ids whose retreat is planned (their later estimates unused)
         self._newest: dict[int, ContactEvent] = {}  # per recent contact id: its newest event (its class so far)
+        # per recent contact id: its newest event names the intent the one before it named (or closes it)
+        self._settled: dict[int, bool] = {}
         self._news = threading.Event()  # a contact event came (a held retreat's decision may be due)
         self._busy = False
         self._wake = threading.Event()
@@ -156,8 +159,12 @@ class RetreatReflex:
 
     def _on_event(self, ev: Any) -> None:
         if isinstance(ev, ContactEvent):
+            prior = self._newest.get(ev.contact_id)
+            self._settled[ev.contact_id] = ev.kind == "offset" or (
+                intent_known(ev) and prior is not None and getattr(prior, "intent", "") == getattr(ev, "intent", ""))
             self._newest[ev.contact_id] = ev
             if len(self._newest) > 64:
+                self._settled.pop(next(iter(self._newest)), None)
                 self._newest.pop(next(iter(self._newest)))
             self._news.set()
         if isinstance(ev, ContactEvent) and ev.kind != "offset" and ev.contact_id not in self._planned:
@@ -211,15 +218,25 @@ class RetreatReflex:
         if frame is None:
             raise RetreatError(f"no joint state on {self.joints_topic}")
         # first a setpoint where the arm is: it brakes while the retreat is decided and planned (milliseconds,
-        # more on a loaded host), as the stop reflex would
-        self.arm.servo(frame.q)
+        # more on a loaded host), as the stop reflex would; a still arm whose contact's intent is not known yet
+        # is left free until it is (a hand may be leading it: held, it would fight the hand)
+        speed, into = self._point_motion(frame, ev)
+        held = intent_known(ev) or speed > self.settings.moving_above_m_s or into > self.settings.pushing_above_m_s
+        if held:
+            self.arm.servo(frame.q)
         t_first = time.monotonic_ns()
-        decided = self._decide(ev)
-        if not self.should_retreat(decided):  # a hand guides it: let go, the arm follows the hand again
-            self.arm.end_servo()
+        decided = self._decide(ev, early=held)
+        if not self.should_retreat(decided):  # a hand guides it: let go (or leave it), the arm follows the hand
+            if held:
+                self.arm.end_servo()
             self.not_fought.append({"onset_t_host_ns": ev.t_host_ns, "contact_id": ev.contact_id,
-                                    "guidance": self.guidance(decided), "held_ms": (time.monotonic_ns() - t0) / 1e6})
+                                    "guidance": self.guidance(decided), "held": held,
+                                    "waited_ms": (time.monotonic_ns() - t0) / 1e6})
             return None
+        if not held:  # decided an accident: the arm is held from where it is now
+            frame = self.bus.latest(self.joints_topic) or frame
+            self.arm.servo(frame.q)
+            t_first = time.monotonic_ns()
         # the path starts at the setpoint that holds the arm, not where the arm is now: braking, it goes on past
         # that setpoint and comes back to it meanwhile, and a path from a measured position it has already
         # left behind would first send it forward again, into what it touched (seen on a loaded host: 70 ms
@@ -243,6 +260,20 @@ class RetreatReflex:
                 "direction": path.direction.tolist(), "direction_from": why, "clipped": path.clipped,
                 "within_time_limit": path.within(self.settings.time_limit_s), "short": short}
 
+    def _point_motion(self, frame: Any, ev: ContactEvent) -> tuple[float, float]:
+        """The touched point's speed (m/s) at ``frame``'s joints, and its speed into the contact (against the
+        estimated force on the arm: positive when the arm pushes on what it touches); 0 where unknown."""
+        try:
+            jac = self.model.jacobian(np.asarray(frame.q, dtype=float), ev.link, np.asarray(ev.point, dtype=float))
+            v = jac @ np.asarray(frame.qd, dtype=float)
+        except (KeyError, ValueError):
+            return 0.0, 0.0
+        f = np.asarray(ev.force, dtype=float)
+        norm = float(np.linalg.norm(f))
+        into = float(-(v @ f) / norm) if norm > 1e-9 else 0.0
+        speed = float(np.linalg.norm(v))
+        return (speed if math.isfinite(speed) else 0.0), (into if math.isfinite(into) else 0.0)
+
     def _say_short(self, ev: ContactEvent, path: RetreatPath) -> str:
         """A retreat that moves some point the contact may be at less than the distance (cut to the time
         limit, the path's length cap, a joint range) is said on the bus (a ``retreat_short`` device event)
@@ -262,22 +293,28 @@ class RetreatReflex:
              "duration_s": path.duration_s, "needed_s": path.needed_s, "time_cut": float(path.time_cut)}))
         return msg
 
-    def _decide(self, ev: ContactEvent) -> ContactEvent:
-        """The contact's newest event once its intent is known (:func:`intent_known`), or at ``decide_s`` after
-        its onset sample at the latest."""
+    def _decide(self, ev: ContactEvent, *, early: bool = True) -> ContactEvent:
+        """``ev`` when it names the contact's intent (an arm moving into it: an impact at once), else the contact's
+        newest event at ``decide_s`` after its onset sample, or once it has closed, or (``early``: a held arm) once
+        two events in a row name the same intent. A still arm is not decided early: the classifier cannot tell a
+        hand from a clamp until the arm has had time to yield to it (live, a hand-guided arm yielded at 0.015 m/s
+        for its first 0.4 s and the classifier named it an impact for three updates, then guidance at 0.44 s),
+        and the arm left free meanwhile pushes on nothing; on a held arm the guidance probability can cross a
+        bound for one update as a hand's force builds (seen at 0.32 s: "impact" between "unknown"s)."""
+        if intent_known(ev):
+            return ev
         deadline = ev.t_host_ns + int(self.settings.decide_s * 1e9)
-        newest = self._newest.get(ev.contact_id, ev)
-        while not intent_known(newest) and not self._quit.is_set():
+        cid = ev.contact_id
+        while not self._quit.is_set():
+            self._news.clear()  # before the look: an event that comes after it sets it again
+            newest = self._newest.get(cid, ev)
+            if newest.kind == "offset" or (early and self._settled.get(cid, False)):
+                break
             remaining = (deadline - time.monotonic_ns()) / 1e9
             if remaining <= 0:
                 break
-            self._news.clear()
-            newest = self._newest.get(ev.contact_id, ev)  # again: one may have come before the clear
-            if intent_known(newest):
-                break
             self._news.wait(remaining)
-            newest = self._newest.get(ev.contact_id, ev)
-        return newest
+        return self._newest.get(cid, ev)
 
     def _plan(self, ev: ContactEvent, frame: Any, at: ContactEvent) -> tuple[np.ndarray, str, RetreatPath]:
         """The direction, why that one, and the path, from the setpoint holding the arm (``frame``) and the
