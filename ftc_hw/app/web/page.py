@@ -47,6 +47,15 @@ def _fmt_mm(v) -> str:
 
 
 
+def _hidden_shapes(size_m: float) -> dict[str, Any]:
+    """A contact entity's shapes at the base's origin, ``size_m`` across (the base's sphere hides them)."""
+    at = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0}}
+    rgba = {"r": 0.9, "g": 0.2, "b": 0.1}
+    return {"spheres": [{"pose": at, "size": {"x": size_m, "y": size_m, "z": size_m}, "color": {**rgba, "a": 0.3}}],
+            "arrows": [{"pose": at, "shaft_length": size_m / 2, "shaft_diameter": size_m / 8,
+                        "head_length": size_m / 4, "head_diameter": size_m / 4, "color": {**rgba, "a": 1.0}}]}
+
+
 def _limits_md(c: dict[str, Any] | None) -> str:
     """An event's margin to its body region's limit (docs/limits.md), or nothing."""
     if not c:
@@ -89,6 +98,10 @@ class Page:
         scene.add_label(f"/arm/{setup['sensor_link']}/sensor/label", "sensor", anchor="bottom-center")
         scene.add_icosphere("/base", radius=0.01 * reach, color=(90, 90, 90), subdivisions=2, flat_shading=True,
                             cast_shadow=False, receive_shadow=False)
+        # and a contact's other shapes (its see-through ellipsoid, its force arrow), drawn once inside that sphere:
+        # a browser that renders in software compiles their shaders in seconds (a CI run's first contact showed
+        # 3.4 s after its onset, the next ones 0.15-0.45 s), at load rather than when the first contact comes
+        DrawnEntity(scene, "/base/shapes").draw(_hidden_shapes(0.004 * reach))
         self.status = gui.add_markdown(f"**{setup['title']}**")
         self.contact_md = gui.add_markdown("contact: none yet")
         self.events_md = gui.add_markdown("")
