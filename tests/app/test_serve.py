@@ -122,11 +122,14 @@ def test_a_monitor_on_another_endpoint_takes_the_frames_and_sends_its_events_bac
             onsets = [e for e in written if e["kind"] == "onset"]
             assert len(onsets) >= 1 and "'foreign': 0, 'corrupt': 0" in out, out[-2000:]
             # the reflex across the process boundary: each onset to the arm's reader, which stopped the arm
-            # and said so on the bus (its latency from the onset sample, one host's clock)
+            # and said so on the bus (its latency from the onset sample, one host's clock); a provisional onset the
+            # confirmed judgement did not follow stopped it too (counted, said: a loaded host's CI run had one)
+            unconfirmed = re.search(r"'provisional_unconfirmed': (\d+)", " ".join(out.split()))
+            stops = len(onsets) + (int(unconfirmed.group(1)) if unconfirmed else 0)
             said = re.search(r"the arm's reader process stopped it (\d+)x, ([0-9.]+)-([0-9.]+) ms after the onset", out)
-            assert said and int(said.group(1)) == len(onsets), out[-3000:]
+            assert said and int(said.group(1)) == stops, out[-3000:]
             stopped = [e for e in watcher.history(EVENTS_DEVICE) if e.kind == "stopped"]
-            assert len(stopped) == len(onsets) and all(e.source == "arm" for e in stopped)
+            assert len(stopped) == stops and all(e.source == "arm" for e in stopped)
             assert all(0 < e.counters["sent_after_onset_ms"] < 100 for e in stopped), [e.counters for e in stopped]
             time.sleep(0.3)
             seen = watcher.history("events/contact")
