@@ -105,9 +105,13 @@ class EmulatorProcess:
     def alive(self) -> bool:
         return self.process.is_alive()
 
-    def stop(self, timeout: float = 5.0) -> None:
+    def ask_to_stop(self) -> None:
+        """SIGTERM, not waited for (:meth:`stop` waits)."""
         if self.process.is_alive():
             self.process.terminate()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self.ask_to_stop()
         self.process.join(timeout)
         if self.process.is_alive():
             self.process.kill()
