@@ -15,7 +15,8 @@ import contextlib
 import os
 import threading
 from dataclasses import dataclass
-from pathlib import Path
+
+from .process_cpu import descendants
 
 CELL_PREFIXES = ("ftc-world", "ftc-emu-")
 
@@ -35,25 +36,6 @@ def core_split() -> CoreSplit | None:
     if len(cpus) < 2:
         return None
     return CoreSplit(frozenset(cpus[:1]), frozenset(cpus[1:]))
-
-
-def _children() -> dict[int, str]:
-    """Every process started from this one (at any depth): pid -> its name now."""
-    parents, names = {}, {}
-    for entry in os.scandir("/proc"):
-        if not entry.name.isdigit():
-            continue
-        with contextlib.suppress(OSError, ValueError, IndexError):
-            text = Path(f"/proc/{entry.name}/stat").read_text()
-            pid = int(entry.name)
-            names[pid] = text[text.index("(") + 1:text.rindex(")")]
-            parents[pid] = int(text[text.rindex(")") + 2:].split()[1])
-    ours, grew = {os.getpid()}, True
-    while grew:
-        new = {p for p, pp in parents.items() if pp in ours and p not in ours}
-        ours |= new
-        grew = bool(new)
-    return {p: names[p] for p in ours - {os.getpid()}}
 
 
 def _pin(pid: int, cpus: frozenset[int]) -> int:
@@ -81,7 +63,7 @@ class Pinned:
 
     def pin_now(self) -> None:
         self.moved += _pin(os.getpid(), self.split.monitor)
-        for pid, name in _children().items():
+        for pid, name in descendants().items():
             self.moved += _pin(pid, self.split.cell if name.startswith(CELL_PREFIXES) else self.split.monitor)
 
     def _run(self) -> None:

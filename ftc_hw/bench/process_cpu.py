@@ -27,6 +27,22 @@ def _stat(pid: int) -> tuple[str, int, float] | None:
     return name, int(rest[1]), (int(rest[11]) + int(rest[12])) / CLOCK_TICKS  # state ppid ... utime stime
 
 
+def descendants() -> dict[int, str]:
+    """Every process started from this one, at any depth (a scan of ``/proc``): pid -> its name now."""
+    stats: dict[int, tuple[str, int]] = {}
+    for entry in os.scandir("/proc"):
+        if entry.name.isdigit():
+            st = _stat(int(entry.name))
+            if st is not None:
+                stats[int(entry.name)] = st[:2]
+    ours, grew = {os.getpid()}, True
+    while grew:
+        new = {p for p, (_, pp) in stats.items() if pp in ours and p not in ours}
+        ours |= new
+        grew = bool(new)
+    return {p: stats[p][0] for p in ours - {os.getpid()}}
+
+
 def _host_busy_s() -> float | None:
     """The host's busy CPU seconds so far (every core: all but idle and iowait), from ``/proc/stat``."""
     try:
@@ -52,20 +68,8 @@ class ProcessCpu:
         self._thread = threading.Thread(target=self._run, name="bench-cpu", daemon=True)
 
     def _children(self) -> None:
-        """Find the processes started from this one since the last look (a scan of ``/proc``)."""
-        parents: dict[int, int] = {}
-        for entry in os.scandir("/proc"):
-            if entry.name.isdigit():
-                st = _stat(int(entry.name))
-                if st is not None:
-                    parents[int(entry.name)] = st[1]
-        ours = {os.getpid()}
-        grew = True
-        while grew:
-            new = {p for p, pp in parents.items() if pp in ours and p not in ours}
-            ours |= new
-            grew = bool(new)
-        for pid in ours - {os.getpid()}:
+        """Find the processes started from this one since the last look."""
+        for pid in descendants():
             self.names.setdefault(pid, "?")
 
     def _sample(self) -> None:
