@@ -162,6 +162,9 @@ class StatsFile:
 
 
 def _raise_exit(signum: int, frame: object) -> None:
+    """The first SIGTERM ends the serving loop; any later one is ignored: raised again while the process
+    runs its exit handlers it would print a traceback there (and on the monitor's stderr)."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise SystemExit(0)
 
 

@@ -85,6 +85,7 @@ class EmulatorProcess:
     process: Any
     endpoint: dict[str, Any] = field(default_factory=dict)
     started_s: float = 0.0  # from launch to ready
+    asked_to_stop: bool = False
 
     @staticmethod
     def launch(device: DeviceSpec, scene: Scene, link: LinkInfo, options: dict | None = None) -> Launched:
@@ -106,9 +107,10 @@ class EmulatorProcess:
         return self.process.is_alive()
 
     def ask_to_stop(self) -> None:
-        """SIGTERM, not waited for (:meth:`stop` waits)."""
-        if self.process.is_alive():
+        """SIGTERM once, not waited for (:meth:`stop` waits)."""
+        if not self.asked_to_stop and self.process.is_alive():
             self.process.terminate()
+            self.asked_to_stop = True
 
     def stop(self, timeout: float = 5.0) -> None:
         self.ask_to_stop()

@@ -6,8 +6,8 @@ own process, the world in another. Ideal world (the pipeline's own model): the r
 ``sweep-with-collision``: the sweep meets its obstacle at about 1.74-1.80 s; 2.6 simulated seconds leave
 the retreat and 0.6 s after it. Judged by the world's truth: the contact force below 5 N within 150 ms of
 the onset sample, the true touched point (the truth's, on its link; the onset's estimate is centimetres off)
-moved back at least the configured distance along the retreat, and no contact after the retreated one ended
-(the retreat caused none).
+moved back at least the configured distance along the retreat, and no contact the retreat caused (only the
+one obstacle, on the touched link, and it touching again after a gap only lightly: it springs back after the arm).
 """
 from __future__ import annotations
 
@@ -105,9 +105,18 @@ def test_retreat_frees_the_contact_through_the_arms_protocol(tmp_path, scene, cl
         assert not short, (short, report)
     assert moved >= DISTANCE_M - 5e-4, report
     assert moved_true >= 0.7 * DISTANCE_M, report  # along the true force: the retreat's direction is an estimate
-    # one contact, ended well before the run's end, and none after it (the retreat caused none)
-    assert all(truth[i]["contacts"] for i in range(first, last + 1)), report
-    assert {c["link"] for r in truth for c in r["contacts"]} == {truth[first]["contacts"][0]["link"]}, report
+    # one contact, ended well before the run's end (and within the time limit, above), and none the retreat caused:
+    # on one link, with one obstacle. It may break and touch again while the obstacle -- a sphere on a critically
+    # damped spring, pushed in while the reflex took over -- springs back after the arm (seen when the hold came
+    # 39 ms after the onset, the arm 17 mm further in: free 52 ms, then 2.5 N for 8 ms); that touch stays light
+    touched = truth[first]["contacts"][0]
+    assert {(c["link"], c["source"]) for r in truth for c in r["contacts"]} == {(touched["link"], touched["source"])}, \
+        report
+    gap = next((i for i in range(first, last + 1) if not truth[i]["contacts"]), None)
+    if gap is not None:
+        again = max(_force(r) for r in truth[gap:last + 1])
+        print(f"the obstacle touched again after {gap - first} samples, at most {again:.1f} N")
+        assert again < FORCE_N, report
     assert truth[last]["t"] < truth[-1]["t"] - 0.4, report
     assert not proc.stderr.count("Traceback"), proc.stderr[-2000:]
 
