@@ -302,10 +302,10 @@ class URArm(ArmAdapter):
             _retire(io)
         if self._rtde is not None:
             rtde, self._rtde = self._rtde, None
-            if rtde.isConnected() and not self._stale:
-                rtde.disconnect()  # sleeps 0.5 s inside ur_rtde
-            elif rtde.isConnected():
+            if rtde.isConnected() and self._stale:
                 _retire(rtde)  # hung: its disconnect takes seconds
+            # else dropped here: ur_rtde's destructor disconnects (sleeping 0.5 s inside); disconnect() before
+            # it would sleep that 0.5 s twice
 
     # -- the reader loop ----------------------------------------------------------------------------------
     def _read_once(self) -> None:

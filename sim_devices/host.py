@@ -54,6 +54,7 @@ from ftc_hw.priority import name_process
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
 from .ahead import AheadError, AheadRunner, AheadSpan, TruthPlayer
+from .launch import end_process
 from .link import FT_WIDTH, Command, JointRecord, NoFTRingError, Ring, RingReader
 from .played import PlayedRing
 from .runner import AppliedCommand, SimRunner
@@ -319,6 +320,7 @@ def _main(conn: Any, plan: _Plan) -> None:
         pass
     finally:
         runner.stop()
+    end_process()  # the truth file closed, the report sent, the emulators ended and the rings unlinked
 
 
 def _device_specs(scene: Scene, devices: Iterable[str | DeviceSpec] | None) -> tuple[DeviceSpec, ...]:
