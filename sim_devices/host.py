@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import multiprocessing as mp
 import os
 import random
@@ -383,16 +384,27 @@ class WorldHost:
         self.result: dict[str, Any] | None = None
         self._pipe_lock = threading.RLock()
         self.startup_s: dict[str, float] = {}  # seconds to build the world ("world"), to start each emulator
+        self.up_since = math.nan  # time.monotonic() when it was up: its pre-roll runs from then
 
     # -- lifecycle ---------------------------------------------------------------------------------------
     def start(self, timeout: float = START_TIMEOUT_S) -> dict[str, dict[str, Any]]:
         """Start the world and its emulators; returns the endpoints by device name."""
+        self.launch()
+        return self.wait_started(timeout)
+
+    def launch(self) -> None:
+        """Start the world's process, which builds the world and starts the emulators, and return at once: the
+        caller does its own set-up meanwhile (on another core), then :meth:`wait_started`."""
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         # not a daemon: it starts the emulator processes; it quits when our end of the pipe closes
         self._proc = ctx.Process(target=_main, args=(child, self._plan), name=f"ftc-world:{self.scene.name}")
         self._proc.start()
         child.close()
+
+    def wait_started(self, timeout: float = START_TIMEOUT_S) -> dict[str, dict[str, Any]]:
+        """Until the launched world is up (WorldHostError when it fails or ``timeout`` s pass without a word from
+        it); the endpoints by device name."""
         try:
             kind, info = self._recv(timeout)
             while kind == "progress":  # a world computed ahead: the timeout runs from its last word
@@ -417,6 +429,7 @@ class WorldHost:
                 self._rings["ft"] = Ring(FT_WIDTH, name=info["ft_ring"], create=False)
         self.sample_period_s = info["sample_period_s"]
         self.startup_s = info["startup_s"]
+        self.up_since = time.monotonic()
         return self.endpoints
 
     def close(self) -> None:

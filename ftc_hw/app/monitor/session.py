@@ -216,9 +216,10 @@ def _stop_on_sigterm(stack: contextlib.ExitStack) -> None:
         stack.callback(signal.signal, signal.SIGTERM, previous)
 
 
-def _start_world(cfg: MonitorOptions, console: Console, scene: Scene, stack: contextlib.ExitStack
-                 ) -> tuple[WorldHost, Path]:
-    """The scene's world and emulators, holding the scenario's start pose until ``go()``; the truth file."""
+def _launch_world(cfg: MonitorOptions, console: Console, scene: Scene, stack: contextlib.ExitStack
+                  ) -> tuple[WorldHost, Path]:
+    """The scene's world and emulators launched (:func:`_world_up` waits for them), to hold the scenario's start
+    pose until ``go()``; the truth file."""
     world_options = cfg.world
     truth_path = world_options.truth
     if truth_path is None:
@@ -234,18 +235,22 @@ def _start_world(cfg: MonitorOptions, console: Console, scene: Scene, stack: con
     console.print(f"starting the world (MuJoCo, reality [cyan]{world_options.reality}[/]) and the emulated devices of "
                   f"[cyan]{scene.name}[/] "
                   f"({', '.join(f'{d.name}: {d.kind}' for d in scene.devices)}) ...")
-    t0 = time.monotonic()
+    world.launch()
+    stack.callback(world.close)
+    return world, truth_path
+
+
+def _world_up(console: Console, world: WorldHost, t0: float) -> None:
+    """Until the launched world and its emulators are up (launched at ``t0``, monotonic s)."""
     try:
-        world.start()
+        world.wait_started()
     except Exception as exc:  # noqa: BLE001 - emulator start failures carry their reason
         raise MonitorSetupError(str(exc)) from None
-    stack.callback(world.close)
     took = world.startup_s
     ahead = f", computed ahead in {took['ahead']:.1f} s" if "ahead" in took else ""
     console.print(f"world up in {time.monotonic() - t0:.1f} s (built in {took.get('world', 0.0):.1f} s{ahead}); "
                   "emulators up: "
                   + ", ".join(f"{n} ({e['kind']}) {took.get(n, 0.0):.1f} s" for n, e in world.endpoints.items()))
-    return world, truth_path
 
 
 def _progress(console: Console, every_s: float = 5.0):
@@ -294,8 +299,9 @@ def _start_recorder(cfg: MonitorOptions, scene: Scene, bus: Bus, monitor_meta: d
 
 
 def _tare_then_go(cfg: MonitorOptions, monitor: LiveMonitor, world: WorldHost) -> None:
-    """The world's pre-roll starts from a posed state: let the arm settle, tare at rest, start the scenario."""
-    time.sleep(SETTLE_S)
+    """The world's pre-roll starts from a posed state: let the arm settle (SETTLE_S from when the world was up),
+    tare at rest, start the scenario."""
+    time.sleep(max(0.0, SETTLE_S - (time.monotonic() - world.up_since)))
     monitor.start()
     end = time.monotonic() + cfg.connect_timeout_s
     while not monitor.tared and time.monotonic() < end:
@@ -370,15 +376,19 @@ def _start(cfg: MonitorOptions, console: Console, scene: Scene, ft_dev: DeviceSp
     bus = Bus()
     # first: ROS discovery (up to ~2 s) runs while the world starts, so subscribers match before the first frame
     ros = _start_ros(cfg, console, scene, bus, stack) if cfg.ros_namespace is not None else None
-    world, truth_path = _start_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.world.truth)
-    try:
-        plan = FaultPlan(faults, world, bus) if faults and world is not None else None
-    except FaultError as exc:
-        raise MonitorSetupError(str(exc)) from None
+    # the world is built in its process while this one loads the pipeline (each ~1 s with a scene's meshes)
+    t_world = time.monotonic()
+    world, truth_path = _launch_world(cfg, console, scene, stack) if cfg.sim else (None, cfg.world.truth)
     ft_name, arm_name = ft_dev.name if ft_dev is not None else "ft", arm_dev.name if arm_dev is not None else "arm"
     topics = [wrench_topic(ft_name), joints_topic(arm_name), MONITOR_INPUT]  # no frames on the first: no F/T
     ev_sub = bus.subscribe("events/", maxsize=None)
     monitor, recorder = _start_monitor(cfg, console, scene, bus, ft_name, arm_name, corrections, cal_meta, stack)
+    if world is not None:
+        _world_up(console, world, t_world)
+    try:
+        plan = FaultPlan(faults, world, bus) if faults and world is not None else None
+    except FaultError as exc:
+        raise MonitorSetupError(str(exc)) from None
     events_file = stack.enter_context(open(cfg.events, "w", encoding="utf-8")) if cfg.events else None  # noqa: SIM115 - the stack closes it
     writer = EventWriter(events_file) if events_file is not None else None
     if world is None:
