@@ -5,6 +5,9 @@ mistyped option answer at once, without loading MuJoCo, numba kernels and the de
 """
 from __future__ import annotations
 
+import atexit
+import os
+import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, Optional
@@ -891,10 +894,6 @@ def end_process(code: int | str | None) -> None:
     Python's teardown of every module: unloading MuJoCo, numba, Zenoh and the rest took 0.45 s after each
     command's last line (measured), which scripts and the test suite waited for. Every file the command
     writes is closed by then (the commands close their own); the handlers end child processes and logging."""
-    import atexit
-    import os
-    import sys
-
     if isinstance(code, str):
         print(code, file=sys.stderr)
         code = 1

@@ -5,7 +5,11 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from ftc_hw.sim_devices.launch import EmulatorProcess
+
+pytestmark = pytest.mark.compute  # a process signalled, a process object faked: no clock
 
 SIGNALLED_TWICE = """
 import atexit, os, signal, time
