@@ -29,7 +29,7 @@ class Topic:
 
 
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
-EXTERNAL_WRENCH = Topic("external_wrench", WRENCH_STAMPED, depth=1000)  # 1 s at 1 kHz: none lost to a slow reader
+EXTERNAL_WRENCH = Topic("external_wrench", WRENCH_STAMPED, depth=5000)  # docs/ros.md: the repair of a lost sample
 CONTACT_WRENCH = Topic("contact_wrench", WRENCH_STAMPED, depth=1, latched=True)
 CONTACT_POSE = Topic("contact_pose", "geometry_msgs/msg/PoseStamped", depth=1, latched=True)
 MARKERS = Topic("contact_markers", "visualization_msgs/msg/MarkerArray", depth=1, latched=True)
