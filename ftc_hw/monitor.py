@@ -271,8 +271,13 @@ class LiveMonitor:
         self._received(self._driving, pending[-len(batch)][1])  # back (after a loss) from the first
 
     def judge_ready(self, pending: deque, now: float) -> None:
-        """Every pending frame whose side state is there (or that waited ``wait_s`` by ``now``, monotonic s)."""
+        """Every pending frame whose side state is there (or that waited ``wait_s`` by ``now``, monotonic s); with
+        provisional judgement, only until a new driving frame is waiting: it is taken (and judged provisionally)
+        first. A host that cannot keep up builds a backlog of confirmed judgements, and a provisional onset
+        queued behind it came that late: a stop's p99 of 21 ms at 1 kHz with 13,703 frames judged over 50 ms
+        after they arrived (ur5e, 60 s)."""
         side = self.side
+        yield_to_new = self.provisional is not None
         backlog = "ft_frames_backlog" if self.driver == "ft" else "joint_frames_backlog"
         while pending:
             arrived, t, frame = pending[0]
@@ -290,6 +295,8 @@ class LiveMonitor:
             except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the monitor
                 self.counters["errors"] += 1
                 self.counters[f"error:{type(exc).__name__}"] += 1
+            if yield_to_new and self.backlog():
+                return
 
     # -- lost streams (the worker's thread; the side stream's callback only notes the time) --------------
     def _received(self, stream: str, t_frame: int) -> None:

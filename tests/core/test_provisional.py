@@ -137,3 +137,23 @@ def test_an_unconfirmed_provisional_onset_gives_its_event():
     assert not [e for e in contact.drain() if e.kind == "onset"]  # the pipeline saw no contact
     assert monitor.counters["provisional_unconfirmed"] == monitor.counters["provisional_onsets"] >= 1
     assert monitor.counters["provisional_frames"] > 600  # from 1 s of motion on
+
+
+def test_confirmed_judgements_yield_to_a_new_frame_waiting_for_its_provisional_one():
+    """A backlog of frames ready for their confirmed judgement is worked off one frame at a time while a new
+    driving frame waits to be taken (and judged provisionally at once): the reflex's onset never queues behind
+    the backlog."""
+    bus = Bus()
+    monitor = LiveMonitor(bus, SCENE, tare_s=None, publish_inputs=False, settings=settings(level="dynamics"))
+    pending: deque = deque()
+    for k in range(60):  # 500 Hz joint state at rest past every frame below
+        monitor.on_joints(JointFrame.make(k * 2 * MS, HOME, np.zeros(6), np.zeros(6), source="arm", seq=k))
+    raw = ArmModel(SCENE).arm_loads(HOME, np.zeros(6), np.zeros(6), "dynamics")[0]
+    monitor.take(pending, [WrenchFrame.make(i * MS, raw, source="ft", seq=i) for i in range(10)], 0.0)
+    monitor.backlog = lambda: 1  # a new frame waits in the subscription
+    monitor.judge_ready(pending, 0.0)
+    assert len(pending) == 9
+    monitor.backlog = lambda: 0
+    monitor.judge_ready(pending, 0.0)
+    assert not pending
+    assert monitor.counters["frames"] == 10
