@@ -139,10 +139,11 @@ def test_an_unconfirmed_provisional_onset_gives_its_event():
     assert monitor.counters["provisional_frames"] > 600  # from 1 s of motion on
 
 
-def test_confirmed_judgements_yield_to_a_new_frame_waiting_for_its_provisional_one():
-    """A backlog of frames ready for their confirmed judgement is worked off one frame at a time while a new
-    driving frame waits to be taken (and judged provisionally at once): the reflex's onset never queues behind
-    the backlog."""
+def test_confirmed_judgements_yield_to_a_new_frame_waiting_for_its_provisional_one(monkeypatch):
+    """A backlog of frames ready for their confirmed judgement is worked off for at most YIELD_AFTER_NS while a
+    new driving frame waits to be taken (and judged provisionally at once): the reflex's onset does not queue
+    behind the backlog."""
+    monkeypatch.setattr("ftc_hw.monitor.YIELD_AFTER_NS", 0)  # the budget spent after the first frame
     bus = Bus()
     monitor = LiveMonitor(bus, SCENE, tare_s=None, publish_inputs=False, settings=settings(level="dynamics"))
     pending: deque = deque()
@@ -153,7 +154,7 @@ def test_confirmed_judgements_yield_to_a_new_frame_waiting_for_its_provisional_o
     monitor.backlog = lambda: 1  # a new frame waits in the subscription
     monitor.judge_ready(pending, 0.0)
     assert len(pending) == 9
-    monitor.backlog = lambda: 0
+    monkeypatch.setattr("ftc_hw.monitor.YIELD_AFTER_NS", 10**12)  # within the budget: every ready frame
     monitor.judge_ready(pending, 0.0)
     assert not pending
     assert monitor.counters["frames"] == 10
