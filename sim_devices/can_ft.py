@@ -103,6 +103,9 @@ class CanFTEmulator(FTEmulator):
                 self.extra_stats["bad_requests"] += 1
                 continue
             self.extra_stats["requests"] += 1
+            if op in (OP_READ, OP_BIAS) and self.last is None:  # asked before the pacing loop took a sample
+                recs = self.new_samples()
+                self.last = recs[-1] if len(recs) else None
             if op in (OP_START, OP_STOP):
                 self.streaming = op == OP_START
                 self._last_n = None  # samples outside a stream are not missing

@@ -2,6 +2,8 @@
 pty, and the virtual interface in-process."""
 from __future__ import annotations
 
+import dataclasses
+
 import can
 import numpy as np
 import pytest
@@ -139,3 +141,20 @@ def test_the_init_bias_request_biases_what_follows_and_other_opcodes_are_counted
         assert np.allclose(one_sample(), 0.0, atol=1e-9)
     assert wait_for(lambda: ft_sim.read_stats(emu).get("requests") == 3, 5.0)  # the stats file lags 0.1 s
     assert ft_sim.read_stats(emu)["bad_requests"] == 2
+
+
+def test_a_read_request_before_the_emulators_first_tick_is_answered(ft_sim):
+    """A request that comes before the emulator's pacing loop has taken its first sample from the world (a client
+    that asks at once on a loaded host; here the loop's first tick is 2 s away) gets the world's newest sample,
+    not silence."""
+    held = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3])
+    scene, spec = ft_sim.device("ur5e", "ft-can")
+    slow = dataclasses.replace(scene, sensor=dataclasses.replace(scene.sensor, rate_hz=0.5))
+    world = ft_sim.world(1000.0, n_joints=6, fn=lambda k: held)
+    emu = ft_sim.start_emulator(spec, slow, world)
+    codec = NetFTCodec(spec.params.get("dbc", "ati_netft_can.dbc"), int(spec.params.get("base_id", 8)))
+    with can.Bus(interface="serial", channel=emu.endpoint["channel"], bitrate=1_000_000) as sensor:
+        arb_id, data = codec.encode_request(OP_READ)
+        sensor.send(can.Message(arbitration_id=arb_id, data=data, is_extended_id=False))
+        msg = sensor.recv(timeout=1.0)
+    assert msg is not None and codec.decode(msg.arbitration_id, bytes(msg.data)) is not None
