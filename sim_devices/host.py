@@ -51,11 +51,10 @@ import numpy as np
 
 from ftc_hw.model import Payload, sample_rate_hz
 from ftc_hw.model.true_arm import true_arm_spec
-from ftc_hw.priority import name_process
+from ftc_hw.priority import end_process, name_process
 from ftc_hw.scene import DeviceSpec, Scene, load_scene
 
 from .ahead import AheadError, AheadRunner, AheadSpan, TruthPlayer
-from .launch import end_process
 from .link import FT_WIDTH, Command, JointRecord, NoFTRingError, Ring, RingReader
 from .played import PlayedRing
 from .runner import AppliedCommand, SimRunner

@@ -10,14 +10,13 @@ from __future__ import annotations
 import contextlib
 import importlib
 import multiprocessing as mp
-import os
 import queue
 import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from ftc_hw.priority import DEVICE_NICE, name_process, prefer_cpu
+from ftc_hw.priority import DEVICE_NICE, end_process, name_process, prefer_cpu
 from ftc_hw.scene import DeviceSpec, Scene
 
 from .link import LinkInfo
@@ -36,16 +35,6 @@ def _entry(kind: str):
         raise EmulatorStartError(f"no emulator for device kind {kind!r} (known: {', '.join(EMULATORS)})")
     module, func = target.split(":")
     return getattr(importlib.import_module(module), func)
-
-
-def end_process() -> None:
-    """End this world or emulator process at once, its work done and its files closed: Python's own teardown
-    (MuJoCo, numpy and the rest unloaded, 0.15-0.35 s a process, measured) is what a run waited for at its end.
-    Only stdio is still buffered here."""
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    os._exit(0)
 
 
 def _serve(kind: str, device: DeviceSpec, scene: Scene, link: LinkInfo, ready, options: dict) -> None:

@@ -5,9 +5,6 @@ mistyped option answer at once, without loading MuJoCo, numba kernels and the de
 """
 from __future__ import annotations
 
-import atexit
-import os
-import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, Optional
@@ -16,6 +13,7 @@ import typer
 import typer.core
 
 from ftc_hw import __version__
+from ftc_hw.priority import end_process
 
 _typed = typer.core.TyperOption.display_type_rich
 
@@ -888,19 +886,3 @@ def run() -> None:
         end_process(exc.code)
     end_process(0)
 
-
-def end_process(code: int | str | None) -> None:
-    """Exit with ``code`` (``sys.exit``'s meaning) after the exit handlers and a flush of stdio, skipping
-    Python's teardown of every module: unloading MuJoCo, numba, Zenoh and the rest took 0.45 s after each
-    command's last line (measured), which scripts and the test suite waited for. Every file the command
-    writes is closed by then (the commands close their own); the handlers end child processes and logging."""
-    if isinstance(code, str):
-        print(code, file=sys.stderr)
-        code = 1
-    atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except Exception:  # noqa: BLE001 - a closed pipe: nothing more to say
-            code = code or 1
-    os._exit(code or 0)
