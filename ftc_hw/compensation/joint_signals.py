@@ -66,6 +66,11 @@ class JointSignals:
             return self.residuals.kt * np.asarray(current, dtype=float) - self.residuals.friction(qd)
         return np.asarray(tau_j, dtype=float) - self.offset
 
+    def stuck_std(self, qd: np.ndarray) -> np.ndarray:
+        """(n,) N m: the static friction's share of :meth:`slow_std` (f_c where a joint stands still, 0 where
+        it slides, the same ``tanh`` blend): the most a stuck joint's friction can hold."""
+        return self._coulomb * (1.0 - np.abs(np.tanh(np.asarray(qd, dtype=float) / self.v_eps)))
+
     def slow_std(self, qd: np.ndarray, model_tau: np.ndarray, out: np.ndarray) -> np.ndarray:
         """(n,) N m into ``out``: 1 sigma of tau_in's slowly varying error (friction model, static friction,
         rigid-body model) at joint velocities qd and model torque ``model_tau``."""

@@ -104,8 +104,10 @@ class ContactDetector:
         change, blind = self._judge(t_ns, d2, u)
         return Detection(self.active, d2, blind, 1.0 - chi2_sf6(d2), change, self.onset_t_ns)
 
-    def _judge(self, t_ns: int, d2: float, u: np.ndarray | None) -> tuple[str | None, bool]:
-        """One sample's statistic d2 through the hysteresis: (the change, blind)."""
+    def _judge(self, t_ns: int, d2: float, u: np.ndarray | None,
+               d2_release: float | None = None) -> tuple[str | None, bool]:
+        """One sample's statistic d2 through the hysteresis: (the change, blind). ``d2_release``: in contact,
+        the statistic the offset is judged on, where it differs from d2."""
         change = None
         blind = False
         if not self.active:
@@ -123,7 +125,7 @@ class ContactDetector:
                 self._above = 0
         elif self._blinded(t_ns, u):
             blind = True  # no offset judged: the count is neither advanced nor reset
-        elif d2 < self.off:
+        elif (d2 if d2_release is None else d2_release) < self.off:
             self._below += 1
             if self._below >= self.n_off:
                 self.active = False

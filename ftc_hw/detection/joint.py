@@ -127,11 +127,14 @@ class JointDetector(ContactDetector):
         d2 = self.on * float(np.max(self._quads[self._k_index] / self.on_k))
         return d2 if math.isfinite(d2) else math.inf
 
-    def update(self, t_ns: int, r, cov) -> Detection:
-        """One sample's residual r (n,) N m and its covariance cov (n, n) N^2 m^2. ``ValueError`` when
-        d2 is not finite (the pipeline checks its inputs before)."""
+    def update(self, t_ns: int, r, cov, release=None) -> Detection:
+        """One sample's residual r (n,) N m and its covariance cov (n, n) N^2 m^2. ``release``: in contact,
+        the (r, cov) the offset is judged on instead (``JointResidual.release``: a stuck joint's static
+        friction as the bound it is); None: r and cov. ``ValueError`` when d2 is not finite (the pipeline
+        checks its inputs before)."""
         d2 = self.statistic(r, cov)
         if not math.isfinite(d2):
             raise ValueError("joint residual or its covariance holds NaN or Inf, or the covariance is singular")
-        change, _ = self._judge(t_ns, d2, None)
+        d2_release = d2 if release is None or not self.active else self.statistic(*release)
+        change, _ = self._judge(t_ns, d2, None, d2_release)
         return Detection(self.active, d2, False, 1.0 - chi2_sf(d2, self.dof), change, self.onset_t_ns)

@@ -137,7 +137,8 @@ class JointContactPipeline(PipelineView):
         else:
             z, z_cov = r, cov
         self.tested = z
-        det = self.detector.update(t_ns, z, z_cov)
+        release = self._release(w) if self.detector.active else None
+        det = self.detector.update(t_ns, z, z_cov, release)
         self._track_offsets(t_ns, det)
         clock.lap("detection")
         estimate = None
@@ -157,6 +158,11 @@ class JointContactPipeline(PipelineView):
         clock.lap("events")
         clock.end()
         return FrameResult(t_ns, external, det, estimate, r.copy(), tuple(events))
+
+    def _release(self, w) -> tuple[np.ndarray, np.ndarray]:
+        """What the offset is judged on (``JointResidual.release``), stacked with the flange's wrench as z is."""
+        r, cov = self.residual.release()
+        return self.flange.stacked(r, cov, w) if self.flange is not None else (r, cov)
 
     def _track_offsets(self, t_ns: int, det: Detection) -> None:
         """The torque sensors' offsets refined on this sample where it is clearly contact-free (from the next
