@@ -4,7 +4,9 @@
 Each poll reads the map's block in one request and publishes one frame (no device sequence or
 clock: ``seq`` is the adapter's own count). A failed poll is counted as ``timeouts`` (no answer),
 ``checksum_errors`` (an answer of the right length whose CRC is wrong, RTU) or ``format_errors``
-(a short or malformed answer); ``max_failures`` failed polls in a row reconnect.
+(a short or malformed answer); ``max_failures`` failed polls in a row reconnect. On RTU, an answer still
+waiting when the next request goes out is counted ``late_answers``: one that came after its request had timed
+out (a stalled host or device), or a repeated one; pymodbus discards it before sending.
 """
 from __future__ import annotations
 
@@ -73,6 +75,9 @@ class ModbusFTAdapter(FTAdapter):
     def _trace(self, sending: bool, data: bytes) -> bytes:
         if not sending:
             self._rx = bytes(data)  # pymodbus passes everything received so far for this request
+        elif isinstance(self.client, ModbusSerialClient) and self.client.socket is not None \
+                and self.client.socket.in_waiting:
+            self.counters["late_answers"] += 1
         return data
 
     def _open_client(self) -> ModbusSerialClient | ModbusTcpClient:

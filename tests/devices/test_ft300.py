@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import struct
+import sys
 import time
 
 import numpy as np
@@ -97,7 +98,8 @@ def test_poll_mode_with_response_faults(ft_sim, sat_world, originals, wait_for):
     c = adapter.counters
     for f in bus.history(adapter.topic):
         assert tuple(np.round(f.wrench, 3)) in originals
-    assert c["timeouts"] == inj.get("drop", 0)
+    # a timeout is a dropped answer, or one that came late (a stall of this loaded host): seen at the next request
+    assert inj.get("drop", 0) <= c["timeouts"] <= inj.get("drop", 0) + c["late_answers"], (c, inj)
     assert c["checksum_errors"] == inj.get("corrupt", 0)
     assert c["format_errors"] == inj.get("truncate", 0)
     identity_reads = 3 * c["event_connect"]
@@ -155,3 +157,37 @@ def test_plain_pyserial_reader_decodes_the_stream(ft_sim):
         time.sleep(0.1)
         s.reset_input_buffer()
         assert s.read(16) == b""
+
+
+
+def test_an_answer_that_comes_while_the_reader_stalls_is_a_timeout_and_then_a_late_answer(ft_sim, sat_world, originals,
+                                                                                        wait_for):
+    """This process holds the interpreter for 0.4 s at a time (a stall of the host, as a loaded CI host's), longer
+    than the 0.1 s timeout: the poll waiting then is a timeout although the FT 300 answered in time, and its answer,
+    still waiting when the next request goes out, a late answer (pymodbus discards it)."""
+    scene, spec = ft_sim.device("dxl-arm", "ft300", mode="poll", poll_hz=100.0, timeout=0.1)
+    world = ft_sim.world(100.0, n_joints=4, fn=sat_world)
+    emu = ft_sim.start_emulator(spec, scene, world)
+    bus = Bus()
+    adapter = make_adapter(spec, bus, emu.endpoint, scene=scene)
+    switch = sys.getswitchinterval()
+    with adapter:
+        assert adapter.wait_connected(5.0)
+        for _ in range(3):
+            polls = adapter.counters["polls"]
+            assert wait_for(lambda p=polls: adapter.counters["polls"] >= p + 20, 5.0)
+            sys.setswitchinterval(1.0)  # this thread keeps the interpreter until it waits
+            try:
+                end = time.monotonic() + 0.4
+                while time.monotonic() < end:
+                    pass
+            finally:
+                sys.setswitchinterval(switch)
+        polls = adapter.counters["polls"]
+        assert wait_for(lambda: adapter.counters["polls"] >= polls + 20, 5.0)
+    ft_sim.stop()
+    c = adapter.counters
+    assert c["timeouts"] >= 1 and c["late_answers"] >= 1, c
+    assert c["timeouts"] == c["late_answers"], c  # each timeout's answer came, late
+    for f in bus.history(adapter.topic):
+        assert tuple(np.round(f.wrench, 3)) in originals
