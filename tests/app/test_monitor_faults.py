@@ -58,7 +58,9 @@ def _check_run(tmp_path, proc, events: list[dict], stream: str, losses: int) -> 
     assert ids == list(range(1, len(ids) + 1)), ids
     for cid in ids:  # every contact is closed, once, by an offset that carries its last estimate
         mine = [e for e in contacts if e["contact_id"] == cid]
-        assert [e["kind"] for e in mine].count("offset") == 1 and mine[-1]["kind"] == "offset", mine
+        assert [e["kind"] for e in mine].count("offset") == 1 and mine[-1]["kind"] == "offset", (
+            [(e["kind"], round(e["t"] - events[0]["t"], 3), e["link"], round(e.get("peak_force") or 0.0, 1))
+             for e in mine], [(e["kind"], round(e["t"] - events[0]["t"], 3)) for e in events[-5:]], out[-2500:])
         if any("no_estimate" not in e["flags"] for e in mine[:-1]):
             assert mine[-1]["point"] != [0.0, 0.0, 0.0] and "no_estimate" not in mine[-1]["flags"]
     for e in contacts:  # nothing is judged while a stream is lost
