@@ -97,7 +97,7 @@ class JointResidual:
         if first:
             self._slow[:] = self.signals.slow_std(qd, obs.bias, self._slow_now)
             self._stuck[:] = self.signals.stuck_std(qd)
-            self._sliding[:] = np.sqrt(np.maximum(self._slow**2 - self._stuck**2, 0.0))
+            self._sliding[:] = _without(self._slow, self._stuck)
             return r, self.cov, False
         slow = self.signals.slow_std(qd, obs.model_torque(), self._slow_now)
         stuck = self.signals.stuck_std(qd)
@@ -105,7 +105,7 @@ class JointResidual:
         a = 1.0 - 2.0 * f_white  # the filter's pole this interval, a = exp(-K dt)
         self._slow = a * self._slow + (1.0 - a) * slow
         self._stuck = a * self._stuck + (1.0 - a) * stuck
-        self._sliding = a * self._sliding + (1.0 - a) * np.sqrt(np.maximum(slow**2 - stuck**2, 0.0))
+        self._sliding = a * self._sliding + (1.0 - a) * _without(slow, stuck)
         cov = self.cov
         cov[:] = 0.0
         if self.velocity_var > 0.0:
@@ -119,9 +119,12 @@ class JointResidual:
             cov += self._model_cov
         return r, cov, True
 
-    def release(self) -> tuple[np.ndarray, np.ndarray]:
+    def release(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The last sample's r and cov as the offset judges them (module notes): r (n,) less the stuck joints'
-        static friction bound, towards 0 and no further; cov (n, n) without the static friction's share."""
+        static friction bound, towards 0 and no further; cov (n, n) without the static friction's share. None
+        where no joint's signal carries static friction (joint torque sensors): r and cov themselves."""
+        if not self.signals.sticks:
+            return None
         r = self.observer.r
         r_free = np.sign(r) * np.maximum(np.abs(r) - STUCK_MARGIN * self._stuck, 0.0)
         cov = self.cov.copy()
@@ -134,3 +137,8 @@ class JointResidual:
         if self.model_error is None or current is None:
             return self.cov
         return self.cov - self._model_cov + self.model_error.cov_now(q, qd, self.observer.qdd, current)
+
+
+def _without(std: np.ndarray, part: np.ndarray) -> np.ndarray:
+    """A 1-sigma (n,) with one of its independent shares ``part`` taken out."""
+    return np.sqrt(np.maximum(std**2 - part**2, 0.0))

@@ -66,6 +66,11 @@ class JointSignals:
             return self.residuals.kt * np.asarray(current, dtype=float) - self.residuals.friction(qd)
         return np.asarray(tau_j, dtype=float) - self.offset
 
+    @property
+    def sticks(self) -> bool:
+        """Whether any joint's signal carries static friction (motor currents; not link-side torque sensors)."""
+        return bool(np.any(self._coulomb))
+
     def stuck_std(self, qd: np.ndarray) -> np.ndarray:
         """(n,) N m: the static friction's share of :meth:`slow_std` (f_c where a joint stands still, 0 where
         it slides, the same ``tanh`` blend): the most a stuck joint's friction can hold."""

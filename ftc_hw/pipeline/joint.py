@@ -159,10 +159,13 @@ class JointContactPipeline(PipelineView):
         clock.end()
         return FrameResult(t_ns, external, det, estimate, r.copy(), tuple(events))
 
-    def _release(self, w) -> tuple[np.ndarray, np.ndarray]:
-        """What the offset is judged on (``JointResidual.release``), stacked with the flange's wrench as z is."""
-        r, cov = self.residual.release()
-        return self.flange.stacked(r, cov, w) if self.flange is not None else (r, cov)
+    def _release(self, w) -> tuple[np.ndarray, np.ndarray] | None:
+        """What the offset is judged on (``JointResidual.release``), stacked with the flange's wrench as z is;
+        None: z itself."""
+        release = self.residual.release()
+        if release is None or self.flange is None:
+            return release
+        return self.flange.stacked(*release, w)
 
     def _track_offsets(self, t_ns: int, det: Detection) -> None:
         """The torque sensors' offsets refined on this sample where it is clearly contact-free (from the next
